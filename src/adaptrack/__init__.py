@@ -1,0 +1,45 @@
+"""adaptrack: adaptive motion estimation for radar and tracking engineers.
+
+Continuous-time motion models with exact discretisation, batched Kalman filtering and RTS
+smoothing over irregular time steps, observability analysis, and the adaptive models of
+the seed documents. SI units and radians throughout; time is float seconds.
+"""
+
+from . import models
+from .analysis.observability import (
+    is_observable,
+    observability_matrix,
+    observability_rank,
+    unobservable_directions,
+)
+from .filters.dead_reckoning import DeadReckoningResult, dead_reckoning_filter
+from .filters.kalman import CovarianceError, kalman_step, predict, update
+from .filters.run import kalman_filter
+from .models.discretize import Discretization, control_offset, discretize
+from .smoothers.rts import rts_smooth
+from .types import FilterResult, GaussianState, StepInfo
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "CovarianceError",
+    "DeadReckoningResult",
+    "Discretization",
+    "FilterResult",
+    "GaussianState",
+    "StepInfo",
+    "__version__",
+    "control_offset",
+    "dead_reckoning_filter",
+    "discretize",
+    "is_observable",
+    "kalman_filter",
+    "kalman_step",
+    "models",
+    "observability_matrix",
+    "observability_rank",
+    "predict",
+    "rts_smooth",
+    "unobservable_directions",
+    "update",
+]

@@ -1,0 +1,15 @@
+"""Array type aliases used in annotations (shapes are documented in docstrings)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+FloatArray = npt.NDArray[np.float64]
+BoolArray = npt.NDArray[np.bool_]
+ArrayLike = npt.ArrayLike
+AnyArray = npt.NDArray[Any]
+
+__all__ = ["AnyArray", "ArrayLike", "BoolArray", "FloatArray"]

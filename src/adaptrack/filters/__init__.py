@@ -1,0 +1,15 @@
+"""Kalman filters: pure predict/update steps, the online step and the sequence runner."""
+
+from .dead_reckoning import DeadReckoningResult, dead_reckoning_filter
+from .kalman import CovarianceError, kalman_step, predict, update
+from .run import kalman_filter
+
+__all__ = [
+    "CovarianceError",
+    "DeadReckoningResult",
+    "dead_reckoning_filter",
+    "kalman_filter",
+    "kalman_step",
+    "predict",
+    "update",
+]

@@ -1,0 +1,243 @@
+"""Linear Kalman filter steps as pure functions (batched over leading axes).
+
+Spec 0.2. Predict: ``x = Phi x + u``, ``P = Phi P Phi^T + Qd``. Update (Joseph form by
+default): ``nu = z - H x - m_eta``, ``S = H P H^T + R``, ``K = P H^T S^-1``,
+``x = x + K nu``, ``P = (I - K H) P (I - K H)^T + K R K^T``, then ``P = sym(P)``.
+
+Missing measurement components (``mask`` False) are handled exactly: their rows of ``H``
+are zeroed and their rows/columns of ``R`` replaced by a unit variance decoupled from the
+rest, so they carry no information; their innovation is reported as 0 and they are not
+counted in the log-likelihood's dimension.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+
+from .._linalg import mT, matvec, symmetrize
+from .._typing import ArrayLike, BoolArray, FloatArray
+from .._validation import as_float_array, check_finite
+from ..models.continuous import MotionModel, as_motion_model
+from ..models.discretize import Method, Noise, discretize_with_input
+from ..types import GaussianState, StepInfo, _trusted, as_gaussian_state
+
+UpdateForm = Literal["joseph", "standard"]
+_LOG_2PI = float(np.log(2.0 * np.pi))
+
+
+class CovarianceError(ValueError):
+    """A covariance that must be positive definite is not (names step and tracks)."""
+
+
+def predict(state: GaussianState, transition: FloatArray, process_cov: FloatArray, *,
+            time: ArrayLike, control: FloatArray | None = None) -> GaussianState:
+    """Propagate a Gaussian through a linear transition.
+
+    Parameters
+    ----------
+    state : GaussianState
+        Mean (..., n), cov (..., n, n).
+    transition : ndarray, shape (..., n, n)
+        ``Phi`` from ``state.time`` to ``time``.
+    process_cov : ndarray, shape (..., n, n)
+        ``Qd`` over the same step.
+    time : array_like, shape (...)
+        Time of the prediction [s].
+    control : ndarray, shape (..., n), optional
+        Known-input offset ``u``.
+
+    Returns
+    -------
+    GaussianState
+        The predicted belief.
+    """
+    mean = matvec(transition, state.mean)
+    if control is not None:
+        mean = mean + control
+    cov = symmetrize(transition @ state.cov @ mT(transition) + process_cov)
+    time_arr = np.broadcast_to(np.asarray(time, dtype=np.float64), mean.shape[:-1])
+    return _trusted(GaussianState, mean=mean, cov=cov, time=time_arr)
+
+
+def _masked_model(h: FloatArray, r: FloatArray, mask: BoolArray | None
+                  ) -> tuple[FloatArray, FloatArray]:
+    """Zero the rows of H and decouple the entries of R of missing components."""
+    if mask is None:
+        return h, r
+    m = mask.astype(np.float64)
+    hm = h * m[..., :, None]
+    both = m[..., :, None] * m[..., None, :]
+    rm = r * both + np.eye(r.shape[-1]) * (1.0 - m)[..., None, :]
+    return hm, rm
+
+
+def _gain(cov: FloatArray, h: FloatArray, r: FloatArray
+          ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Return (K, S, log det S); raises LinAlgError if S is not positive definite."""
+    hp = h @ cov
+    s = symmetrize(hp @ mT(h) + r)
+    chol = np.linalg.cholesky(s)
+    logdet = 2.0 * np.sum(np.log(np.diagonal(chol, axis1=-2, axis2=-1)), axis=-1)
+    k = mT(np.linalg.solve(s, hp))
+    return k, s, logdet
+
+
+def _covariance_update(cov: FloatArray, k: FloatArray, h: FloatArray, r: FloatArray,
+                       form: str) -> FloatArray:
+    ikh = np.eye(cov.shape[-1]) - k @ h
+    if form == "joseph":
+        return symmetrize(ikh @ cov @ mT(ikh) + k @ r @ mT(k))
+    return symmetrize(ikh @ cov)
+
+
+def _innovation_stats(nu: FloatArray, s: FloatArray, logdet: FloatArray, n_obs: FloatArray
+                      ) -> tuple[FloatArray, FloatArray]:
+    nis = np.einsum("...i,...i->...", nu, np.linalg.solve(s, nu[..., None])[..., 0])
+    loglik = np.where(n_obs > 0, -0.5 * (logdet + nis + n_obs * _LOG_2PI), 0.0)
+    return nis, loglik
+
+
+def update(state: GaussianState, measurement: ArrayLike, measurement_matrix: ArrayLike,
+           measurement_cov: ArrayLike, *, mask: ArrayLike | None = None,
+           form: UpdateForm = "joseph", measurement_noise_mean: ArrayLike | None = None
+           ) -> tuple[GaussianState, StepInfo]:
+    """Condition a Gaussian state on a linear measurement ``z = H x + v``.
+
+    Parameters
+    ----------
+    state : GaussianState
+        Prior, mean (..., n).
+    measurement : array_like, shape (..., m)
+        ``z``; entries under a False mask are ignored (may be NaN).
+    measurement_matrix : array_like, shape (m, n) or (..., m, n)
+        ``H``.
+    measurement_cov : array_like, shape (m, m) or (..., m, m)
+        ``R`` (for a noise ``D eta`` pass ``D S_eta D^T``), symmetric positive definite.
+    mask : array_like of bool, shape (..., m) or (...), optional
+        True where a component was measured (default: all).
+    form : {"joseph", "standard"}
+        Covariance update form.
+    measurement_noise_mean : array_like, shape (m,), optional
+        Known mean of the measurement noise, removed from the innovation.
+
+    Returns
+    -------
+    (GaussianState, StepInfo)
+        The posterior and the innovation statistics computed from the prior.
+    """
+    state = as_gaussian_state(state, "state")
+    z = as_float_array(measurement, "measurement", min_ndim=1, allow_nan=True)
+    h = as_float_array(measurement_matrix, "measurement_matrix", min_ndim=2)
+    r = as_float_array(measurement_cov, "measurement_cov", min_ndim=2)
+    if h.shape[-1] != state.dim:
+        raise ValueError(f"measurement_matrix must have shape (..., m, {state.dim}) to match "
+                         f"the state; got {h.shape}")
+    m = h.shape[-2]
+    if z.shape[-1] != m:
+        raise ValueError(f"measurement must have shape (..., {m}) to match measurement_matrix; "
+                         f"got {z.shape}")
+    if r.shape[-2:] != (m, m):
+        raise ValueError(f"measurement_cov must have shape (..., {m}, {m}); got {r.shape}")
+    mk = _component_mask(mask, z.shape, "mask")
+    if np.any(np.isnan(z) & mk):
+        idx = tuple(int(i) for i in np.argwhere(np.isnan(z) & mk)[0])
+        raise ValueError(f"measurement is NaN at index {idx} where mask says it was measured")
+    offset = None
+    if measurement_noise_mean is not None:
+        offset = as_float_array(measurement_noise_mean, "measurement_noise_mean", min_ndim=1)
+    form = _check_form(form)
+    return _update(state, z, h, r, mk, form, offset)
+
+
+def _update(state: GaussianState, z: FloatArray, h: FloatArray, r: FloatArray,
+            mask: BoolArray, form: str, offset: FloatArray | None = None
+            ) -> tuple[GaussianState, StepInfo]:
+    """Trusted update kernel (inputs validated by the caller)."""
+    full = bool(mask.all())
+    hm, rm = _masked_model(h, r, None if full else mask)
+    zm = np.where(mask, z, 0.0)
+    if offset is not None:
+        zm = zm - np.where(mask, offset, 0.0)
+    nu = zm - matvec(hm, state.mean)
+    k, s, logdet = _gain(state.cov, hm, rm)
+    cov = _covariance_update(state.cov, k, hm, rm, form)
+    mean = state.mean + matvec(k, nu)
+    n_obs = np.broadcast_to(mask.sum(axis=-1).astype(np.float64), mean.shape[:-1])
+    nis, loglik = _innovation_stats(nu, s, logdet, n_obs)
+    post = _trusted(GaussianState, mean=mean, cov=np.broadcast_to(cov, mean.shape + mean.shape[-1:]),
+                    time=state.time)
+    info = _trusted(StepInfo, innovation=nu, innovation_cov=s, nis=nis, log_likelihood=loglik,
+                    gain=k, n_observed=n_obs)
+    return post, info
+
+
+def _check_form(form: str) -> str:
+    if form not in ("joseph", "standard"):
+        raise ValueError(f"form must be 'joseph' or 'standard'; got {form!r}")
+    return form
+
+
+def _component_mask(mask: ArrayLike | None, shape: tuple[int, ...], name: str) -> BoolArray:
+    """Broadcast a whole-vector (...) or per-component (..., m) boolean mask to ``shape``."""
+    if mask is None:
+        return np.ones(shape, dtype=bool)
+    mk = np.asarray(mask)
+    if mk.dtype != np.bool_:
+        raise TypeError(f"{name} must be boolean (True = measured); got dtype {mk.dtype}")
+    if mk.shape == shape[:-1]:
+        mk = mk[..., None]
+    try:
+        return np.broadcast_to(mk, shape)
+    except ValueError:
+        raise ValueError(f"{name} must have shape {shape[:-1]} (whole measurements) or {shape} "
+                         f"(per component); got {mk.shape}") from None
+
+
+def kalman_step(state: GaussianState, measurement: ArrayLike, model: MotionModel,
+                measurement_matrix: ArrayLike, measurement_cov: ArrayLike, *, time: ArrayLike,
+                mask: ArrayLike | None = None, method: Method = "expm", noise: Noise = "white",
+                order: int = 2, form: UpdateForm = "joseph"
+                ) -> tuple[GaussianState, StepInfo]:
+    """One online step: predict ``state`` to ``time`` with ``model``, then update.
+
+    The online counterpart of :func:`adaptrack.kalman_filter`: feeding a sequence step by step
+    gives the same numbers as the sequence API. ``time`` equal to ``state.time`` makes the step
+    update-only (``Phi = I``, ``Qd = 0``).
+
+    Parameters
+    ----------
+    state : GaussianState
+        Current belief, mean (..., n).
+    measurement : array_like, shape (..., m)
+        Measurement at ``time``.
+    model : MotionModel
+        Continuous motion model.
+    measurement_matrix, measurement_cov : array_like
+        ``H`` (m, n) and ``R`` (m, m) or batched.
+    time : array_like, shape (...)
+        Measurement time [s], >= ``state.time``.
+    mask : array_like of bool, optional
+        As in :func:`update`.
+    method, noise, order : see :func:`adaptrack.discretize`.
+    form : {"joseph", "standard"}
+
+    Returns
+    -------
+    (GaussianState, StepInfo)
+    """
+    state = as_gaussian_state(state, "state")
+    model = as_motion_model(model)
+    t = as_float_array(time, "time")
+    check_finite(t, "time")
+    dt = np.broadcast_to(t, state.batch_shape) - state.time
+    if np.any(dt < 0):
+        idx = tuple(int(i) for i in np.argwhere(dt < 0)[0]) if dt.ndim else ()
+        raise ValueError(f"time must not precede state.time; dt = {dt[idx]} at batch index {idx}")
+    phi, qd, u = discretize_with_input(model, dt, method, noise=noise, order=order)
+    prior = predict(state, phi, qd, time=np.broadcast_to(t, state.batch_shape), control=u)
+    return update(prior, measurement, measurement_matrix, measurement_cov, mask=mask, form=form)
+
+
+__all__ = ["CovarianceError", "kalman_step", "predict", "update"]

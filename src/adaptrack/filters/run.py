@@ -1,0 +1,329 @@
+"""Kalman filter over measurement sequences, for one track or a batch of tracks.
+
+Loops over time steps only; every track of the batch is processed at once. Irregular
+sampling (per-track times) is the norm: the transition is discretised for every step's
+``dt``. When all tracks share their times, prior covariance, measurement covariance and
+missing-data pattern, the covariance recursion is identical for every track; it is then
+computed once and shared (the result holds broadcast views), which is exact and fast.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+
+from .._typing import ArrayLike, BoolArray, FloatArray
+from .._validation import (
+    as_float_array,
+    check_symmetric_pd,
+    check_times,
+)
+from ..models.continuous import MotionModel, as_motion_model
+from ..models.discretize import Method, Noise, discretize_with_input
+from ..types import FilterResult, GaussianState, StepInfo, _trusted, as_gaussian_state
+from .kalman import (
+    CovarianceError,
+    UpdateForm,
+    _check_form,
+    _component_mask,
+    _covariance_update,
+    _gain,
+    _innovation_stats,
+    _masked_model,
+    _update,
+    predict,
+)
+
+NanPolicy = Literal["raise", "missing"]
+
+
+def kalman_filter(times: ArrayLike, measurements: ArrayLike, model: MotionModel,
+                  measurement_matrix: ArrayLike, measurement_cov: ArrayLike,
+                  initial: GaussianState, *, mask: ArrayLike | None = None,
+                  nan_policy: NanPolicy = "raise", method: Method = "expm",
+                  noise: Noise = "white", order: int = 2, form: UpdateForm = "joseph",
+                  measurement_noise_mean: ArrayLike | None = None) -> FilterResult:
+    """Run a linear Kalman filter over one track or a batch of tracks.
+
+    Parameters
+    ----------
+    times : array_like, shape (T,) or (N, T)
+        Measurement times [s], strictly increasing per track; a 1-D array is shared by all
+        tracks.
+    measurements : array_like, shape (T, m) or (N, T, m)
+        Measurements ``z``.
+    model : MotionModel
+        Continuous-time motion model, discretised for every step (``method``, ``noise``,
+        ``order`` as in :func:`adaptrack.discretize`).
+    measurement_matrix : array_like, shape (m, n)
+        ``H``.
+    measurement_cov : array_like, shape (m, m), (N, m, m) or (..., T, m, m)
+        ``R``: shared, per track, or per step; symmetric positive definite.
+    initial : GaussianState
+        Prior at ``initial.time`` (scalar or per track), applied to the first measurement:
+        when ``initial.time`` equals the first measurement time, step 0 is update-only
+        (spec 0.2); an earlier time is predicted forward first.
+    mask : array_like of bool, shape (..., T) or (..., T, m), optional
+        True where a measurement (component) is present. Missing entries are predicted
+        through; their values are ignored and may be NaN.
+    nan_policy : {"raise", "missing"}
+        What a NaN in a measurement that the mask calls present means: an error (default)
+        or a missing component. Nothing is ever dropped silently.
+    method, noise, order
+        Discretisation options.
+    form : {"joseph", "standard"}
+        Covariance update form.
+    measurement_noise_mean : array_like, shape (m,), optional
+        Known mean of the measurement noise, removed from every innovation.
+
+    Returns
+    -------
+    FilterResult
+        Predicted and filtered moments (..., T, n), the transitions used, innovations, NIS
+        and log-likelihood per step.
+
+    Raises
+    ------
+    ValueError
+        For bad shapes, non-finite values, unsorted or duplicate times, an initial time after
+        the first measurement, or covariances that are not positive definite (naming the
+        argument, step and track).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from adaptrack.models import ConstantVelocity
+    >>> t = np.arange(5.0)
+    >>> z = (2.0 * t)[:, None]
+    >>> prior = GaussianState(mean=[0.0, 0.0], cov=100.0 * np.eye(2), time=0.0)
+    >>> res = kalman_filter(t, z, ConstantVelocity(accel_psd=0.01), [[1.0, 0.0]], [[1.0]], prior)
+    >>> res.filtered.mean.shape
+    (5, 2)
+    """
+    model = as_motion_model(model)
+    initial = as_gaussian_state(initial, "initial")
+    form = _check_form(form)
+    if nan_policy not in ("raise", "missing"):
+        raise ValueError(f"nan_policy must be 'raise' or 'missing'; got {nan_policy!r}")
+    n = model.state_dim
+    t = as_float_array(times, "times", min_ndim=1)
+    if t.ndim > 2:
+        raise ValueError(f"times must have shape (T,) or (N, T); got {t.shape}")
+    z = as_float_array(measurements, "measurements", min_ndim=2, allow_nan=True)
+    if z.ndim > 3:
+        raise ValueError(f"measurements must have shape (T, m) or (N, T, m); got {z.shape}")
+    batch = z.shape[:-2]
+    n_steps = z.shape[-2]
+    if t.shape not in ((n_steps,), batch + (n_steps,)):
+        raise ValueError(f"times must have shape ({n_steps},) or {batch + (n_steps,)} to match "
+                         f"measurements {z.shape}; got {t.shape}")
+    if n_steps == 0:
+        raise ValueError("measurements must hold at least one time step; got T = 0")
+    check_times(t, "times")
+    h = as_float_array(measurement_matrix, "measurement_matrix", min_ndim=2)
+    m = z.shape[-1]
+    if h.shape != (m, n):
+        raise ValueError(f"measurement_matrix must have shape ({m}, {n}) to match measurements "
+                         f"(m = {m}) and model (n = {n}); got {h.shape}")
+    r = as_float_array(measurement_cov, "measurement_cov", min_ndim=2)
+    r_per_step = r.shape == batch + (n_steps, m, m) and r.shape != (m, m)
+    if r.shape not in ((m, m), batch + (m, m), batch + (n_steps, m, m)):
+        raise ValueError(f"measurement_cov must have shape ({m}, {m}), {batch + (m, m)} or "
+                         f"{batch + (n_steps, m, m)}; got {r.shape}")
+    check_symmetric_pd(r, "measurement_cov")
+    if initial.dim != n:
+        raise ValueError(f"initial.mean must have shape (..., {n}) to match the model "
+                         f"{model.state_names}; got {initial.mean.shape}")
+    if initial.batch_shape not in ((), batch):
+        raise ValueError(f"initial must have batch shape () or {batch} to match measurements; "
+                         f"got {initial.batch_shape}")
+    check_symmetric_pd(initial.cov, "initial.cov")
+    t0 = t[..., 0]
+    late = np.broadcast_to(initial.time, batch) > np.broadcast_to(t0, batch)
+    if np.any(late):
+        idx = tuple(int(i) for i in np.argwhere(late)[0]) if batch else ()
+        raise ValueError(f"initial.time must not be after the first measurement time; track "
+                         f"{idx}: {np.broadcast_to(initial.time, batch)[idx]} > "
+                         f"{np.broadcast_to(t0, batch)[idx]}")
+    mk = np.array(_component_mask(mask, z.shape, "mask"))
+    nan = np.isnan(z) & mk
+    if np.any(nan):
+        if nan_policy == "raise":
+            idx = tuple(int(i) for i in np.argwhere(nan)[0])
+            where = (f"track {idx[0]}, step {idx[1]}, component {idx[2]}" if batch
+                     else f"step {idx[0]}, component {idx[1]}")
+            raise ValueError(f"measurements is NaN at {where} where it is marked present; pass "
+                             "mask=... or nan_policy='missing' to treat NaN as missing")
+        mk = mk & ~nan
+    return _run(t, z, model, h, r, r_per_step, initial, mk, method, noise, order, form,
+                measurement_noise_mean)
+
+
+_DISCRETIZE_CHUNK = 65536
+
+
+def _transitions(model: MotionModel, t: FloatArray, t_init: FloatArray, method: Method,
+                 noise: Noise, order: int) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Phi, Qd and control offsets per step (entry k maps step k-1 -> k), cached by dt."""
+    prev = np.concatenate([np.broadcast_to(t_init, t.shape[:-1])[..., None], t[..., :-1]],
+                          axis=-1)
+    dt = t - prev
+    uniq, inv = np.unique(dt, return_inverse=True)
+    parts = [discretize_with_input(model, uniq[i:i + _DISCRETIZE_CHUNK], method, noise=noise,
+                                   order=order) for i in range(0, uniq.size, _DISCRETIZE_CHUNK)]
+    phi_u, qd_u, u_u = (np.concatenate([p[j] for p in parts]) for j in range(3))
+    inv = inv.reshape(dt.shape)
+    return phi_u[inv], qd_u[inv], u_u[inv]
+
+
+def _run(t: FloatArray, z: FloatArray, model: MotionModel, h: FloatArray, r: FloatArray,
+         r_per_step: bool, initial: GaussianState, mask: BoolArray, method: Method,
+         noise: Noise, order: int, form: str, offset: ArrayLike | None) -> FilterResult:
+    batch = z.shape[:-2]
+    n_steps, m = z.shape[-2:]
+    t_init = np.broadcast_to(initial.time, batch)
+    times_shared = t.ndim == 1 and bool(np.all(t_init == t_init.flat[0]))
+    if times_shared:
+        phi, qd, u = _transitions(model, t, t_init.flat[0], method, noise, order)
+    else:
+        phi, qd, u = _transitions(model, np.broadcast_to(t, batch + (n_steps,)), t_init,
+                                  method, noise, order)
+    off = None if offset is None else as_float_array(offset, "measurement_noise_mean",
+                                                       min_ndim=1)
+    shared_cov = (times_shared and initial.cov.ndim == 2 and r.ndim == 2
+                  and bool(np.all(mask == mask.reshape(-1, n_steps, m)[0])))
+    if shared_cov:
+        return _run_shared(t, z, h, r, initial, mask, phi, qd, u, form, off)
+    return _run_general(t, z, h, r, r_per_step, initial, mask, phi, qd, u, form, off,
+                        model.state_dim)
+
+
+def _alloc(batch: tuple[int, ...], n_steps: int, *tail: int) -> FloatArray:
+    return np.empty(batch + (n_steps,) + tail)
+
+
+def _step_view(a: FloatArray, k: int, batch_ndim: int) -> FloatArray:
+    return a[(slice(None),) * batch_ndim + (k,)]
+
+
+def _raise_not_pd(what: str, k: int, tracks: list[int] | None) -> None:
+    where = f"step {k}" + (f", tracks {tracks[:10]}" if tracks else "")
+    raise CovarianceError(f"{what} is not positive definite at {where}; check the model, "
+                          "measurement_cov and the prior")
+
+
+def _run_general(t: FloatArray, z: FloatArray, h: FloatArray, r: FloatArray, r_per_step: bool,
+                 initial: GaussianState, mask: BoolArray, phi: FloatArray, qd: FloatArray,
+                 u: FloatArray, form: str, off: FloatArray | None, n: int) -> FilterResult:
+    batch = z.shape[:-2]
+    b = len(batch)
+    n_steps, m = z.shape[-2:]
+    tb = np.broadcast_to(t, batch + (n_steps,))
+    phi_b = np.broadcast_to(phi, batch + (n_steps, n, n))
+    qd_b = np.broadcast_to(qd, batch + (n_steps, n, n))
+    u_b = np.broadcast_to(u, batch + (n_steps, n))
+    pm, pc = _alloc(batch, n_steps, n), _alloc(batch, n_steps, n, n)
+    fm, fc = _alloc(batch, n_steps, n), _alloc(batch, n_steps, n, n)
+    nu_a, s_a = _alloc(batch, n_steps, m), _alloc(batch, n_steps, m, m)
+    nis_a, ll_a, nobs_a = _alloc(batch, n_steps), _alloc(batch, n_steps), _alloc(batch, n_steps)
+    k_a = _alloc(batch, n_steps, n, m)
+    state = _trusted(GaussianState, mean=np.broadcast_to(initial.mean, batch + (n,)),
+                     cov=np.broadcast_to(initial.cov, batch + (n, n)),
+                     time=np.broadcast_to(initial.time, batch))
+    for k in range(n_steps):
+        sv = (slice(None),) * b + (k,)
+        prior = predict(state, phi_b[sv], qd_b[sv], time=tb[sv], control=u_b[sv])
+        rk = r[sv] if r_per_step else r
+        try:
+            state, info = _update(prior, z[sv], h, rk, mask[sv], form, off)
+        except np.linalg.LinAlgError:
+            _raise_not_pd("innovation covariance", k, _bad_tracks(prior.cov, h, rk, mask[sv]))
+        pm[sv], pc[sv], fm[sv], fc[sv] = prior.mean, prior.cov, state.mean, state.cov
+        nu_a[sv], s_a[sv], nis_a[sv] = info.innovation, info.innovation_cov, info.nis
+        ll_a[sv], nobs_a[sv], k_a[sv] = info.log_likelihood, info.n_observed, info.gain
+    return _result(tb, pm, pc, fm, fc, phi_b, qd_b, u_b, nu_a, s_a, nis_a, ll_a, k_a, nobs_a,
+                   mask, h, np.broadcast_to(r, batch + ((n_steps,) if r_per_step else ())
+                                            + (m, m)))
+
+
+def _bad_tracks(cov: FloatArray, h: FloatArray, r: FloatArray, mask: BoolArray
+                ) -> list[int] | None:
+    if cov.ndim < 3:
+        return None
+    hm, rm = _masked_model(h, r, mask)
+    s = hm @ cov @ np.swapaxes(hm, -1, -2) + rm
+    return [int(i) for i in np.flatnonzero(np.linalg.eigvalsh(s).min(axis=-1) <= 0)]
+
+
+def _run_shared(t: FloatArray, z: FloatArray, h: FloatArray, r: FloatArray,
+                initial: GaussianState, mask: BoolArray, phi: FloatArray, qd: FloatArray,
+                u: FloatArray, form: str, off: FloatArray | None) -> FilterResult:
+    """All tracks share the covariance recursion: compute it once, batch only the means."""
+    batch = z.shape[:-2]
+    b = len(batch)
+    n_steps, m = z.shape[-2:]
+    n = phi.shape[-1]
+    mask0 = mask.reshape(-1, n_steps, m)[0]
+    pc, fc = np.empty((n_steps, n, n)), np.empty((n_steps, n, n))
+    s_a, k_a = np.empty((n_steps, m, m)), np.empty((n_steps, n, m))
+    logdet = np.empty(n_steps)
+    hm_a = np.empty((n_steps, m, n))
+    cov = initial.cov
+    for k in range(n_steps):
+        p = phi[k] @ cov @ phi[k].T + qd[k]
+        pc[k] = p = 0.5 * (p + p.T)
+        full = bool(mask0[k].all())
+        hm, rm = _masked_model(h, r, None if full else mask0[k])
+        try:
+            kg, s, ld = _gain(p, hm, rm)
+        except np.linalg.LinAlgError:
+            _raise_not_pd("innovation covariance", k, None)
+        fc[k] = cov = _covariance_update(p, kg, hm, rm, form)
+        s_a[k], k_a[k], logdet[k], hm_a[k] = s, kg, ld, hm
+    # means, all tracks at once (same arithmetic as the general path)
+    pm, fm = _alloc(batch, n_steps, n), _alloc(batch, n_steps, n)
+    nu_a = _alloc(batch, n_steps, m)
+    x = np.broadcast_to(initial.mean, batch + (n,))
+    zm = np.where(mask, z, 0.0)
+    if off is not None:
+        zm = zm - np.where(mask, off, 0.0)
+    for k in range(n_steps):
+        sv = (slice(None),) * b + (k,)
+        xp = np.einsum("ij,...j->...i", phi[k], x) + u[k]
+        nu = zm[sv] - np.einsum("ij,...j->...i", hm_a[k], xp)
+        x = xp + np.einsum("ij,...j->...i", k_a[k], nu)
+        pm[sv], fm[sv], nu_a[sv] = xp, x, nu
+    n_obs = np.broadcast_to(mask0.sum(axis=-1).astype(np.float64), batch + (n_steps,))
+    nis, ll = _innovation_stats(nu_a, s_a, logdet, n_obs)
+    full_shape = batch + (n_steps,)
+
+    def bc(a: FloatArray) -> FloatArray:
+        return np.broadcast_to(a, full_shape + a.shape[1:])
+
+    return _result(np.broadcast_to(t, full_shape), pm, bc(pc), fm, bc(fc), bc(phi), bc(qd),
+                   bc(u), nu_a, bc(s_a), nis, ll, bc(k_a), n_obs, mask, h,
+                   np.broadcast_to(r, full_shape[:-1] + (m, m)))
+
+
+def _ro(a: FloatArray) -> FloatArray:
+    if a.flags.writeable:
+        a.flags.writeable = False
+    return a
+
+
+def _result(t: FloatArray, pm: FloatArray, pc: FloatArray, fm: FloatArray, fc: FloatArray,
+            phi: FloatArray, qd: FloatArray, u: FloatArray, nu: FloatArray, s: FloatArray,
+            nis: FloatArray, ll: FloatArray, k: FloatArray, n_obs: FloatArray,
+            mask: BoolArray, h: FloatArray, r: FloatArray) -> FilterResult:
+    t = _ro(np.array(t, dtype=np.float64)) if t.flags.writeable else t
+    predicted = _trusted(GaussianState, mean=_ro(pm), cov=_ro(pc), time=t)
+    filtered = _trusted(GaussianState, mean=_ro(fm), cov=_ro(fc), time=t)
+    info = _trusted(StepInfo, innovation=_ro(nu), innovation_cov=_ro(s), nis=_ro(nis),
+                    log_likelihood=_ro(ll), gain=_ro(k), n_observed=_ro(np.asarray(n_obs)))
+    return _trusted(FilterResult, predicted=predicted, filtered=filtered, transition=_ro(phi),
+                    process_cov=_ro(qd), control=_ro(u), info=info, mask=_ro(mask),
+                    measurement_matrix=_ro(np.array(h)), measurement_cov=_ro(r))
+
+
+__all__ = ["kalman_filter"]

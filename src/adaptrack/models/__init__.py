@@ -1,0 +1,39 @@
+"""Continuous-time motion models and their discretisation.
+
+Models: :class:`ConstantVelocity`, :class:`ConstantAcceleration`, :class:`Singer` (seed 000),
+:class:`InverseDynamics` (M1) and :class:`ShapingFilter` (M2) of seed 001, and a generic
+:class:`LinearSDE`. State order: all positions, then velocities, then higher states.
+"""
+
+from .adaptive import InverseDynamics, ShapingFilter, singer_accel_std
+from .continuous import (
+    ConstantAcceleration,
+    ConstantVelocity,
+    LinearSDE,
+    MotionModel,
+    Singer,
+    drift_matrix,
+    noise_input_matrix,
+    noise_psd,
+    seed000_permutation,
+)
+from .discretize import Discretization, control_offset, discretize, discretize_with_input
+
+__all__ = [
+    "ConstantAcceleration",
+    "ConstantVelocity",
+    "Discretization",
+    "InverseDynamics",
+    "LinearSDE",
+    "MotionModel",
+    "ShapingFilter",
+    "Singer",
+    "control_offset",
+    "discretize",
+    "discretize_with_input",
+    "drift_matrix",
+    "noise_input_matrix",
+    "noise_psd",
+    "seed000_permutation",
+    "singer_accel_std",
+]

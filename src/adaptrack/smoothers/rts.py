@@ -1,0 +1,81 @@
+"""Rauch-Tung-Striebel fixed-interval smoother over a :class:`~adaptrack.types.FilterResult`.
+
+Uses only the stored predicted/filtered moments and transitions (models are never re-run):
+``C_k = P_k|k Phi_{k+1}^T P_{k+1|k}^-1``,
+``x_k|T = x_k|k + C_k (x_{k+1|T} - x_{k+1|k})``,
+``P_k|T = P_k|k + C_k (P_{k+1|T} - P_{k+1|k}) C_k^T``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .._linalg import mT, matvec, symmetrize
+from .._typing import FloatArray
+from ..types import FilterResult, GaussianState, _trusted
+
+
+def _shared(a: FloatArray, batch_ndim: int) -> FloatArray | None:
+    """The unbatched array if ``a`` repeats one array over its batch axes (zero strides)."""
+    if batch_ndim and all(s == 0 for s in a.strides[:batch_ndim]):
+        return a[(0,) * batch_ndim]
+    return None
+
+
+def _gains(pf: FloatArray, pp_next: FloatArray, phi_next: FloatArray) -> FloatArray:
+    return mT(np.linalg.solve(pp_next, phi_next @ pf))
+
+
+def rts_smooth(result: FilterResult) -> GaussianState:
+    """Smooth a Kalman filter result (fixed interval, all tracks at once).
+
+    Parameters
+    ----------
+    result : FilterResult
+        Output of :func:`adaptrack.kalman_filter`, shapes (..., T, n).
+
+    Returns
+    -------
+    GaussianState
+        Smoothed means (..., T, n) and covariances (..., T, n, n) at the filter's times.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import adaptrack as at
+    >>> t = np.arange(4.0)
+    >>> prior = at.GaussianState(mean=[0.0, 0.0], cov=10.0 * np.eye(2), time=0.0)
+    >>> res = at.kalman_filter(t, t[:, None], at.models.ConstantVelocity(accel_psd=0.1),
+    ...                        [[1.0, 0.0]], [[0.5]], prior)
+    >>> at.rts_smooth(res).mean.shape
+    (4, 2)
+    """
+    if not isinstance(result, FilterResult):
+        raise TypeError(f"result must be a FilterResult; got {type(result).__name__}")
+    pred, filt = result.predicted, result.filtered
+    b = pred.mean.ndim - 2
+    n_steps = pred.mean.shape[-2]
+    sm = np.array(filt.mean)
+    sh = [_shared(a, b) for a in (filt.cov, pred.cov, result.transition)]
+    shared = None if any(a is None for a in sh) else sh
+    sc = np.array(shared[0]) if shared is not None else np.array(filt.cov)
+    tail = (slice(None),) * b
+    for k in range(n_steps - 2, -1, -1):
+        if shared is not None:
+            pf, pp, phi = shared
+            c = _gains(pf[k], pp[k + 1], phi[k + 1])
+            sc[k] = symmetrize(pf[k] + c @ (sc[k + 1] - pp[k + 1]) @ c.T)
+        else:
+            i, j = tail + (k,), tail + (k + 1,)
+            c = _gains(filt.cov[i], pred.cov[j], result.transition[j])
+            sc[i] = symmetrize(filt.cov[i] + c @ (sc[j] - pred.cov[j]) @ mT(c))
+        i, j = tail + (k,), tail + (k + 1,)
+        sm[i] = filt.mean[i] + matvec(c, sm[j] - pred.mean[j])
+    cov = np.broadcast_to(sc, filt.cov.shape) if shared is not None else sc
+    sm.flags.writeable = False
+    if cov.flags.writeable:
+        cov.flags.writeable = False
+    return _trusted(GaussianState, mean=sm, cov=cov, time=filt.time)
+
+
+__all__ = ["rts_smooth"]
