@@ -41,6 +41,7 @@ _SUBSTEP_NORM = 0.5
 _ANALYTIC_SERIES_ORDER = 30
 _CHUNK = 65536  # distinct steps discretised per batch (bounds memory)
 _EXPM_TAYLOR_DEGREE = 18
+_VAN_LOAN_BLOCK_NORM = 0.25
 
 
 class Discretization(NamedTuple):
@@ -204,8 +205,9 @@ def _expm_batched(m: FloatArray) -> FloatArray:
 def _expm_substep(b: Block):  # type: ignore[no-untyped-def]
     """Van Loan block exponentials for one (short) step h.
 
-    The Van Loan exponential is linear in its noise block, which is therefore normalised to
-    unit norm (and the result rescaled) so that the scaling depends on ``F`` only.
+    The Van Loan exponential is linear in its noise block ``G Qc G^T h``; where that block is
+    large it is scaled down to 1-norm 0.25 (and the result scaled back), so that the number of
+    squarings depends on ``F`` only.
     """
     d = b.dim
     gq = _gq(b)
@@ -219,17 +221,19 @@ def _expm_substep(b: Block):  # type: ignore[no-untyped-def]
         hh = h[..., None, None]
         m = np.zeros(h.shape + (2 * d, 2 * d))
         m[..., :d, :d] = -b.drift * hh
-        m[..., :d, d:] = gq / gq_norm
+        qscale = np.where(hh > 0, np.minimum(hh, _VAN_LOAN_BLOCK_NORM / gq_norm), 1.0)
+        m[..., :d, d:] = gq * qscale
         m[..., d:, d:] = b.drift.T * hh
         e = _expm_batched(m)
         phi_ = mT(e[..., d:, d:])
-        qd = symmetrize(phi_ @ e[..., :d, d:]) * (gq_norm * hh)
+        qd = symmetrize(phi_ @ e[..., :d, d:]) * (hh / qscale)
         if not k:
             return phi_, qd, np.zeros(h.shape + (d, 0))
         a = np.zeros(h.shape + (d + k, d + k))
         a[..., :d, :d] = b.drift * hh
-        a[..., :d, d:] = inp / inp_norm
-        gam = _expm_batched(a)[..., :d, d:] * (inp_norm * hh)
+        iscale = np.where(hh > 0, np.minimum(hh, _VAN_LOAN_BLOCK_NORM / inp_norm), 1.0)
+        a[..., :d, d:] = inp * iscale
+        gam = _expm_batched(a)[..., :d, d:] * (hh / iscale)
         return phi_, qd, gam
 
     return step

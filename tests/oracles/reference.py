@@ -1,0 +1,112 @@
+"""High-precision reference formulas of the spec (mpmath), independent of adaptrack.
+
+Orders follow the spec: seed 000 uses [w, v, r]; M1 [q, dq]; M2 [q, dq, xi].
+"""
+
+import math
+
+import mpmath as mp
+import numpy as np
+
+
+def to_float(rows):
+    return np.array([[float(v) for v in row] for row in rows])
+
+
+def relerr(a, b):
+    """Normwise relative error max|a - b| / max|b|."""
+    return float(np.max(np.abs(np.asarray(a) - np.asarray(b))) / max(1e-300, np.max(np.abs(b))))
+
+
+def relerr_el(a, b, floor=1e-280):
+    """Element-wise relative error over the entries of b with |b| > floor."""
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    mask = np.abs(b) > floor
+    return float(np.max(np.abs(a - b)[mask] / np.abs(b)[mask]))
+
+
+def singer_mp(dt, tau, sw):
+    """Exact Phi, Qd, Gamma (noise input e_w) of spec A.4 in seed order [w, v, r]."""
+    with mp.workdps(90):
+        dt, t, s2 = mp.mpf(dt), mp.mpf(tau), mp.mpf(sw) ** 2
+        rho = mp.e ** (-dt / t)
+        q00 = s2 * (1 - rho**2)
+        q01 = s2 * t * (1 - rho) ** 2
+        q02 = s2 * t * (t * (1 - rho**2) - 2 * dt * rho)
+        q11 = s2 * t * (2 * dt - 3 * t + 4 * t * rho - t * rho**2)
+        q12 = s2 * t * (dt - t + t * rho) ** 2
+        q22 = s2 * t * (2 * dt**3 / 3 - 2 * t * dt**2 + 2 * t**2 * dt + t**3
+                        - 4 * t**2 * dt * rho - t**3 * rho**2)
+        phi = [[rho, 0, 0], [t * (1 - rho), 1, 0], [t * dt - t**2 * (1 - rho), dt, 1]]
+        gam = [[t * (1 - rho)], [t * dt - t**2 * (1 - rho)],
+               [t * dt**2 / 2 - t**2 * dt + t**3 * (1 - rho)]]
+        q = [[q00, q01, q02], [q01, q11, q12], [q02, q12, q22]]
+        return to_float(phi), to_float(q), to_float(gam)
+
+
+def singer_closed_float(dt, tau, sw):
+    """The printed closed forms of A.4 in float64 (accurate only for dt/tau >= 1)."""
+    rho = math.exp(-dt / tau)
+    s2, t = sw**2, tau
+    q = np.array([
+        [1 - rho**2, t * (1 - rho) ** 2, t * (t * (1 - rho**2) - 2 * dt * rho)],
+        [0, t * (2 * dt - 3 * t + 4 * t * rho - t * rho**2), t * (dt - t + t * rho) ** 2],
+        [0, 0, t * (2 * dt**3 / 3 - 2 * dt**2 * t + 2 * dt * t**2 + t**3
+                    - 4 * dt * t**2 * rho - t**3 * rho**2)]]) * s2
+    return q + np.triu(q, 1).T
+
+
+def m1_mp(dt, k, qa):
+    """M1 exact Phi, Gamma (acceleration input [0, 1]) and white-noise Qd with PSD qa."""
+    with mp.workdps(90):
+        dt, k, qa = mp.mpf(dt), mp.mpf(k), mp.mpf(qa)
+        r = mp.e ** (-k * dt)
+        g = qa / k**2
+        q = [[g * (dt - (1 - r) * (3 - r) / (2 * k)), g * (1 - r) ** 2 / 2],
+             [g * (1 - r) ** 2 / 2, g * k * (1 - r**2) / 2]]
+        gam = [[(dt - (1 - r) / k) / k], [(1 - r) / k]]
+        return to_float([[1, (1 - r) / k], [0, r]]), to_float(gam), to_float(q)
+
+
+def m2_closed(dt, k, a, switch=1e-6):
+    """M2 closed forms of B.5.1 (Phi2, Gamma2 for G2 = e_3), float64 test oracle."""
+    rk, ra = math.exp(-k * dt), math.exp(-a * dt)
+    if abs(k - a) >= switch * max(k, a):
+        p23 = k * (ra - rk) / (k - a)
+        p13 = k / (k - a) * ((1 - ra) / a - (1 - rk) / k)
+        g1 = k / (k - a) * ((dt - (1 - ra) / a) / a - (dt - (1 - rk) / k) / k)
+    else:
+        p23 = k * dt * rk
+        p13 = (1 - rk - k * dt * rk) / k
+        g1 = dt / k - (2 * (1 - rk) - k * dt * rk) / k**2
+    phi = np.array([[1, (1 - rk) / k, p13], [0, rk, p23], [0, 0, ra]])
+    return phi, np.array([g1, p13, (1 - ra) / a])
+
+
+def van_loan_mp(f, g, qc, dt):
+    """High-precision Van Loan Phi, Qd for a generic (F, G, Qc)."""
+    n = f.shape[0]
+    g = np.atleast_2d(g).reshape(n, -1)
+    gq = g @ np.atleast_2d(qc) @ g.T
+    with mp.workdps(int(60 + 0.9 * float(np.abs(f).sum(axis=0).max()) * dt)):
+        m = mp.zeros(2 * n, 2 * n)
+        for i in range(n):
+            for j in range(n):
+                m[i, j] = -mp.mpf(f[i, j])
+                m[i, n + j] = mp.mpf(gq[i, j])
+                m[n + i, n + j] = mp.mpf(f[j, i])
+        e = mp.expm(m * mp.mpf(dt))
+        phi = e[n:, n:].T
+        qd = phi * e[:n, n:]
+        return (to_float([[phi[i, j] for j in range(n)] for i in range(n)]),
+                to_float([[qd[i, j] for j in range(n)] for i in range(n)]))
+
+
+# seed 000 [w, v, r] <-> adaptrack [r, v, w]
+PI = np.fliplr(np.eye(3))
+
+
+def to_seed(a):
+    """Permute an adaptrack-order (r, v, w) matrix or vector to seed order (w, v, r)."""
+    a = np.asarray(a)
+    return PI @ a @ PI.T if a.ndim == 2 and a.shape == (3, 3) else PI @ a
