@@ -61,7 +61,9 @@ def kalman_filter(times: ArrayLike, measurements: ArrayLike, model: MotionModel,
     measurement_cov : array_like, shape (m, m), (N, m, m) or (..., T, m, m)
         ``R``: shared, per track, or per step; symmetric positive definite.
     initial : GaussianState
-        Prior at ``initial.time`` (scalar or per track), applied to the first measurement:
+        Prior at ``initial.time`` (scalar or per track), applied to the first measurement;
+        its covariance must be symmetric positive semi-definite (a zero variance is a known
+        component):
         when ``initial.time`` equals the first measurement time, step 0 is update-only
         (spec 0.2); an earlier time is predicted forward first.
     mask : array_like of bool, shape (..., T) or (..., T, m), optional
@@ -138,7 +140,7 @@ def kalman_filter(times: ArrayLike, measurements: ArrayLike, model: MotionModel,
     if initial.batch_shape not in ((), batch):
         raise ValueError(f"initial must have batch shape () or {batch} to match measurements; "
                          f"got {initial.batch_shape}")
-    check_symmetric_pd(initial.cov, "initial.cov")
+    check_symmetric_pd(initial.cov, "initial.cov", semidefinite=True)
     t0 = t[..., 0]
     late = np.broadcast_to(initial.time, batch) > np.broadcast_to(t0, batch)
     if np.any(late):
