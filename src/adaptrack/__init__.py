@@ -5,7 +5,7 @@ smoothing over irregular time steps, observability analysis, and the adaptive mo
 the seed documents. SI units and radians throughout; time is float seconds.
 """
 
-from . import models
+from . import models, simulation
 from .analysis.observability import (
     is_observable,
     observability_matrix,
@@ -40,6 +40,7 @@ __all__ = [
     "observability_rank",
     "predict",
     "rts_smooth",
+    "simulation",
     "unobservable_directions",
     "update",
 ]

@@ -12,7 +12,7 @@ def symmetrize(a: FloatArray) -> FloatArray:
     return 0.5 * (a + np.swapaxes(a, -1, -2))
 
 
-def mT(a: FloatArray) -> FloatArray:  # noqa: N802  (conventional name: matrix transpose)
+def mT(a: FloatArray) -> FloatArray:
     """Transpose the last two axes (batched ``.T``)."""
     return np.swapaxes(a, -1, -2)
 

@@ -7,7 +7,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-FloatArray = npt.NDArray[np.float64]
+# float64 in practice; typed as floating[Any] because NumPy's stubs type linalg results so
+FloatArray = npt.NDArray[np.floating[Any]]
 BoolArray = npt.NDArray[np.bool_]
 ArrayLike = npt.ArrayLike
 AnyArray = npt.NDArray[Any]

@@ -138,7 +138,7 @@ def _cholesky_fails(cov: np.ndarray) -> np.ndarray:
         np.linalg.cholesky(flat)
         return np.zeros(cov.shape[:-2], dtype=bool)
     except np.linalg.LinAlgError:
-        bad = np.empty(flat.shape[0], dtype=bool)
+        bad = np.zeros(len(flat), dtype=np.bool_)
         for i, c in enumerate(flat):  # only on the error path, to find the offending index
             try:
                 np.linalg.cholesky(c)

@@ -18,7 +18,7 @@ from ._validation import as_float_array, check_shape, frozen
 
 def _trusted(cls: type, **values: Any) -> Any:
     """Build a frozen dataclass without validation (private kernels trust their inputs)."""
-    obj = object.__new__(cls)
+    obj: Any = object.__new__(cls)
     for f in fields(cls):
         object.__setattr__(obj, f.name, values[f.name])
     return obj

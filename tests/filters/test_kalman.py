@@ -120,7 +120,6 @@ def test_whole_measurement_missing_predicts_through(rng):
 
 
 def test_partial_measurement_equals_reduced_measurement_model(rng):
-    model = ConstantVelocity(accel_psd=0.5, n_axes=2)
     h = np.hstack([np.eye(2), np.zeros((2, 2))])
     r = np.array([[1.0, 0.4], [0.4, 2.0]])
     prior = at.GaussianState(np.zeros(4), 5 * np.eye(4), 0.0)

@@ -41,7 +41,8 @@ def test_c0_2_exact_qd_closed_form_vs_quadrature():
     for dt, tau, sw in [(1.0, 5.0, 0.7), (1.0, 2.0, 1.3), (3.0, 0.7, 0.4), (6.0, 30.0, 2.0)]:
         qc = 2 * sw**2 / tau
         g = np.array([[1.0], [0], [0]])
-        quad = quad_vec(lambda s, tau=tau, qc=qc: expm(a000(tau) * s) @ g @ g.T
+        gg = g @ g.T
+        quad = quad_vec(lambda s, tau=tau, qc=qc, gg=gg: expm(a000(tau) * s) @ gg
                         @ expm(a000(tau) * s).T * qc, 0.0, dt, epsabs=1e-14, epsrel=1e-12)[0]
         closed = singer_closed_float(dt, tau, sw)
         for method in ("expm", "analytic"):

@@ -46,7 +46,7 @@ def anees_band(dof: int, n_runs: int, prob: float = 0.95) -> tuple[float, float]
     Examples
     --------
     >>> [round(v, 2) for v in anees_band(4, 100)]
-    [3.47, 4.57]
+    [3.46, 4.57]
     """
     lo, hi = chi2.ppf([(1 - prob) / 2, (1 + prob) / 2], dof * n_runs)
     return float(lo) / n_runs, float(hi) / n_runs

@@ -93,7 +93,7 @@ def unobservable_directions(obs_matrix: ArrayLike, rtol: float | None = None) ->
 
 def is_observable(transition: ArrayLike, measurement_matrix: ArrayLike,
                   rtol: float | None = None) -> bool:
-    """True if ``(Phi, H)`` (constant or a sequence of transitions) is fully observable.
+    """Tell whether ``(Phi, H)`` (constant or a sequence of transitions) is fully observable.
 
     Examples
     --------

@@ -65,8 +65,9 @@ def run_singer_study(n_runs: int = 200, seed: int = 0, duration_s: float = 60.0,
     z = simulate_linear_measurements(truth, h6, r, rng=rng_meas)
     models: dict[str, MotionModel] = {
         "Singer (matched)": truth_model,
-        "constant velocity": ConstantVelocity(accel_psd=2 * 1.5**2 * 10.0 / 10.0, n_axes=2),
-        "M1 (lambda = 0.03)": InverseDynamics(lambda_per_s2=0.03, accel_psd=4.5, n_axes=2),
+        "constant velocity": ConstantVelocity(accel_psd=4.5, n_axes=2),
+        "M1 (lambda = 0.001, untuned)": InverseDynamics(lambda_per_s2=0.001, accel_psd=10.0,
+                                                        n_axes=2),
     }
     keep = times >= 5.0
     rows = []

@@ -109,18 +109,17 @@ def dead_reckoning_filter(times: ArrayLike, speeds: ArrayLike, model: Singer, sp
                      cov=np.broadcast_to(initial.cov, batch + (2, 2)),
                      time=np.broadcast_to(initial.time, batch))
     # 3-state covariance [r, v, w] of the zero-distance-gain filter
-    p3 = np.zeros(batch + (3, 3))
+    p3: FloatArray = np.zeros(batch + (3, 3))
     p3[..., 0, 0] = var_r0
     p3[..., 1:, 1:] = state.cov
     dist, dist_var = np.empty(batch + (n_steps,)), np.empty(batch + (n_steps,))
     fm, fc = np.empty(batch + (n_steps, 2)), np.empty(batch + (n_steps, 2, 2))
     infos = []
-    r_hat = np.array(r0, dtype=np.float64)
+    r_hat: FloatArray = np.array(r0, dtype=np.float64)
     mask = np.ones(batch + (1,), dtype=bool)
     for k in range(n_steps):
         sv = (Ellipsis, k)
-        ph, qd = phi3[(Ellipsis, k, slice(None), slice(None))], qd3[
-            (Ellipsis, k, slice(None), slice(None))]
+        ph, qd = phi3[..., k, :, :], qd3[..., k, :, :]
         r_hat = r_hat + ph[..., 0, 1] * state.mean[..., 0] + ph[..., 0, 2] * state.mean[..., 1]
         prior = predict(state, ph[..., 1:, 1:], qd[..., 1:, 1:], time=tb[sv])
         state, info = _update(prior, y[sv][..., None], h2, r_meas, mask, "joseph")
@@ -129,8 +128,7 @@ def dead_reckoning_filter(times: ArrayLike, speeds: ArrayLike, model: Singer, sp
         ikc = np.eye(3) - k3 @ h3
         p3 = symmetrize(ikc @ p3 @ mT(ikc) + k3 @ r_meas @ mT(k3))
         dist[sv], dist_var[sv] = r_hat, p3[..., 0, 0]
-        fm[(Ellipsis, k, slice(None))], fc[(Ellipsis, k, slice(None), slice(None))] = (
-            state.mean, state.cov)
+        fm[..., k, :], fc[..., k, :, :] = state.mean, state.cov
         infos.append(info)
     stack = {f: np.stack([getattr(i, f) for i in infos], axis=len(batch))
              for f in ("innovation", "innovation_cov", "nis", "log_likelihood", "gain",

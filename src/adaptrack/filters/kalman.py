@@ -16,7 +16,7 @@ from typing import Literal
 
 import numpy as np
 
-from .._linalg import mT, matvec, symmetrize
+from .._linalg import matvec, mT, symmetrize
 from .._typing import ArrayLike, BoolArray, FloatArray
 from .._validation import as_float_array, check_finite
 from ..models.continuous import MotionModel, as_motion_model
@@ -148,7 +148,14 @@ def update(state: GaussianState, measurement: ArrayLike, measurement_matrix: Arr
     if measurement_noise_mean is not None:
         offset = as_float_array(measurement_noise_mean, "measurement_noise_mean", min_ndim=1)
     form = _check_form(form)
-    return _update(state, z, h, r, mk, form, offset)
+    try:
+        return _update(state, z, h, r, mk, form, offset)
+    except np.linalg.LinAlgError:
+        s_mat = h @ state.cov @ np.swapaxes(h, -1, -2) + r
+        bad = np.linalg.eigvalsh(symmetrize(s_mat)).min(axis=-1) <= 0
+        idx = tuple(int(i) for i in np.argwhere(bad)[0]) if bad.ndim else ()
+        raise CovarianceError(f"innovation covariance is not positive definite at batch index "
+                              f"{idx}; is state.cov positive semi-definite?") from None
 
 
 def _update(state: GaussianState, z: FloatArray, h: FloatArray, r: FloatArray,
@@ -166,17 +173,17 @@ def _update(state: GaussianState, z: FloatArray, h: FloatArray, r: FloatArray,
     mean = state.mean + matvec(k, nu)
     n_obs = np.broadcast_to(mask.sum(axis=-1).astype(np.float64), mean.shape[:-1])
     nis, loglik = _innovation_stats(nu, s, logdet, n_obs)
-    post = _trusted(GaussianState, mean=mean, cov=np.broadcast_to(cov, mean.shape + mean.shape[-1:]),
-                    time=state.time)
+    full_cov = np.broadcast_to(cov, mean.shape + mean.shape[-1:])
+    post = _trusted(GaussianState, mean=mean, cov=full_cov, time=state.time)
     info = _trusted(StepInfo, innovation=nu, innovation_cov=s, nis=nis, log_likelihood=loglik,
                     gain=k, n_observed=n_obs)
     return post, info
 
 
-def _check_form(form: str) -> str:
+def _check_form(form: str) -> UpdateForm:
     if form not in ("joseph", "standard"):
         raise ValueError(f"form must be 'joseph' or 'standard'; got {form!r}")
-    return form
+    return "joseph" if form == "joseph" else "standard"
 
 
 def _component_mask(mask: ArrayLike | None, shape: tuple[int, ...], name: str) -> BoolArray:

@@ -13,7 +13,7 @@ from typing import Literal
 
 import numpy as np
 
-from .._typing import ArrayLike, BoolArray, FloatArray
+from .._typing import AnyArray, ArrayLike, BoolArray, FloatArray
 from .._validation import (
     as_float_array,
     check_symmetric_pd,
@@ -308,7 +308,7 @@ def _run_shared(t: FloatArray, z: FloatArray, h: FloatArray, r: FloatArray,
                    np.broadcast_to(r, full_shape[:-1] + (m, m)))
 
 
-def _ro(a: FloatArray) -> FloatArray:
+def _ro(a: AnyArray) -> AnyArray:
     if a.flags.writeable:
         a.flags.writeable = False
     return a

@@ -15,7 +15,8 @@ import numpy as np
 
 from .._typing import FloatArray
 
-# closed_form(dt) -> (Phi, Qd_white, Gamma_[G B]) with shapes (..., d, d), (..., d, d), (..., d, w + c)
+# closed_form(dt) -> (Phi, Qd_white, Gamma of [G B]),
+# shapes (..., d, d), (..., d, d), (..., d, w + c)
 ClosedForm = Callable[[FloatArray], tuple[FloatArray, FloatArray, FloatArray]]
 
 

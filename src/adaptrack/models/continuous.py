@@ -9,7 +9,7 @@ one value for every axis or a sequence with one value per axis.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
 
@@ -377,7 +377,8 @@ def _singer_analytic(dt: FloatArray, tau: float, sw: float) -> tuple[FloatArray,
     g_l = {"w": t * (1 - rho), "v": t * dl - t**2 * (1 - rho),
            "r": t * dl**2 / 2 - t**2 * dl + t**3 * (1 - rho)}
 
-    def pick(key: str, small_d: dict[str, FloatArray], large_d: dict[str, FloatArray]) -> FloatArray:
+    def pick(key: str, small_d: Mapping[str, FloatArray],
+             large_d: Mapping[str, FloatArray]) -> FloatArray:
         return np.where(small, small_d[key], large_d[key])
 
     one, z = np.ones_like(dt), np.zeros_like(dt)

@@ -106,8 +106,8 @@ def discretize_with_input(model: MotionModel, dt: ArrayLike, method: Method = "e
     model = as_motion_model(model)
     dt_arr = as_float_array(dt, "dt")
     if np.any(dt_arr < 0):
-        idx = np.argwhere(dt_arr < 0)[0]
-        raise ValueError(f"dt must be >= 0; got {dt_arr[tuple(idx)]} at index {tuple(idx)}")
+        idx = tuple(int(i) for i in np.argwhere(dt_arr < 0)[0])
+        raise ValueError(f"dt must be >= 0; got {dt_arr[idx]} at index {idx}")
     if method not in ("expm", "analytic", "taylor", "source"):
         raise ValueError(
             f"method must be 'expm', 'analytic', 'taylor' or 'source'; got {method!r}")

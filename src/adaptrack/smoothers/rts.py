@@ -10,13 +10,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._linalg import mT, matvec, symmetrize
+from .._linalg import matvec, mT, symmetrize
 from .._typing import FloatArray
 from ..types import FilterResult, GaussianState, _trusted
 
 
 def _shared(a: FloatArray, batch_ndim: int) -> FloatArray | None:
-    """The unbatched array if ``a`` repeats one array over its batch axes (zero strides)."""
+    """Return the unbatched array if ``a`` repeats one array over its batch axes (zero strides)."""
     if batch_ndim and all(s == 0 for s in a.strides[:batch_ndim]):
         return a[(0,) * batch_ndim]
     return None
@@ -57,11 +57,13 @@ def rts_smooth(result: FilterResult) -> GaussianState:
     n_steps = pred.mean.shape[-2]
     sm = np.array(filt.mean)
     sh = [_shared(a, b) for a in (filt.cov, pred.cov, result.transition)]
-    shared = None if any(a is None for a in sh) else sh
-    sc = np.array(shared[0]) if shared is not None else np.array(filt.cov)
+    shared = [a for a in sh if a is not None]
+    if len(shared) < 3:
+        shared = []
+    sc = np.array(shared[0]) if shared else np.array(filt.cov)
     tail = (slice(None),) * b
     for k in range(n_steps - 2, -1, -1):
-        if shared is not None:
+        if shared:
             pf, pp, phi = shared
             c = _gains(pf[k], pp[k + 1], phi[k + 1])
             sc[k] = symmetrize(pf[k] + c @ (sc[k + 1] - pp[k + 1]) @ c.T)
@@ -71,7 +73,7 @@ def rts_smooth(result: FilterResult) -> GaussianState:
             sc[i] = symmetrize(filt.cov[i] + c @ (sc[j] - pred.cov[j]) @ mT(c))
         i, j = tail + (k,), tail + (k + 1,)
         sm[i] = filt.mean[i] + matvec(c, sm[j] - pred.mean[j])
-    cov = np.broadcast_to(sc, filt.cov.shape) if shared is not None else sc
+    cov = np.broadcast_to(sc, filt.cov.shape) if shared else sc
     sm.flags.writeable = False
     if cov.flags.writeable:
         cov.flags.writeable = False
