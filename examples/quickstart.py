@@ -14,15 +14,16 @@ truth = at.simulation.simulate_linear_trajectory(
     model, times, initial_mean=[0.0, 15.0, 0.0], initial_cov=np.diag([1.0, 1.0, 4.0]), rng=rng
 )
 z = at.simulation.simulate_linear_measurements(truth, [[1.0, 0.0, 0.0]], [[0.25]], rng=rng)
-prior = at.GaussianState(mean=[z[0, 0], 0.0, 0.0], cov=np.diag([0.25, 400.0, 16.0]),
-                         time=times[0])
+prior = at.GaussianState(mean=[z[0, 0], 0.0, 0.0], cov=np.diag([0.25, 400.0, 16.0]), time=times[0])
 result = at.kalman_filter(times, z, model, [[1.0, 0.0, 0.0]], [[0.25]], prior)
 smoothed = at.rts_smooth(result)
 
 for name, est in (("filter", result.filtered), ("RTS smoother", smoothed)):
     err = est.mean[50:] - truth[50:]
-    print(f"{name:>12}: position RMSE {np.sqrt(np.mean(err[:, 0] ** 2)):.3f} m, "
-          f"speed RMSE {np.sqrt(np.mean(err[:, 1] ** 2)):.3f} m/s")
+    print(
+        f"{name:>12}: position RMSE {np.sqrt(np.mean(err[:, 0] ** 2)):.3f} m, "
+        f"speed RMSE {np.sqrt(np.mean(err[:, 1] ** 2)):.3f} m/s"
+    )
 
 phi, _ = at.discretize(model, 0.05)
 print("observable from position:", at.is_observable(phi, [[1.0, 0.0, 0.0]]))

@@ -23,13 +23,15 @@ R = [[0.25]]
 
 
 def prior(cov=None, time=0.0, mean=None):
-    return at.GaussianState(np.zeros(3) if mean is None else mean,
-                            100.0 * np.eye(3) if cov is None else cov, time)
+    return at.GaussianState(
+        np.zeros(3) if mean is None else mean, 100.0 * np.eye(3) if cov is None else cov, time
+    )
 
 
 def run(**kw):
-    args = dict(times=T, measurements=Z, model=M, measurement_matrix=H, measurement_cov=R,
-                initial=prior())
+    args = dict(
+        times=T, measurements=Z, model=M, measurement_matrix=H, measurement_cov=R, initial=prior()
+    )
     args.update(kw)
     return at.kalman_filter(**args)
 
@@ -50,8 +52,9 @@ def test_inf_measurement():
 def test_nan_measurement_marked_present():
     z = Z.copy()
     z[2, 0] = np.nan
-    with pytest.raises(ValueError, match="measurements is NaN at step 2, component 0 where it "
-                                         "is marked present"):
+    with pytest.raises(
+        ValueError, match="measurements is NaN at step 2, component 0 where it is marked present"
+    ):
         run(measurements=z)
 
 
@@ -94,16 +97,23 @@ def test_wrong_measurement_cov_shape():
 def test_non_positive_measurement_variance():
     with pytest.raises(ValueError, match="measurement_cov must be positive definite"):
         run(measurement_cov=[[0.0]])
-    with pytest.raises(ValueError, match="measurement_cov must be positive definite; not at "
-                                         r"batch index \(2,\)"):
-        run(measurements=np.zeros((3, 4, 1)), measurement_cov=np.array([[[1.0]], [[1.0]],
-                                                                          [[-1.0]]]))
+    with pytest.raises(
+        ValueError,
+        match="measurement_cov must be positive definite; not at "
+        r"batch index \(2,\)",
+    ):
+        run(
+            measurements=np.zeros((3, 4, 1)), measurement_cov=np.array([[[1.0]], [[1.0]], [[-1.0]]])
+        )
 
 
 def test_asymmetric_cov():
     with pytest.raises(ValueError, match="measurement_cov must be symmetric"):
-        run(measurement_matrix=np.eye(2, 3), measurements=np.zeros((4, 2)),
-            measurement_cov=[[1.0, 0.5], [0.0, 1.0]])
+        run(
+            measurement_matrix=np.eye(2, 3),
+            measurements=np.zeros((4, 2)),
+            measurement_cov=[[1.0, 0.5], [0.0, 1.0]],
+        )
 
 
 def test_non_psd_prior():
@@ -124,9 +134,10 @@ def test_prior_after_first_measurement():
 
 def test_prior_wrong_batch():
     with pytest.raises(ValueError, match=r"initial must have batch shape \(\) or \(3,\)"):
-        run(measurements=np.zeros((3, 4, 1)), initial=prior(cov=np.broadcast_to(np.eye(3),
-                                                                               (2, 3, 3)),
-                                                            mean=np.zeros((2, 3))))
+        run(
+            measurements=np.zeros((3, 4, 1)),
+            initial=prior(cov=np.broadcast_to(np.eye(3), (2, 3, 3)), mean=np.zeros((2, 3))),
+        )
 
 
 def test_mask_wrong_dtype_and_shape():
@@ -141,8 +152,7 @@ def test_bad_options():
         run(nan_policy="drop")
     with pytest.raises(ValueError, match="form must be 'joseph' or 'standard'"):
         run(form="sqrt")
-    with pytest.raises(ValueError, match="method must be 'expm', 'analytic', 'taylor' or "
-                                         "'source'"):
+    with pytest.raises(ValueError, match="method must be 'expm', 'analytic', 'taylor' or 'source'"):
         run(method="euler")
 
 
@@ -165,8 +175,11 @@ def test_empty_sequence():
 def test_innovation_covariance_not_pd_names_batch_index():
     covs = np.stack([np.eye(3), -10.0 * np.eye(3)])
     state = at.GaussianState(np.zeros((2, 3)), covs, 0.0)
-    with pytest.raises(at.CovarianceError, match=r"innovation covariance is not positive "
-                                                 r"definite at batch index \(1,\)"):
+    with pytest.raises(
+        at.CovarianceError,
+        match=r"innovation covariance is not positive "
+        r"definite at batch index \(1,\)",
+    ):
         at.update(state, np.zeros((2, 1)), H, R)
 
 
@@ -207,25 +220,34 @@ def test_bad_method_options():
         discretize(M, 0.1, "source", noise="piecewise")
 
 
-@pytest.mark.parametrize("ctor, match", [
-    (lambda: Singer(time_constant_s=0.0), "time_constant_s must be > 0; got 0.0 for axis 0"),
-    (lambda: Singer(accel_std_mps2=[1.0, -1.0], n_axes=2),
-     "accel_std_mps2 must be >= 0; got -1.0 for axis 1"),
-    (lambda: Singer(time_constant_s=[1.0, 2.0]), r"one value per axis, shape \(1,\)"),
-    (lambda: ConstantVelocity(accel_psd=-1.0), "accel_psd must be >= 0"),
-    (lambda: ConstantAcceleration(jerk_psd=np.nan), "jerk_psd must be finite"),
-    (lambda: InverseDynamics(lambda_per_s2=-0.1), "lambda_per_s2 must be >= 0"),
-    (lambda: ShapingFilter(alpha_per_s=0.0), "alpha_per_s must be > 0"),
-    (lambda: ShapingFilter(coupling="weak"), "coupling must be 'sqrt_lambda' or 'unit'"),
-    (lambda: ConstantVelocity(n_axes=4), "n_axes must be 1, 2 or 3"),
-    (lambda: ShapingFilter.from_singer_rule(0.0, 0.3, 9.0, 0.05, 0.5),
-     "lambda_per_s2 must be finite and > 0"),
-    (lambda: singer_accel_std(9.0, 0.5, 0.5), r"2 \* prob_max_accel \+ prob_no_accel must be"),
-    (lambda: LinearSDE([[0.0, 1.0]], [[1.0]], [[1.0]], ("a",)), r"drift must have shape"),
-    (lambda: LinearSDE([[0.0]], [[1.0]], [[-1.0]], ("a",)),
-     "noise_psd must be positive semi-definite"),
-    (lambda: LinearSDE([[0.0]], [[1.0]], [[1.0]], ("a", "b")), "state_names must have 1"),
-])
+@pytest.mark.parametrize(
+    "ctor, match",
+    [
+        (lambda: Singer(time_constant_s=0.0), "time_constant_s must be > 0; got 0.0 for axis 0"),
+        (
+            lambda: Singer(accel_std_mps2=[1.0, -1.0], n_axes=2),
+            "accel_std_mps2 must be >= 0; got -1.0 for axis 1",
+        ),
+        (lambda: Singer(time_constant_s=[1.0, 2.0]), r"one value per axis, shape \(1,\)"),
+        (lambda: ConstantVelocity(accel_psd=-1.0), "accel_psd must be >= 0"),
+        (lambda: ConstantAcceleration(jerk_psd=np.nan), "jerk_psd must be finite"),
+        (lambda: InverseDynamics(lambda_per_s2=-0.1), "lambda_per_s2 must be >= 0"),
+        (lambda: ShapingFilter(alpha_per_s=0.0), "alpha_per_s must be > 0"),
+        (lambda: ShapingFilter(coupling="weak"), "coupling must be 'sqrt_lambda' or 'unit'"),
+        (lambda: ConstantVelocity(n_axes=4), "n_axes must be 1, 2 or 3"),
+        (
+            lambda: ShapingFilter.from_singer_rule(0.0, 0.3, 9.0, 0.05, 0.5),
+            "lambda_per_s2 must be finite and > 0",
+        ),
+        (lambda: singer_accel_std(9.0, 0.5, 0.5), r"2 \* prob_max_accel \+ prob_no_accel must be"),
+        (lambda: LinearSDE([[0.0, 1.0]], [[1.0]], [[1.0]], ("a",)), r"drift must have shape"),
+        (
+            lambda: LinearSDE([[0.0]], [[1.0]], [[-1.0]], ("a",)),
+            "noise_psd must be positive semi-definite",
+        ),
+        (lambda: LinearSDE([[0.0]], [[1.0]], [[1.0]], ("a", "b")), "state_names must have 1"),
+    ],
+)
 def test_model_parameter_errors(ctor, match):
     with pytest.raises(ValueError, match=match):
         ctor()

@@ -18,7 +18,12 @@ def mT(a: FloatArray) -> FloatArray:
 
 
 def matvec(a: FloatArray, x: FloatArray) -> FloatArray:
-    """Batched matrix-vector product ``A x`` over leading axes."""
+    """Batched matrix-vector product ``A x`` over leading axes.
+
+    A single matrix ``a`` (n, n) is applied as ``x @ a^T`` (one BLAS call for all vectors).
+    """
+    if a.ndim == 2:
+        return x @ a.T
     return np.einsum("...ij,...j->...i", a, x)
 
 

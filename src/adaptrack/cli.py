@@ -13,8 +13,9 @@ from rich.table import Table
 
 from .analysis.singer_study import run_singer_study
 
-app = typer.Typer(help="adaptrack: adaptive motion estimation.", no_args_is_help=True,
-                  add_completion=False)
+app = typer.Typer(
+    help="adaptrack: adaptive motion estimation.", no_args_is_help=True, add_completion=False
+)
 _err = Console(stderr=True)
 
 
@@ -39,13 +40,24 @@ def demo(
 
         result = run_singer_study(n_runs=runs, seed=seed, progress=step)
     table = Table(title=f"2-D Singer target, {runs} runs x {result.n_steps} steps, seed {seed}")
-    for col in ("filter", "pos RMSE [m]", "vel RMSE [m/s]", "RTS pos [m]", "RTS vel [m/s]",
-                "ANEES (pos+vel)"):
+    for col in (
+        "filter",
+        "pos RMSE [m]",
+        "vel RMSE [m/s]",
+        "RTS pos [m]",
+        "RTS vel [m/s]",
+        "ANEES (pos+vel)",
+    ):
         table.add_column(col, justify="right" if col != "filter" else "left")
     for row in result.rows:
-        table.add_row(row.filter, f"{row.position_rmse_m:.3f}", f"{row.velocity_rmse_mps:.3f}",
-                      f"{row.smoothed_position_rmse_m:.3f}",
-                      f"{row.smoothed_velocity_rmse_mps:.3f}", f"{row.anees:.2f}")
+        table.add_row(
+            row.filter,
+            f"{row.position_rmse_m:.3f}",
+            f"{row.velocity_rmse_mps:.3f}",
+            f"{row.smoothed_position_rmse_m:.3f}",
+            f"{row.smoothed_velocity_rmse_mps:.3f}",
+            f"{row.anees:.2f}",
+        )
     console.print(table)
     lo, hi = result.anees_band
     console.print(f"95 % ANEES band of a consistent filter: [{lo:.3f}, {hi:.3f}]")

@@ -14,16 +14,25 @@ def random_model(rng, i):
     choice = i % 4
     n_axes = int(rng.integers(1, 4))
     if choice == 0:
-        return Singer(time_constant_s=rng.uniform(0.5, 30, n_axes),
-                      accel_std_mps2=rng.uniform(0.1, 5, n_axes), n_axes=n_axes)
+        return Singer(
+            time_constant_s=rng.uniform(0.5, 30, n_axes),
+            accel_std_mps2=rng.uniform(0.1, 5, n_axes),
+            n_axes=n_axes,
+        )
     if choice == 1:
         return ConstantVelocity(accel_psd=rng.uniform(0.01, 10, n_axes), n_axes=n_axes)
     if choice == 2:
-        return InverseDynamics(lambda_per_s2=rng.uniform(0, 1, n_axes),
-                               accel_psd=rng.uniform(0.1, 5, n_axes), n_axes=n_axes)
-    return ShapingFilter(lambda_per_s2=rng.uniform(0.001, 1, n_axes),
-                         alpha_per_s=rng.uniform(0.05, 2, n_axes),
-                         shaping_std=rng.uniform(0.1, 5, n_axes), n_axes=n_axes)
+        return InverseDynamics(
+            lambda_per_s2=rng.uniform(0, 1, n_axes),
+            accel_psd=rng.uniform(0.1, 5, n_axes),
+            n_axes=n_axes,
+        )
+    return ShapingFilter(
+        lambda_per_s2=rng.uniform(0.001, 1, n_axes),
+        alpha_per_s=rng.uniform(0.05, 2, n_axes),
+        shaping_std=rng.uniform(0.1, 5, n_axes),
+        n_axes=n_axes,
+    )
 
 
 def relative(a, b):
@@ -68,7 +77,6 @@ def test_kalman_filter_and_rts_match_filterpy(case):
     assert relative(res.filtered.cov, fp) <= 1e-9
     assert relative(res.info.log_likelihood, np.array(ll)) <= 1e-9
     # FilterPy's rts_smoother uses Fs[k+1] for the step k -> k+1 through Fs[k]; pass shifted
-    xs, ps, _, _ = rts_smoother(fx, fp, np.array(fs[1:] + [fs[-1]]),
-                                np.array(qs[1:] + [qs[-1]]))
+    xs, ps, _, _ = rts_smoother(fx, fp, np.array(fs[1:] + [fs[-1]]), np.array(qs[1:] + [qs[-1]]))
     assert relative(sm.mean, xs) <= 1e-9
     assert relative(sm.cov, ps) <= 1e-9

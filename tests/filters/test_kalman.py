@@ -15,8 +15,9 @@ SINGER = Singer(time_constant_s=5.0, accel_std_mps2=2.0)
 
 
 def prior3(t0=0.0, batch=()):
-    return at.GaussianState(mean=np.zeros(batch + (3,)), cov=np.broadcast_to(100.0 * np.eye(3),
-                            batch + (3, 3)), time=t0)
+    return at.GaussianState(
+        mean=np.zeros(batch + (3,)), cov=np.broadcast_to(100.0 * np.eye(3), batch + (3, 3)), time=t0
+    )
 
 
 def irregular_times(rng, n, shape=()):
@@ -45,11 +46,13 @@ def test_batch_equals_loop(rng, per_track_times):
     for i in range(n_tracks):
         ti = t[i] if per_track_times else t
         one = at.kalman_filter(ti, z[i], SINGER, H3, [[0.5]], prior3(float(np.min(t[..., 0]))))
-        for a, b in ((res.filtered.mean[i], one.filtered.mean),
-                     (res.filtered.cov[i], one.filtered.cov),
-                     (res.predicted.mean[i], one.predicted.mean),
-                     (res.info.log_likelihood[i], one.info.log_likelihood),
-                     (res.transition[i], one.transition)):
+        for a, b in (
+            (res.filtered.mean[i], one.filtered.mean),
+            (res.filtered.cov[i], one.filtered.cov),
+            (res.predicted.mean[i], one.predicted.mean),
+            (res.info.log_likelihood[i], one.info.log_likelihood),
+            (res.transition[i], one.transition),
+        ):
             np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12)
 
 
@@ -60,10 +63,12 @@ def test_shared_and_general_paths_agree(rng):
     # a per-track prior covariance forces the general path
     general = at.kalman_filter(t, z, SINGER, H3, [[0.3]], prior3(t[0], batch=(4,)))
     assert shared.filtered.cov.strides[0] == 0 and general.filtered.cov.strides[0] != 0
-    for a, b in ((shared.filtered.mean, general.filtered.mean),
-                 (shared.filtered.cov, general.filtered.cov),
-                 (shared.info.nis, general.info.nis),
-                 (shared.info.log_likelihood, general.info.log_likelihood)):
+    for a, b in (
+        (shared.filtered.mean, general.filtered.mean),
+        (shared.filtered.cov, general.filtered.cov),
+        (shared.info.nis, general.info.nis),
+        (shared.info.log_likelihood, general.info.log_likelihood),
+    ):
         np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-13)
 
 
@@ -88,8 +93,9 @@ def test_scalar_random_walk_reaches_riccati_steady_state():
     q, r = 0.3, 2.0
     model = at.models.LinearSDE([[0.0]], [[1.0]], [[q]], ("x",))
     t = np.arange(300.0)
-    res = at.kalman_filter(t, np.zeros((300, 1)), model, [[1.0]], [[r]],
-                           at.GaussianState([0.0], [[50.0]], 0.0))
+    res = at.kalman_filter(
+        t, np.zeros((300, 1)), model, [[1.0]], [[r]], at.GaussianState([0.0], [[50.0]], 0.0)
+    )
     p_pred = solve_discrete_are(np.eye(1), np.eye(1), q * np.eye(1), r * np.eye(1))[0, 0]
     p_filt = p_pred * r / (p_pred + r)
     assert res.predicted.cov[-1, 0, 0] == pytest.approx(p_pred, rel=1e-12)
@@ -174,19 +180,26 @@ def test_seed000_filter_including_source_form(rng):
     p0_seed = np.diag([sw**2, 4.0, 9.0])
     ry = d @ s_eta @ d.T
     for method in ("source", "expm"):
-        res = at.kalman_filter(t, y, model, c_seed @ pi, ry,
-                               at.GaussianState(pi @ m0_seed, pi @ p0_seed @ pi.T, t[0]),
-                               method=method, measurement_noise_mean=d @ m_eta)
+        res = at.kalman_filter(
+            t,
+            y,
+            model,
+            c_seed @ pi,
+            ry,
+            at.GaussianState(pi @ m0_seed, pi @ p0_seed @ pi.T, t[0]),
+            method=method,
+            measurement_noise_mean=d @ m_eta,
+        )
         x, p = m0_seed, p0_seed
         for k in range(t.size):
             if k > 0:
                 phi, qd = discretize(model, t[k] - t[k - 1], method)
                 phi, qd = pi @ phi @ pi.T, pi @ qd @ pi.T
-                x = phi @ x                                   # (8)
-                p = phi @ p @ phi.T + qd                      # (10)
+                x = phi @ x  # (8)
+                p = phi @ p @ phi.T + qd  # (10)
             s = c_seed @ p @ c_seed.T + ry
-            gain = p @ c_seed.T @ np.linalg.inv(s)             # (13)
-            x = x + gain @ (y[k] - c_seed @ x - d @ m_eta)     # (9), C restored
+            gain = p @ c_seed.T @ np.linalg.inv(s)  # (13)
+            x = x + gain @ (y[k] - c_seed @ x - d @ m_eta)  # (9), C restored
             p = p - p @ c_seed.T @ np.linalg.inv(s) @ c_seed @ p  # (11), (12)
             np.testing.assert_allclose(pi @ res.filtered.mean[k], x, rtol=1e-10, atol=1e-12)
             np.testing.assert_allclose(pi @ res.filtered.cov[k] @ pi, p, rtol=1e-9, atol=1e-12)

@@ -35,11 +35,24 @@ def singer_mp(dt, tau, sw):
         q02 = s2 * t * (t * (1 - rho**2) - 2 * dt * rho)
         q11 = s2 * t * (2 * dt - 3 * t + 4 * t * rho - t * rho**2)
         q12 = s2 * t * (dt - t + t * rho) ** 2
-        q22 = s2 * t * (2 * dt**3 / 3 - 2 * t * dt**2 + 2 * t**2 * dt + t**3
-                        - 4 * t**2 * dt * rho - t**3 * rho**2)
+        q22 = (
+            s2
+            * t
+            * (
+                2 * dt**3 / 3
+                - 2 * t * dt**2
+                + 2 * t**2 * dt
+                + t**3
+                - 4 * t**2 * dt * rho
+                - t**3 * rho**2
+            )
+        )
         phi = [[rho, 0, 0], [t * (1 - rho), 1, 0], [t * dt - t**2 * (1 - rho), dt, 1]]
-        gam = [[t * (1 - rho)], [t * dt - t**2 * (1 - rho)],
-               [t * dt**2 / 2 - t**2 * dt + t**3 * (1 - rho)]]
+        gam = [
+            [t * (1 - rho)],
+            [t * dt - t**2 * (1 - rho)],
+            [t * dt**2 / 2 - t**2 * dt + t**3 * (1 - rho)],
+        ]
         q = [[q00, q01, q02], [q01, q11, q12], [q02, q12, q22]]
         return to_float(phi), to_float(q), to_float(gam)
 
@@ -48,11 +61,28 @@ def singer_closed_float(dt, tau, sw):
     """The printed closed forms of A.4 in float64 (accurate only for dt/tau >= 1)."""
     rho = math.exp(-dt / tau)
     s2, t = sw**2, tau
-    q = np.array([
-        [1 - rho**2, t * (1 - rho) ** 2, t * (t * (1 - rho**2) - 2 * dt * rho)],
-        [0, t * (2 * dt - 3 * t + 4 * t * rho - t * rho**2), t * (dt - t + t * rho) ** 2],
-        [0, 0, t * (2 * dt**3 / 3 - 2 * dt**2 * t + 2 * dt * t**2 + t**3
-                    - 4 * dt * t**2 * rho - t**3 * rho**2)]]) * s2
+    q = (
+        np.array(
+            [
+                [1 - rho**2, t * (1 - rho) ** 2, t * (t * (1 - rho**2) - 2 * dt * rho)],
+                [0, t * (2 * dt - 3 * t + 4 * t * rho - t * rho**2), t * (dt - t + t * rho) ** 2],
+                [
+                    0,
+                    0,
+                    t
+                    * (
+                        2 * dt**3 / 3
+                        - 2 * dt**2 * t
+                        + 2 * dt * t**2
+                        + t**3
+                        - 4 * dt * t**2 * rho
+                        - t**3 * rho**2
+                    ),
+                ],
+            ]
+        )
+        * s2
+    )
     return q + np.triu(q, 1).T
 
 
@@ -62,8 +92,10 @@ def m1_mp(dt, k, qa):
         dt, k, qa = mp.mpf(dt), mp.mpf(k), mp.mpf(qa)
         r = mp.e ** (-k * dt)
         g = qa / k**2
-        q = [[g * (dt - (1 - r) * (3 - r) / (2 * k)), g * (1 - r) ** 2 / 2],
-             [g * (1 - r) ** 2 / 2, g * k * (1 - r**2) / 2]]
+        q = [
+            [g * (dt - (1 - r) * (3 - r) / (2 * k)), g * (1 - r) ** 2 / 2],
+            [g * (1 - r) ** 2 / 2, g * k * (1 - r**2) / 2],
+        ]
         gam = [[(dt - (1 - r) / k) / k], [(1 - r) / k]]
         return to_float([[1, (1 - r) / k], [0, r]]), to_float(gam), to_float(q)
 
@@ -98,8 +130,10 @@ def van_loan_mp(f, g, qc, dt):
         e = mp.expm(m * mp.mpf(dt))
         phi = e[n:, n:].T
         qd = phi * e[:n, n:]
-        return (to_float([[phi[i, j] for j in range(n)] for i in range(n)]),
-                to_float([[qd[i, j] for j in range(n)] for i in range(n)]))
+        return (
+            to_float([[phi[i, j] for j in range(n)] for i in range(n)]),
+            to_float([[qd[i, j] for j in range(n)] for i in range(n)]),
+        )
 
 
 # seed 000 [w, v, r] <-> adaptrack [r, v, w]

@@ -31,8 +31,9 @@ def test_c0_1_exact_phi_is_expm(method):
     for dt, tau, sw in CASES:
         phi, _ = seed_disc(dt, tau, sw, method)
         rho = math.exp(-dt / tau)
-        closed = np.array([[rho, 0, 0], [tau * (1 - rho), 1, 0],
-                           [tau * dt - tau**2 * (1 - rho), dt, 1]])
+        closed = np.array(
+            [[rho, 0, 0], [tau * (1 - rho), 1, 0], [tau * dt - tau**2 * (1 - rho), dt, 1]]
+        )
         assert relerr(phi, expm(a000(tau) * dt)) < 1e-13
         assert relerr(phi, closed) < 1e-13
 
@@ -42,8 +43,13 @@ def test_c0_2_exact_qd_closed_form_vs_quadrature():
         qc = 2 * sw**2 / tau
         g = np.array([[1.0], [0], [0]])
         gg = g @ g.T
-        quad = quad_vec(lambda s, tau=tau, qc=qc, gg=gg: expm(a000(tau) * s) @ gg
-                        @ expm(a000(tau) * s).T * qc, 0.0, dt, epsabs=1e-14, epsrel=1e-12)[0]
+        quad = quad_vec(
+            lambda s, tau=tau, qc=qc, gg=gg: expm(a000(tau) * s) @ gg @ expm(a000(tau) * s).T * qc,
+            0.0,
+            dt,
+            epsabs=1e-14,
+            epsrel=1e-12,
+        )[0]
         closed = singer_closed_float(dt, tau, sw)
         for method in ("expm", "analytic"):
             _, qd = seed_disc(dt, tau, sw, method)
@@ -55,8 +61,13 @@ def test_c0_2b_small_step_series_and_closed_form_cancellation():
     dt, tau, sw = 0.003, 30.0, 2.0
     qc = 2 * sw**2 / tau
     _, qd = seed_disc(dt, tau, sw)
-    series = qc * np.array([[dt, dt**2 / 2, dt**3 / 6], [dt**2 / 2, dt**3 / 3, dt**4 / 8],
-                            [dt**3 / 6, dt**4 / 8, dt**5 / 20]])
+    series = qc * np.array(
+        [
+            [dt, dt**2 / 2, dt**3 / 6],
+            [dt**2 / 2, dt**3 / 3, dt**4 / 8],
+            [dt**3 / 6, dt**4 / 8, dt**5 / 20],
+        ]
+    )
     assert relerr_el(qd, series) < 3 * dt / tau
     # the printed closed form loses accuracy here; the library does not use it for dt/tau < 1
     assert relerr_el(singer_closed_float(dt, tau, sw), qd) > 1e-6
@@ -129,10 +140,12 @@ def test_c0_6_printed_observability_matrices_and_ranks():
     cr, cv = sp.Matrix([[0, 0, c3]]), sp.Matrix([[0, c2, 0]])
     nr = sp.Matrix.hstack(cr.T, ph.T * cr.T, (ph.T) ** 2 * cr.T)
     nv = sp.Matrix.hstack(cv.T, ph.T * cv.T, (ph.T) ** 2 * cv.T)
-    assert sp.simplify(nr - sp.Matrix([[0, 0, c3 * dt**2], [0, c3 * dt, 2 * c3 * dt],
-                                       [c3, c3, c3]])) == sp.zeros(3, 3)
-    assert sp.simplify(nv - sp.Matrix([[0, c2 * dt, c2 * dt * (rho + 1)], [c2, c2, c2],
-                                       [0, 0, 0]])) == sp.zeros(3, 3)
+    assert sp.simplify(
+        nr - sp.Matrix([[0, 0, c3 * dt**2], [0, c3 * dt, 2 * c3 * dt], [c3, c3, c3]])
+    ) == sp.zeros(3, 3)
+    assert sp.simplify(
+        nv - sp.Matrix([[0, c2 * dt, c2 * dt * (rho + 1)], [c2, c2, c2], [0, 0, 0]])
+    ) == sp.zeros(3, 3)
     assert sp.factor(nr.det()) == -(c3**3) * dt**3
     # numerically, through the library, with the source transition (seed order)
     for dt_, tau in ((0.1, 5.0), (1e-3, 30.0), (2.0, 0.7)):
@@ -174,18 +187,19 @@ def test_c0_11_mean_acceleration_input():
     for dt, tau, _ in CASES:
         # b(dt) = (1/tau) int_0^dt expm(A s) e_w ds; the printed closed form cancels for small
         # dt/tau, so compare with quadrature and with the high-precision Gamma / tau
-        bq = quad_vec(lambda s, tau=tau: expm(a000(tau) * s)[:, 0] / tau, 0.0, dt,
-                      epsabs=1e-16, epsrel=1e-13)[0]
+        bq = quad_vec(
+            lambda s, tau=tau: expm(a000(tau) * s)[:, 0] / tau, 0.0, dt, epsabs=1e-16, epsrel=1e-13
+        )[0]
         _, _, gam = singer_mp(dt, tau, 1.0)
         for method in ("expm", "analytic"):
-            u = to_seed(control_offset(Singer(time_constant_s=tau, mean_accel_mps2=1.7), dt,
-                                       method))
+            u = to_seed(
+                control_offset(Singer(time_constant_s=tau, mean_accel_mps2=1.7), dt, method)
+            )
             assert relerr(u, 1.7 * bq) < 1e-10
             assert relerr_el(u, 1.7 * gam[:, 0] / tau) < 1e-13
         rho = math.exp(-dt / tau)
         if dt / tau >= 0.1:  # the printed closed form where it is accurate
-            b = np.array([1 - rho, dt - tau * (1 - rho),
-                          dt**2 / 2 - tau * dt + tau**2 * (1 - rho)])
+            b = np.array([1 - rho, dt - tau * (1 - rho), dt**2 / 2 - tau * dt + tau**2 * (1 - rho)])
             assert relerr(u, 1.7 * b) < 1e-12
 
 
@@ -225,8 +239,13 @@ def test_c0_14_singer_analytic_elementwise():
     for x in np.concatenate([np.geomspace(1e-9, 1e3, 40), [0.999, 1.0, 1.001]]):
         p_ref, q_ref, g_ref = singer_mp(x * tau, tau, sw)
         phi, qd = seed_disc(x * tau, tau, sw, "analytic")
-        u = to_seed(control_offset(Singer(time_constant_s=tau, accel_std_mps2=sw,
-                                          mean_accel_mps2=tau), x * tau, "analytic"))
+        u = to_seed(
+            control_offset(
+                Singer(time_constant_s=tau, accel_std_mps2=sw, mean_accel_mps2=tau),
+                x * tau,
+                "analytic",
+            )
+        )
         assert relerr_el(phi, p_ref) < 1e-14
         assert relerr_el(qd, q_ref) < 1e-14
         assert relerr_el(u, g_ref[:, 0]) < 1e-14
@@ -240,8 +259,9 @@ def test_c0_15_adaptrack_order_is_permutation():
     model = Singer(time_constant_s=tau, accel_std_mps2=sw)
     phi_c, qd_c = discretize(model, dt)
     # discretise the seed-order model directly (generic SDE) and permute
-    seed_model = at.models.LinearSDE(a000(tau), [[1.0], [0.0], [0.0]], [[2 * sw**2 / tau]],
-                                     ("w", "v", "r"))
+    seed_model = at.models.LinearSDE(
+        a000(tau), [[1.0], [0.0], [0.0]], [[2 * sw**2 / tau]], ("w", "v", "r")
+    )
     phi_s, qd_s = discretize(seed_model, dt)
     assert relerr(phi_c, PI @ phi_s @ PI.T) < 1e-14
     assert relerr(qd_c, PI @ qd_s @ PI.T) < 1e-14

@@ -52,12 +52,26 @@ def test_c1_1_to_c1_3_m1_closed_forms(method):
             assert relerr(phi, expm(m1_f(k) * dt)) < 1e-12
             gam_src = np.array([dt - (1 - r) / k, 1 - r])  # (78), input G1 = [0, k]
             assert relerr(gamma_of(model, dt, method) * k, gam_src) < 1e-10
-            quad = quad_vec(lambda s, k=k, lam=lam: expm(m1_f(k) * s) @ np.array([[0.0], [k]])
-                            @ np.array([[0.0, k]]) @ expm(m1_f(k) * s).T * (1.7 / lam),
-                            0.0, dt, epsabs=1e-14, epsrel=1e-12)[0]
+            quad = quad_vec(
+                lambda s, k=k, lam=lam: (
+                    expm(m1_f(k) * s)
+                    @ np.array([[0.0], [k]])
+                    @ np.array([[0.0, k]])
+                    @ expm(m1_f(k) * s).T
+                    * (1.7 / lam)
+                ),
+                0.0,
+                dt,
+                epsabs=1e-14,
+                epsrel=1e-12,
+            )[0]
             g = 1.7 / lam
-            closed = g * np.array([[dt - (1 - r) * (3 - r) / (2 * k), (1 - r) ** 2 / 2],
-                                   [(1 - r) ** 2 / 2, k * (1 - r**2) / 2]])
+            closed = g * np.array(
+                [
+                    [dt - (1 - r) * (3 - r) / (2 * k), (1 - r) ** 2 / 2],
+                    [(1 - r) ** 2 / 2, k * (1 - r**2) / 2],
+                ]
+            )
             assert relerr_el(qd, quad) < 1e-7
             assert relerr_el(qd, closed) < 1e-7
             # both parameterisations: gamma fixed (seed) and q_a (default)
@@ -73,8 +87,9 @@ def test_c1_4_c1_5_m1_taylor_second_order():
     ts = sp.eye(2) + f1 * s + f1**2 * s**2 / 2
     gt = (ts * g1).applyfunc(lambda e: sp.integrate(e, (s, 0, dt)))
     pub_phi = sp.Matrix([[1, dt - k * dt**2 / 2], [0, 1 - k * dt + k**2 * dt**2 / 2]])
-    pub_gam = sp.Matrix([k * dt**2 / 2 - k**2 * dt**3 / 6,
-                         k * dt - k**2 * dt**2 / 2 + k**3 * dt**3 / 6])
+    pub_gam = sp.Matrix(
+        [k * dt**2 / 2 - k**2 * dt**3 / 6, k * dt - k**2 * dt**2 / 2 + k**3 * dt**3 / 6]
+    )
     assert sp.simplify(t1 - pub_phi) == sp.zeros(2, 2)
     assert sp.simplify(gt - pub_gam) == sp.zeros(2, 1)
     # the library's taylor(2) is (82)
@@ -82,15 +97,19 @@ def test_c1_4_c1_5_m1_taylor_second_order():
     model = InverseDynamics(lambda_per_s2=0.03, accel_psd=1.0)
     for h in (0.05, 0.3):
         phi, _ = discretize(model, h, "taylor", order=2)
-        np.testing.assert_allclose(phi, [[1, h - kk * h**2 / 2],
-                                         [0, 1 - kk * h + kk**2 * h**2 / 2]], rtol=1e-14)
-        np.testing.assert_allclose(gamma_of(model, h, "taylor") * kk,
-                                   [kk * h**2 / 2 - kk**2 * h**3 / 6,
-                                    kk * h - kk**2 * h**2 / 2 + kk**3 * h**3 / 6], rtol=1e-14)
+        np.testing.assert_allclose(
+            phi, [[1, h - kk * h**2 / 2], [0, 1 - kk * h + kk**2 * h**2 / 2]], rtol=1e-14
+        )
+        np.testing.assert_allclose(
+            gamma_of(model, h, "taylor") * kk,
+            [kk * h**2 / 2 - kk**2 * h**3 / 6, kk * h - kk**2 * h**2 / 2 + kk**3 * h**3 / 6],
+            rtol=1e-14,
+        )
     ep, eg = [], []
     for h in (0.8, 0.4, 0.2):
-        ep.append(np.max(np.abs(discretize(model, h, "taylor", order=2)[0]
-                                - discretize(model, h)[0])))
+        ep.append(
+            np.max(np.abs(discretize(model, h, "taylor", order=2)[0] - discretize(model, h)[0]))
+        )
         eg.append(np.max(np.abs(gamma_of(model, h, "taylor") - gamma_of(model, h))))
     assert 7 < ep[1] / ep[2] < 9
     assert 14 < eg[1] / eg[2] < 18
@@ -129,8 +148,9 @@ def test_c1_6b_m2_near_confluence_and_long_steps():
             assert relerr(discretize(model, dt, method)[0], phi) < 1e-8
     # a long step with the recipe equals high precision
     model = ShapingFilter(lambda_per_s2=1.0, alpha_per_s=1.0 + 1e-12, shaping_std=1.0)
-    p_ref, q_ref = van_loan_mp(m2_f(1.0, 1.0 + 1e-12), np.array([[0.0], [0], [1]]),
-                               2 * (1.0 + 1e-12), 5.0)
+    p_ref, q_ref = van_loan_mp(
+        m2_f(1.0, 1.0 + 1e-12), np.array([[0.0], [0], [1]]), 2 * (1.0 + 1e-12), 5.0
+    )
     for method in ("expm", "analytic"):
         phi, qd = discretize(model, 5.0, method)
         assert relerr(phi, p_ref) < 1e-13
@@ -144,24 +164,39 @@ def test_c1_8_m2_taylor_second_order():
     t2 = sp.eye(3) + f2 * dt + f2**2 * dt**2 / 2
     t2s = sp.eye(3) + f2 * s + f2**2 * s**2 / 2
     gt2 = (t2s * g2).applyfunc(lambda e: sp.integrate(e, (s, 0, dt)))
-    pub2 = sp.Matrix([[1, dt - k * dt**2 / 2, k * dt**2 / 2],
-                      [0, 1 - k * dt + k**2 * dt**2 / 2, k * dt - (k**2 + a * k) * dt**2 / 2],
-                      [0, 0, 1 - a * dt + a**2 * dt**2 / 2]])
-    pubg2 = sp.Matrix([k * dt**3 / 6, k * dt**2 / 2 - (k**2 + a * k) * dt**3 / 6,
-                       dt - a * dt**2 / 2 + a**2 * dt**3 / 6])
+    pub2 = sp.Matrix(
+        [
+            [1, dt - k * dt**2 / 2, k * dt**2 / 2],
+            [0, 1 - k * dt + k**2 * dt**2 / 2, k * dt - (k**2 + a * k) * dt**2 / 2],
+            [0, 0, 1 - a * dt + a**2 * dt**2 / 2],
+        ]
+    )
+    pubg2 = sp.Matrix(
+        [
+            k * dt**3 / 6,
+            k * dt**2 / 2 - (k**2 + a * k) * dt**3 / 6,
+            dt - a * dt**2 / 2 + a**2 * dt**3 / 6,
+        ]
+    )
     assert sp.simplify(t2 - pub2) == sp.zeros(3, 3)
     assert sp.simplify(gt2 - pubg2) == sp.zeros(3, 1)
     kk, al = math.sqrt(0.03), 0.5
     model = ShapingFilter(lambda_per_s2=0.03, alpha_per_s=al, shaping_std=1.0)
     h = 0.1
-    np.testing.assert_allclose(discretize(model, h, "taylor", order=2)[0],
-                               np.array(pub2.subs({dt: h, k: kk, a: al}), dtype=float),
-                               rtol=1e-14)
-    np.testing.assert_allclose(gamma_of(model, h, "taylor"),
-                               np.array(pubg2.subs({dt: h, k: kk, a: al}), dtype=float)[:, 0],
-                               rtol=1e-14)
-    ep = [np.max(np.abs(discretize(model, hh, "taylor", order=2)[0] - discretize(model, hh)[0]))
-          for hh in (0.4, 0.2)]
+    np.testing.assert_allclose(
+        discretize(model, h, "taylor", order=2)[0],
+        np.array(pub2.subs({dt: h, k: kk, a: al}), dtype=float),
+        rtol=1e-14,
+    )
+    np.testing.assert_allclose(
+        gamma_of(model, h, "taylor"),
+        np.array(pubg2.subs({dt: h, k: kk, a: al}), dtype=float)[:, 0],
+        rtol=1e-14,
+    )
+    ep = [
+        np.max(np.abs(discretize(model, hh, "taylor", order=2)[0] - discretize(model, hh)[0]))
+        for hh in (0.4, 0.2)
+    ]
     assert 7 < ep[0] / ep[1] < 9
 
 
@@ -182,8 +217,7 @@ def test_c1_9b_m2_piecewise_vs_white_ratios():
     model = ShapingFilter(lambda_per_s2=0.03, alpha_per_s=0.5, shaping_std=1.0)
     h = 1e-4
     ratio = discretize(model, h, noise="piecewise")[1] / discretize(model, h)[1]
-    np.testing.assert_allclose(ratio, [[5 / 9, 2 / 3, 1], [2 / 3, 3 / 4, 1], [1, 1, 1]],
-                               atol=2e-3)
+    np.testing.assert_allclose(ratio, [[5 / 9, 2 / 3, 1], [2 / 3, 3 / 4, 1], [1, 1, 1]], atol=2e-3)
 
 
 def test_c1_10_shaping_filter_stationary_variance():
@@ -214,27 +248,29 @@ def test_c1_11_lambda_to_zero_gamma_fixed_is_noise_free_cv():
 def test_c1_11b_lambda_zero_qa_fixed_is_cv():
     for method in ("expm", "analytic", "taylor"):
         for dt in (0.05, 1.0, 30.0):
-            m1 = discretize(InverseDynamics(lambda_per_s2=0.0, accel_psd=2.5), dt, method,
-                            order=4)
+            m1 = discretize(InverseDynamics(lambda_per_s2=0.0, accel_psd=2.5), dt, method, order=4)
             cv = discretize(ConstantVelocity(accel_psd=2.5), dt, "analytic")
             np.testing.assert_allclose(m1.transition, cv.transition, rtol=1e-14)
             np.testing.assert_allclose(m1.process_cov, cv.process_cov, rtol=1e-13)
     # continuity: tiny lambda is close to CV
     tiny = discretize(InverseDynamics(lambda_per_s2=1e-12, accel_psd=2.5), 1.0, "analytic")
-    np.testing.assert_allclose(tiny.process_cov, discretize(ConstantVelocity(accel_psd=2.5),
-                                                            1.0).process_cov, rtol=1e-5)
+    np.testing.assert_allclose(
+        tiny.process_cov, discretize(ConstantVelocity(accel_psd=2.5), 1.0).process_cov, rtol=1e-5
+    )
 
 
 def test_c1_12_taylor_orders():
     for dt in (0.1, 2.0):
-        np.testing.assert_allclose(discretize(ConstantVelocity(accel_psd=1.3), dt, "taylor",
-                                              order=0).process_cov,
-                                   1.3 * np.array([[dt**3 / 3, dt**2 / 2], [dt**2 / 2, dt]]),
-                                   rtol=1e-14)
+        np.testing.assert_allclose(
+            discretize(ConstantVelocity(accel_psd=1.3), dt, "taylor", order=0).process_cov,
+            1.3 * np.array([[dt**3 / 3, dt**2 / 2], [dt**2 / 2, dt]]),
+            rtol=1e-14,
+        )
     model = InverseDynamics(lambda_per_s2=0.09, accel_psd=1.0)
     ref = discretize(model, 0.05, "analytic").process_cov
-    errs = [relerr_el(discretize(model, 0.05, "taylor", order=p).process_cov, ref)
-            for p in (0, 2, 6)]
+    errs = [
+        relerr_el(discretize(model, 0.05, "taylor", order=p).process_cov, ref) for p in (0, 2, 6)
+    ]
     assert 5e-3 < errs[0] < 5e-2
     assert 1e-7 < errs[1] < 1e-6
     assert errs[2] < 1e-14
@@ -267,9 +303,11 @@ def test_c1_14_two_point_differencing_covariance(rng):
 
 @pytest.mark.parametrize("method", ["expm", "analytic"])
 def test_c1_15_dt_zero_and_composition(method):
-    models = [InverseDynamics(lambda_per_s2=0.05, accel_psd=1.0),
-              ShapingFilter(lambda_per_s2=0.05, alpha_per_s=0.4, shaping_std=2.0),
-              at.models.Singer(time_constant_s=3.0, accel_std_mps2=1.0)]
+    models = [
+        InverseDynamics(lambda_per_s2=0.05, accel_psd=1.0),
+        ShapingFilter(lambda_per_s2=0.05, alpha_per_s=0.4, shaping_std=2.0),
+        at.models.Singer(time_constant_s=3.0, accel_std_mps2=1.0),
+    ]
     for model in models:
         for noise in ("white", "piecewise"):
             phi0, qd0 = discretize(model, 0.0, method, noise=noise)
@@ -293,8 +331,9 @@ def test_c1_16_m2_analytic_elementwise():
     for lam, al in ((0.04, 0.2), (0.05, 1.0), (0.01, 0.1)):
         model = ShapingFilter(lambda_per_s2=lam, alpha_per_s=al, shaping_std=1.5)
         for dt in np.geomspace(1e-4, 40.0, 12):
-            p_ref, q_ref = van_loan_mp(m2_f(math.sqrt(lam), al), np.array([[0.0], [0], [1]]),
-                                       2 * al * 1.5**2, dt)
+            p_ref, q_ref = van_loan_mp(
+                m2_f(math.sqrt(lam), al), np.array([[0.0], [0], [1]]), 2 * al * 1.5**2, dt
+            )
             phi, qd = discretize(model, dt, "analytic")
             assert relerr_el(phi, p_ref, floor=1e-300) < 1e-13
             assert relerr_el(qd, q_ref) < 1e-13
@@ -304,13 +343,13 @@ def test_c1_16_m2_analytic_elementwise():
 
 
 def test_multi_axis_is_block_diagonal_in_state_order():
-    model = ShapingFilter(lambda_per_s2=[0.01, 0.05], alpha_per_s=[0.2, 1.0],
-                          shaping_std=[1.0, 2.0], n_axes=2)
+    model = ShapingFilter(
+        lambda_per_s2=[0.01, 0.05], alpha_per_s=[0.2, 1.0], shaping_std=[1.0, 2.0], n_axes=2
+    )
     assert model.state_names == ("x", "y", "vx", "vy", "xi_x", "xi_y")
     phi, qd, _ = discretize_with_input(model, 0.3)
     for axis, (lam, al, sm) in enumerate([(0.01, 0.2, 1.0), (0.05, 1.0, 2.0)]):
-        p1, q1 = discretize(ShapingFilter(lambda_per_s2=lam, alpha_per_s=al, shaping_std=sm),
-                            0.3)
+        p1, q1 = discretize(ShapingFilter(lambda_per_s2=lam, alpha_per_s=al, shaping_std=sm), 0.3)
         idx = [axis, 2 + axis, 4 + axis]
         np.testing.assert_array_equal(phi[np.ix_(idx, idx)], p1)
         np.testing.assert_array_equal(qd[np.ix_(idx, idx)], q1)

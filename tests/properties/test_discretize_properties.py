@@ -20,24 +20,32 @@ pos = st.floats(0.01, 50.0)
 def models(draw):
     kind = draw(st.integers(0, 4))
     if kind == 0:
-        return Singer(time_constant_s=draw(st.floats(0.1, 100.0)),
-                      accel_std_mps2=draw(st.floats(0.0, 20.0)))
+        return Singer(
+            time_constant_s=draw(st.floats(0.1, 100.0)), accel_std_mps2=draw(st.floats(0.0, 20.0))
+        )
     if kind == 1:
         return ConstantVelocity(accel_psd=draw(st.floats(0.0, 100.0)), n_axes=2)
     if kind == 2:
         return ConstantAcceleration(jerk_psd=draw(pos))
     if kind == 3:
         return InverseDynamics(lambda_per_s2=draw(st.floats(0.0, 4.0)), accel_psd=draw(pos))
-    return ShapingFilter(lambda_per_s2=draw(st.floats(1e-4, 4.0)),
-                         alpha_per_s=draw(st.floats(0.01, 5.0)), shaping_std=draw(pos))
+    return ShapingFilter(
+        lambda_per_s2=draw(st.floats(1e-4, 4.0)),
+        alpha_per_s=draw(st.floats(0.01, 5.0)),
+        shaping_std=draw(pos),
+    )
 
 
 dts = st.floats(0.0, 200.0)
 exact_methods = st.sampled_from(["expm", "analytic"])
 
 
-@given(models(), dts, st.sampled_from(["expm", "analytic", "taylor"]),
-       st.sampled_from(["white", "piecewise"]))
+@given(
+    models(),
+    dts,
+    st.sampled_from(["expm", "analytic", "taylor"]),
+    st.sampled_from(["white", "piecewise"]),
+)
 def test_outputs_symmetric_psd_and_finite(model, dt, method, noise):
     if method == "taylor":
         dt = min(dt, 0.1)

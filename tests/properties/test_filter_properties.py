@@ -17,8 +17,9 @@ def problems(draw):
     times = np.cumsum(rng.uniform(1e-3, 5.0, (n_tracks, n_steps)), axis=1)
     z = rng.normal(size=(n_tracks, n_steps, 2)) * draw(st.floats(0.1, 1e3))
     mask = rng.uniform(size=(n_tracks, n_steps, 2)) > draw(st.floats(0.0, 0.6))
-    model = Singer(time_constant_s=draw(st.floats(0.1, 50.0)),
-                   accel_std_mps2=draw(st.floats(0.01, 30.0)))
+    model = Singer(
+        time_constant_s=draw(st.floats(0.1, 50.0)), accel_std_mps2=draw(st.floats(0.01, 30.0))
+    )
     r = np.diag(rng.uniform(0.01, 100.0, 2))
     return times, z, mask, model, r
 
@@ -39,5 +40,6 @@ def test_covariances_symmetric_psd_and_batch_equals_loop(problem):
     for i in range(times.shape[0]):
         one = at.kalman_filter(times[i], z[i], model, H, r, prior, mask=mask[i])
         scale = np.abs(one.filtered.mean).max() + 1.0
-        np.testing.assert_allclose(res.filtered.mean[i], one.filtered.mean, rtol=1e-9,
-                                   atol=1e-9 * scale)
+        np.testing.assert_allclose(
+            res.filtered.mean[i], one.filtered.mean, rtol=1e-9, atol=1e-9 * scale
+        )

@@ -29,11 +29,11 @@ def dense_posterior(prior_mean, prior_cov, phis, qds, h, r, z, mask):
             c = transfer[k] @ prior_cov @ transfer[l].T
             for j in range(min(k, l) + 1):
                 c = c + noise_maps[k][j] @ qds[j] @ noise_maps[l][j].T
-            big[k * n:(k + 1) * n, l * n:(l + 1) * n] = c
+            big[k * n : (k + 1) * n, l * n : (l + 1) * n] = c
     rows = [k for k in range(n_steps) if mask[k]]
     hb = np.zeros((len(rows) * h.shape[0], n_steps * n))
     for i, k in enumerate(rows):
-        hb[i * h.shape[0]:(i + 1) * h.shape[0], k * n:(k + 1) * n] = h
+        hb[i * h.shape[0] : (i + 1) * h.shape[0], k * n : (k + 1) * n] = h
     zb = np.concatenate([z[k] for k in rows])
     mu = np.concatenate(means)
     s = hb @ big @ hb.T + np.kron(np.eye(len(rows)), r)
@@ -41,7 +41,8 @@ def dense_posterior(prior_mean, prior_cov, phis, qds, h, r, z, mask):
     post_mean = mu + gain @ (zb - hb @ mu)
     post_cov = big - gain @ hb @ big
     return post_mean.reshape(n_steps, n), np.array(
-        [post_cov[k * n:(k + 1) * n, k * n:(k + 1) * n] for k in range(n_steps)])
+        [post_cov[k * n : (k + 1) * n, k * n : (k + 1) * n] for k in range(n_steps)]
+    )
 
 
 def test_rts_equals_dense_joint_posterior(rng):

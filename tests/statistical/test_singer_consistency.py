@@ -25,8 +25,8 @@ def test_matched_singer_filter_is_consistent_and_efficient():
     z = simulate_linear_measurements(truth, h, r, rng=rng)
     res = at.kalman_filter(times, z, model, h, r, at.GaussianState(m0, p0, times[0]))
     err = res.filtered.mean - truth
-    e = nees(err, res.filtered.cov)                       # (n_runs, T), each chi2(3)
-    anees = e.mean(axis=0)                                 # n_runs * anees ~ chi2(3 n_runs)
+    e = nees(err, res.filtered.cov)  # (n_runs, T), each chi2(3)
+    anees = e.mean(axis=0)  # n_runs * anees ~ chi2(3 n_runs)
     lo, hi = chi2.ppf([5e-4, 1 - 5e-4], 3 * n_runs) / n_runs  # each step outside w.p. 1e-3
     inside = np.mean((anees > lo) & (anees < hi))
     # expected 0.3 of 300 steps outside; 2 % = 6 steps outside is a false failure of < 1e-4

@@ -7,5 +7,4 @@ from .observability import (
     unobservable_directions,
 )
 
-__all__ = ["is_observable", "observability_matrix", "observability_rank",
-           "unobservable_directions"]
+__all__ = ["is_observable", "observability_matrix", "observability_rank", "unobservable_directions"]

@@ -27,8 +27,9 @@ def nees(error: ArrayLike, cov: ArrayLike) -> FloatArray:
     e = as_float_array(error, "error", min_ndim=1)
     p = as_float_array(cov, "cov", min_ndim=2)
     if p.shape[-2:] != (e.shape[-1], e.shape[-1]):
-        raise ValueError(f"cov must have shape (..., {e.shape[-1]}, {e.shape[-1]}) to match "
-                         f"error; got {p.shape}")
+        raise ValueError(
+            f"cov must have shape (..., {e.shape[-1]}, {e.shape[-1]}) to match error; got {p.shape}"
+        )
     return np.einsum("...i,...i->...", e, solve_vec(p, e))
 
 

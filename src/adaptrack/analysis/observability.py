@@ -15,8 +15,9 @@ from .._typing import ArrayLike, FloatArray
 from .._validation import as_float_array, check_square
 
 
-def observability_matrix(transition: ArrayLike, measurement_matrix: ArrayLike,
-                         n_steps: int | None = None) -> FloatArray:
+def observability_matrix(
+    transition: ArrayLike, measurement_matrix: ArrayLike, n_steps: int | None = None
+) -> FloatArray:
     """Observability matrix of ``(Phi, H)``.
 
     Parameters
@@ -43,8 +44,9 @@ def observability_matrix(transition: ArrayLike, measurement_matrix: ArrayLike,
     n = check_square(phi, "transition")
     h = as_float_array(measurement_matrix, "measurement_matrix", min_ndim=2)
     if h.ndim != 2 or h.shape[1] != n:
-        raise ValueError(f"measurement_matrix must have shape (m, {n}) to match transition; "
-                         f"got {h.shape}")
+        raise ValueError(
+            f"measurement_matrix must have shape (m, {n}) to match transition; got {h.shape}"
+        )
     if phi.ndim == 2:
         k = n - 1 if n_steps is None else int(n_steps)
         phis = np.broadcast_to(phi, (k, n, n))
@@ -91,8 +93,9 @@ def unobservable_directions(obs_matrix: ArrayLike, rtol: float | None = None) ->
     return q
 
 
-def is_observable(transition: ArrayLike, measurement_matrix: ArrayLike,
-                  rtol: float | None = None) -> bool:
+def is_observable(
+    transition: ArrayLike, measurement_matrix: ArrayLike, rtol: float | None = None
+) -> bool:
     """Tell whether ``(Phi, H)`` (constant or a sequence of transitions) is fully observable.
 
     Examples
@@ -106,5 +109,4 @@ def is_observable(transition: ArrayLike, measurement_matrix: ArrayLike,
     return observability_rank(o, rtol) == o.shape[1]
 
 
-__all__ = ["is_observable", "observability_matrix", "observability_rank",
-           "unobservable_directions"]
+__all__ = ["is_observable", "observability_matrix", "observability_rank", "unobservable_directions"]

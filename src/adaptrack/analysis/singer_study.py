@@ -44,30 +44,37 @@ class StudyResult:
     anees_band: tuple[float, float]
 
 
-def run_singer_study(n_runs: int = 200, seed: int = 0, duration_s: float = 60.0,
-                     progress: Callable[[str], None] | None = None) -> StudyResult:
+def run_singer_study(
+    n_runs: int = 200,
+    seed: int = 0,
+    duration_s: float = 60.0,
+    progress: Callable[[str], None] | None = None,
+) -> StudyResult:
     """Simulate ``n_runs`` Singer targets and compare filters (all runs batched).
 
     Truth: 2-D Singer, ``tau = 10 s``, ``sigma = 1.5 m/s^2``; positions measured with
     ``sigma = 3 m`` every 40-60 ms (uniformly jittered); the first 5 s are excluded from
     the metrics (initial transient).
     """
-    rng_time, rng_truth, rng_meas = (np.random.default_rng(s)
-                                     for s in np.random.SeedSequence(seed).spawn(3))
+    rng_time, rng_truth, rng_meas = (
+        np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(3)
+    )
     n_mean = int(duration_s / 0.05)
     times = np.cumsum(rng_time.uniform(0.04, 0.06, n_mean))
     truth_model = Singer(time_constant_s=10.0, accel_std_mps2=1.5, n_axes=2)
     p0 = np.diag([100.0, 100.0, 25.0, 25.0, 2.25, 2.25])
-    truth = simulate_linear_trajectory(truth_model, times, np.zeros(6), p0, n_runs=n_runs,
-                                       rng=rng_truth)
+    truth = simulate_linear_trajectory(
+        truth_model, times, np.zeros(6), p0, n_runs=n_runs, rng=rng_truth
+    )
     h6 = np.hstack([np.eye(2), np.zeros((2, 4))])
     r = 9.0 * np.eye(2)
     z = simulate_linear_measurements(truth, h6, r, rng=rng_meas)
     models: dict[str, MotionModel] = {
         "Singer (matched)": truth_model,
         "constant velocity": ConstantVelocity(accel_psd=4.5, n_axes=2),
-        "M1 (lambda = 0.001, untuned)": InverseDynamics(lambda_per_s2=0.001, accel_psd=10.0,
-                                                        n_axes=2),
+        "M1 (lambda = 0.001, untuned)": InverseDynamics(
+            lambda_per_s2=0.001, accel_psd=10.0, n_axes=2
+        ),
     }
     keep = times >= 5.0
     rows = []
@@ -82,11 +89,19 @@ def run_singer_study(n_runs: int = 200, seed: int = 0, duration_s: float = 60.0,
         err = res.filtered.mean[..., :4] - truth[..., :4]
         serr = sm.mean[..., :4] - truth[..., :4]
         e4 = nees(err[:, keep], res.filtered.cov[:, keep][..., :4, :4])
-        rows.append(StudyRow(name, float(rmse(err[:, keep, :2])), float(rmse(err[:, keep, 2:4])),
-                             float(rmse(serr[:, keep, :2])), float(rmse(serr[:, keep, 2:4])),
-                             float(e4.mean())))
-    return StudyResult(tuple(rows), n_runs, seed, int(times.size),
-                       anees_band(4, n_runs * int(keep.sum())))
+        rows.append(
+            StudyRow(
+                name,
+                float(rmse(err[:, keep, :2])),
+                float(rmse(err[:, keep, 2:4])),
+                float(rmse(serr[:, keep, :2])),
+                float(rmse(serr[:, keep, 2:4])),
+                float(e4.mean()),
+            )
+        )
+    return StudyResult(
+        tuple(rows), n_runs, seed, int(times.size), anees_band(4, n_runs * int(keep.sum()))
+    )
 
 
 __all__ = ["StudyResult", "StudyRow", "run_singer_study"]

@@ -46,10 +46,18 @@ class DeadReckoningResult:
     info: StepInfo
 
 
-def dead_reckoning_filter(times: ArrayLike, speeds: ArrayLike, model: Singer, speed_var: float,
-                          initial: GaussianState, *, initial_distance_m: ArrayLike = 0.0,
-                          initial_distance_var_m2: float = 0.0, speed_scale: float = 1.0,
-                          method: Method = "expm") -> DeadReckoningResult:
+def dead_reckoning_filter(
+    times: ArrayLike,
+    speeds: ArrayLike,
+    model: Singer,
+    speed_var: float,
+    initial: GaussianState,
+    *,
+    initial_distance_m: ArrayLike = 0.0,
+    initial_distance_var_m2: float = 0.0,
+    speed_scale: float = 1.0,
+    method: Method = "expm",
+) -> DeadReckoningResult:
     """Speed-only reduced Kalman filter with dead reckoning of distance (seed 000, A.8).
 
     Parameters
@@ -91,8 +99,9 @@ def dead_reckoning_filter(times: ArrayLike, speeds: ArrayLike, model: Singer, sp
     c2 = float(speed_scale)
     if c2 == 0.0 or not np.isfinite(c2):
         raise ValueError(f"speed_scale must be finite and non-zero; got {speed_scale}")
-    var_r0 = check_positive_scalar(initial_distance_var_m2, "initial_distance_var_m2",
-                                   allow_zero=True)
+    var_r0 = check_positive_scalar(
+        initial_distance_var_m2, "initial_distance_var_m2", allow_zero=True
+    )
     batch = y.shape[:-1]
     n_steps = y.shape[-1]
     tb = np.broadcast_to(t, batch + (n_steps,))
@@ -105,9 +114,12 @@ def dead_reckoning_filter(times: ArrayLike, speeds: ArrayLike, model: Singer, sp
     h3 = np.array([[0.0, c2, 0.0]])
     r_meas = np.array([[c2**2 * var]])
     r0 = np.broadcast_to(as_float_array(initial_distance_m, "initial_distance_m"), batch)
-    state = _trusted(GaussianState, mean=np.broadcast_to(initial.mean, batch + (2,)),
-                     cov=np.broadcast_to(initial.cov, batch + (2, 2)),
-                     time=np.broadcast_to(initial.time, batch))
+    state = _trusted(
+        GaussianState,
+        mean=np.broadcast_to(initial.mean, batch + (2,)),
+        cov=np.broadcast_to(initial.cov, batch + (2, 2)),
+        time=np.broadcast_to(initial.time, batch),
+    )
     # 3-state covariance [r, v, w] of the zero-distance-gain filter
     p3: FloatArray = np.zeros(batch + (3, 3))
     p3[..., 0, 0] = var_r0
@@ -130,9 +142,10 @@ def dead_reckoning_filter(times: ArrayLike, speeds: ArrayLike, model: Singer, sp
         dist[sv], dist_var[sv] = r_hat, p3[..., 0, 0]
         fm[..., k, :], fc[..., k, :, :] = state.mean, state.cov
         infos.append(info)
-    stack = {f: np.stack([getattr(i, f) for i in infos], axis=len(batch))
-             for f in ("innovation", "innovation_cov", "nis", "log_likelihood", "gain",
-                       "n_observed")}
+    stack = {
+        f: np.stack([getattr(i, f) for i in infos], axis=len(batch))
+        for f in ("innovation", "innovation_cov", "nis", "log_likelihood", "gain", "n_observed")
+    }
     filtered = _trusted(GaussianState, mean=fm, cov=fc, time=tb)
     return DeadReckoningResult(filtered, dist, dist_var, _trusted(StepInfo, **stack))
 

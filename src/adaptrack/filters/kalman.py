@@ -31,8 +31,14 @@ class CovarianceError(ValueError):
     """A covariance that must be positive definite is not (names step and tracks)."""
 
 
-def predict(state: GaussianState, transition: FloatArray, process_cov: FloatArray, *,
-            time: ArrayLike, control: FloatArray | None = None) -> GaussianState:
+def predict(
+    state: GaussianState,
+    transition: FloatArray,
+    process_cov: FloatArray,
+    *,
+    time: ArrayLike,
+    control: FloatArray | None = None,
+) -> GaussianState:
     """Propagate a Gaussian through a linear transition.
 
     Parameters
@@ -61,8 +67,9 @@ def predict(state: GaussianState, transition: FloatArray, process_cov: FloatArra
     return _trusted(GaussianState, mean=mean, cov=cov, time=time_arr)
 
 
-def _masked_model(h: FloatArray, r: FloatArray, mask: BoolArray | None
-                  ) -> tuple[FloatArray, FloatArray]:
+def _masked_model(
+    h: FloatArray, r: FloatArray, mask: BoolArray | None
+) -> tuple[FloatArray, FloatArray]:
     """Zero the rows of H and decouple the entries of R of missing components."""
     if mask is None:
         return h, r
@@ -73,8 +80,9 @@ def _masked_model(h: FloatArray, r: FloatArray, mask: BoolArray | None
     return hm, rm
 
 
-def _gain(cov: FloatArray, h: FloatArray, r: FloatArray
-          ) -> tuple[FloatArray, FloatArray, FloatArray]:
+def _gain(
+    cov: FloatArray, h: FloatArray, r: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Return (K, S, log det S); raises LinAlgError if S is not positive definite."""
     hp = h @ cov
     s = symmetrize(hp @ mT(h) + r)
@@ -84,25 +92,33 @@ def _gain(cov: FloatArray, h: FloatArray, r: FloatArray
     return k, s, logdet
 
 
-def _covariance_update(cov: FloatArray, k: FloatArray, h: FloatArray, r: FloatArray,
-                       form: str) -> FloatArray:
+def _covariance_update(
+    cov: FloatArray, k: FloatArray, h: FloatArray, r: FloatArray, form: str
+) -> FloatArray:
     ikh = np.eye(cov.shape[-1]) - k @ h
     if form == "joseph":
         return symmetrize(ikh @ cov @ mT(ikh) + k @ r @ mT(k))
     return symmetrize(ikh @ cov)
 
 
-def _innovation_stats(nu: FloatArray, s: FloatArray, logdet: FloatArray, n_obs: FloatArray
-                      ) -> tuple[FloatArray, FloatArray]:
+def _innovation_stats(
+    nu: FloatArray, s: FloatArray, logdet: FloatArray, n_obs: FloatArray
+) -> tuple[FloatArray, FloatArray]:
     nis = np.einsum("...i,...i->...", nu, np.linalg.solve(s, nu[..., None])[..., 0])
     loglik = np.where(n_obs > 0, -0.5 * (logdet + nis + n_obs * _LOG_2PI), 0.0)
     return nis, loglik
 
 
-def update(state: GaussianState, measurement: ArrayLike, measurement_matrix: ArrayLike,
-           measurement_cov: ArrayLike, *, mask: ArrayLike | None = None,
-           form: UpdateForm = "joseph", measurement_noise_mean: ArrayLike | None = None
-           ) -> tuple[GaussianState, StepInfo]:
+def update(
+    state: GaussianState,
+    measurement: ArrayLike,
+    measurement_matrix: ArrayLike,
+    measurement_cov: ArrayLike,
+    *,
+    mask: ArrayLike | None = None,
+    form: UpdateForm = "joseph",
+    measurement_noise_mean: ArrayLike | None = None,
+) -> tuple[GaussianState, StepInfo]:
     """Condition a Gaussian state on a linear measurement ``z = H x + v``.
 
     Parameters
@@ -132,12 +148,15 @@ def update(state: GaussianState, measurement: ArrayLike, measurement_matrix: Arr
     h = as_float_array(measurement_matrix, "measurement_matrix", min_ndim=2)
     r = as_float_array(measurement_cov, "measurement_cov", min_ndim=2)
     if h.shape[-1] != state.dim:
-        raise ValueError(f"measurement_matrix must have shape (..., m, {state.dim}) to match "
-                         f"the state; got {h.shape}")
+        raise ValueError(
+            f"measurement_matrix must have shape (..., m, {state.dim}) to match "
+            f"the state; got {h.shape}"
+        )
     m = h.shape[-2]
     if z.shape[-1] != m:
-        raise ValueError(f"measurement must have shape (..., {m}) to match measurement_matrix; "
-                         f"got {z.shape}")
+        raise ValueError(
+            f"measurement must have shape (..., {m}) to match measurement_matrix; got {z.shape}"
+        )
     if r.shape[-2:] != (m, m):
         raise ValueError(f"measurement_cov must have shape (..., {m}, {m}); got {r.shape}")
     mk = _component_mask(mask, z.shape, "mask")
@@ -154,13 +173,21 @@ def update(state: GaussianState, measurement: ArrayLike, measurement_matrix: Arr
         s_mat = h @ state.cov @ np.swapaxes(h, -1, -2) + r
         bad = np.linalg.eigvalsh(symmetrize(s_mat)).min(axis=-1) <= 0
         idx = tuple(int(i) for i in np.argwhere(bad)[0]) if bad.ndim else ()
-        raise CovarianceError(f"innovation covariance is not positive definite at batch index "
-                              f"{idx}; is state.cov positive semi-definite?") from None
+        raise CovarianceError(
+            f"innovation covariance is not positive definite at batch index "
+            f"{idx}; is state.cov positive semi-definite?"
+        ) from None
 
 
-def _update(state: GaussianState, z: FloatArray, h: FloatArray, r: FloatArray,
-            mask: BoolArray, form: str, offset: FloatArray | None = None
-            ) -> tuple[GaussianState, StepInfo]:
+def _update(
+    state: GaussianState,
+    z: FloatArray,
+    h: FloatArray,
+    r: FloatArray,
+    mask: BoolArray,
+    form: str,
+    offset: FloatArray | None = None,
+) -> tuple[GaussianState, StepInfo]:
     """Trusted update kernel (inputs validated by the caller)."""
     full = bool(mask.all())
     hm, rm = _masked_model(h, r, None if full else mask)
@@ -175,8 +202,15 @@ def _update(state: GaussianState, z: FloatArray, h: FloatArray, r: FloatArray,
     nis, loglik = _innovation_stats(nu, s, logdet, n_obs)
     full_cov = np.broadcast_to(cov, mean.shape + mean.shape[-1:])
     post = _trusted(GaussianState, mean=mean, cov=full_cov, time=state.time)
-    info = _trusted(StepInfo, innovation=nu, innovation_cov=s, nis=nis, log_likelihood=loglik,
-                    gain=k, n_observed=n_obs)
+    info = _trusted(
+        StepInfo,
+        innovation=nu,
+        innovation_cov=s,
+        nis=nis,
+        log_likelihood=loglik,
+        gain=k,
+        n_observed=n_obs,
+    )
     return post, info
 
 
@@ -198,15 +232,26 @@ def _component_mask(mask: ArrayLike | None, shape: tuple[int, ...], name: str) -
     try:
         return np.broadcast_to(mk, shape)
     except ValueError:
-        raise ValueError(f"{name} must have shape {shape[:-1]} (whole measurements) or {shape} "
-                         f"(per component); got {mk.shape}") from None
+        raise ValueError(
+            f"{name} must have shape {shape[:-1]} (whole measurements) or {shape} "
+            f"(per component); got {mk.shape}"
+        ) from None
 
 
-def kalman_step(state: GaussianState, measurement: ArrayLike, model: MotionModel,
-                measurement_matrix: ArrayLike, measurement_cov: ArrayLike, *, time: ArrayLike,
-                mask: ArrayLike | None = None, method: Method = "expm", noise: Noise = "white",
-                order: int = 2, form: UpdateForm = "joseph"
-                ) -> tuple[GaussianState, StepInfo]:
+def kalman_step(
+    state: GaussianState,
+    measurement: ArrayLike,
+    model: MotionModel,
+    measurement_matrix: ArrayLike,
+    measurement_cov: ArrayLike,
+    *,
+    time: ArrayLike,
+    mask: ArrayLike | None = None,
+    method: Method = "expm",
+    noise: Noise = "white",
+    order: int = 2,
+    form: UpdateForm = "joseph",
+) -> tuple[GaussianState, StepInfo]:
     """One online step: predict ``state`` to ``time`` with ``model``, then update.
 
     The online counterpart of :func:`adaptrack.kalman_filter`: feeding a sequence step by step

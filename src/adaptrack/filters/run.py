@@ -13,6 +13,7 @@ from typing import Literal
 
 import numpy as np
 
+from .._linalg import matvec
 from .._typing import AnyArray, ArrayLike, BoolArray, FloatArray
 from .._validation import (
     as_float_array,
@@ -38,12 +39,22 @@ from .kalman import (
 NanPolicy = Literal["raise", "missing"]
 
 
-def kalman_filter(times: ArrayLike, measurements: ArrayLike, model: MotionModel,
-                  measurement_matrix: ArrayLike, measurement_cov: ArrayLike,
-                  initial: GaussianState, *, mask: ArrayLike | None = None,
-                  nan_policy: NanPolicy = "raise", method: Method = "expm",
-                  noise: Noise = "white", order: int = 2, form: UpdateForm = "joseph",
-                  measurement_noise_mean: ArrayLike | None = None) -> FilterResult:
+def kalman_filter(
+    times: ArrayLike,
+    measurements: ArrayLike,
+    model: MotionModel,
+    measurement_matrix: ArrayLike,
+    measurement_cov: ArrayLike,
+    initial: GaussianState,
+    *,
+    mask: ArrayLike | None = None,
+    nan_policy: NanPolicy = "raise",
+    method: Method = "expm",
+    noise: Noise = "white",
+    order: int = 2,
+    form: UpdateForm = "joseph",
+    measurement_noise_mean: ArrayLike | None = None,
+) -> FilterResult:
     """Run a linear Kalman filter over one track or a batch of tracks.
 
     Parameters
@@ -118,70 +129,116 @@ def kalman_filter(times: ArrayLike, measurements: ArrayLike, model: MotionModel,
     batch = z.shape[:-2]
     n_steps = z.shape[-2]
     if t.shape not in ((n_steps,), batch + (n_steps,)):
-        raise ValueError(f"times must have shape ({n_steps},) or {batch + (n_steps,)} to match "
-                         f"measurements {z.shape}; got {t.shape}")
+        raise ValueError(
+            f"times must have shape ({n_steps},) or {batch + (n_steps,)} to match "
+            f"measurements {z.shape}; got {t.shape}"
+        )
     if n_steps == 0:
         raise ValueError("measurements must hold at least one time step; got T = 0")
     check_times(t, "times")
     h = as_float_array(measurement_matrix, "measurement_matrix", min_ndim=2)
     m = z.shape[-1]
     if h.shape != (m, n):
-        raise ValueError(f"measurement_matrix must have shape ({m}, {n}) to match measurements "
-                         f"(m = {m}) and model (n = {n}); got {h.shape}")
+        raise ValueError(
+            f"measurement_matrix must have shape ({m}, {n}) to match measurements "
+            f"(m = {m}) and model (n = {n}); got {h.shape}"
+        )
     r = as_float_array(measurement_cov, "measurement_cov", min_ndim=2)
     r_per_step = r.shape == batch + (n_steps, m, m) and r.shape != (m, m)
     if r.shape not in ((m, m), batch + (m, m), batch + (n_steps, m, m)):
-        raise ValueError(f"measurement_cov must have shape ({m}, {m}), {batch + (m, m)} or "
-                         f"{batch + (n_steps, m, m)}; got {r.shape}")
+        raise ValueError(
+            f"measurement_cov must have shape ({m}, {m}), {batch + (m, m)} or "
+            f"{batch + (n_steps, m, m)}; got {r.shape}"
+        )
     check_symmetric_pd(r, "measurement_cov")
     if initial.dim != n:
-        raise ValueError(f"initial.mean must have shape (..., {n}) to match the model "
-                         f"{model.state_names}; got {initial.mean.shape}")
+        raise ValueError(
+            f"initial.mean must have shape (..., {n}) to match the model "
+            f"{model.state_names}; got {initial.mean.shape}"
+        )
     if initial.batch_shape not in ((), batch):
-        raise ValueError(f"initial must have batch shape () or {batch} to match measurements; "
-                         f"got {initial.batch_shape}")
+        raise ValueError(
+            f"initial must have batch shape () or {batch} to match measurements; "
+            f"got {initial.batch_shape}"
+        )
     check_symmetric_pd(initial.cov, "initial.cov", semidefinite=True)
     t0 = t[..., 0]
     late = np.broadcast_to(initial.time, batch) > np.broadcast_to(t0, batch)
     if np.any(late):
         idx = tuple(int(i) for i in np.argwhere(late)[0]) if batch else ()
-        raise ValueError(f"initial.time must not be after the first measurement time; track "
-                         f"{idx}: {np.broadcast_to(initial.time, batch)[idx]} > "
-                         f"{np.broadcast_to(t0, batch)[idx]}")
+        raise ValueError(
+            f"initial.time must not be after the first measurement time; track "
+            f"{idx}: {np.broadcast_to(initial.time, batch)[idx]} > "
+            f"{np.broadcast_to(t0, batch)[idx]}"
+        )
     mk = np.array(_component_mask(mask, z.shape, "mask"))
     nan = np.isnan(z) & mk
     if np.any(nan):
         if nan_policy == "raise":
             idx = tuple(int(i) for i in np.argwhere(nan)[0])
-            where = (f"track {idx[0]}, step {idx[1]}, component {idx[2]}" if batch
-                     else f"step {idx[0]}, component {idx[1]}")
-            raise ValueError(f"measurements is NaN at {where} where it is marked present; pass "
-                             "mask=... or nan_policy='missing' to treat NaN as missing")
+            where = (
+                f"track {idx[0]}, step {idx[1]}, component {idx[2]}"
+                if batch
+                else f"step {idx[0]}, component {idx[1]}"
+            )
+            raise ValueError(
+                f"measurements is NaN at {where} where it is marked present; pass "
+                "mask=... or nan_policy='missing' to treat NaN as missing"
+            )
         mk = mk & ~nan
-    return _run(t, z, model, h, r, r_per_step, initial, mk, method, noise, order, form,
-                measurement_noise_mean)
+    return _run(
+        t,
+        z,
+        model,
+        h,
+        r,
+        r_per_step,
+        initial,
+        mk,
+        method,
+        noise,
+        order,
+        form,
+        measurement_noise_mean,
+    )
 
 
 _DISCRETIZE_CHUNK = 65536
 
 
-def _transitions(model: MotionModel, t: FloatArray, t_init: FloatArray, method: Method,
-                 noise: Noise, order: int) -> tuple[FloatArray, FloatArray, FloatArray]:
+def _transitions(
+    model: MotionModel, t: FloatArray, t_init: FloatArray, method: Method, noise: Noise, order: int
+) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Phi, Qd and control offsets per step (entry k maps step k-1 -> k), cached by dt."""
-    prev = np.concatenate([np.broadcast_to(t_init, t.shape[:-1])[..., None], t[..., :-1]],
-                          axis=-1)
+    prev = np.concatenate([np.broadcast_to(t_init, t.shape[:-1])[..., None], t[..., :-1]], axis=-1)
     dt = t - prev
     uniq, inv = np.unique(dt, return_inverse=True)
-    parts = [discretize_with_input(model, uniq[i:i + _DISCRETIZE_CHUNK], method, noise=noise,
-                                   order=order) for i in range(0, uniq.size, _DISCRETIZE_CHUNK)]
+    parts = [
+        discretize_with_input(
+            model, uniq[i : i + _DISCRETIZE_CHUNK], method, noise=noise, order=order
+        )
+        for i in range(0, uniq.size, _DISCRETIZE_CHUNK)
+    ]
     phi_u, qd_u, u_u = (np.concatenate([p[j] for p in parts]) for j in range(3))
     inv = inv.reshape(dt.shape)
     return phi_u[inv], qd_u[inv], u_u[inv]
 
 
-def _run(t: FloatArray, z: FloatArray, model: MotionModel, h: FloatArray, r: FloatArray,
-         r_per_step: bool, initial: GaussianState, mask: BoolArray, method: Method,
-         noise: Noise, order: int, form: str, offset: ArrayLike | None) -> FilterResult:
+def _run(
+    t: FloatArray,
+    z: FloatArray,
+    model: MotionModel,
+    h: FloatArray,
+    r: FloatArray,
+    r_per_step: bool,
+    initial: GaussianState,
+    mask: BoolArray,
+    method: Method,
+    noise: Noise,
+    order: int,
+    form: str,
+    offset: ArrayLike | None,
+) -> FilterResult:
     batch = z.shape[:-2]
     n_steps, m = z.shape[-2:]
     t_init = np.broadcast_to(initial.time, batch)
@@ -189,16 +246,21 @@ def _run(t: FloatArray, z: FloatArray, model: MotionModel, h: FloatArray, r: Flo
     if times_shared:
         phi, qd, u = _transitions(model, t, t_init.flat[0], method, noise, order)
     else:
-        phi, qd, u = _transitions(model, np.broadcast_to(t, batch + (n_steps,)), t_init,
-                                  method, noise, order)
-    off = None if offset is None else as_float_array(offset, "measurement_noise_mean",
-                                                       min_ndim=1)
-    shared_cov = (times_shared and initial.cov.ndim == 2 and r.ndim == 2
-                  and bool(np.all(mask == mask.reshape(-1, n_steps, m)[0])))
+        phi, qd, u = _transitions(
+            model, np.broadcast_to(t, batch + (n_steps,)), t_init, method, noise, order
+        )
+    off = None if offset is None else as_float_array(offset, "measurement_noise_mean", min_ndim=1)
+    shared_cov = (
+        times_shared
+        and initial.cov.ndim == 2
+        and r.ndim == 2
+        and bool(np.all(mask == mask.reshape(-1, n_steps, m)[0]))
+    )
     if shared_cov:
         return _run_shared(t, z, h, r, initial, mask, phi, qd, u, form, off)
-    return _run_general(t, z, h, r, r_per_step, initial, mask, phi, qd, u, form, off,
-                        model.state_dim)
+    return _run_general(
+        t, z, h, r, r_per_step, initial, mask, phi, qd, u, form, off, model.state_dim
+    )
 
 
 def _alloc(batch: tuple[int, ...], n_steps: int, *tail: int) -> FloatArray:
@@ -211,13 +273,27 @@ def _step_view(a: FloatArray, k: int, batch_ndim: int) -> FloatArray:
 
 def _raise_not_pd(what: str, k: int, tracks: list[int] | None) -> None:
     where = f"step {k}" + (f", tracks {tracks[:10]}" if tracks else "")
-    raise CovarianceError(f"{what} is not positive definite at {where}; check the model, "
-                          "measurement_cov and the prior")
+    raise CovarianceError(
+        f"{what} is not positive definite at {where}; check the model, "
+        "measurement_cov and the prior"
+    )
 
 
-def _run_general(t: FloatArray, z: FloatArray, h: FloatArray, r: FloatArray, r_per_step: bool,
-                 initial: GaussianState, mask: BoolArray, phi: FloatArray, qd: FloatArray,
-                 u: FloatArray, form: str, off: FloatArray | None, n: int) -> FilterResult:
+def _run_general(
+    t: FloatArray,
+    z: FloatArray,
+    h: FloatArray,
+    r: FloatArray,
+    r_per_step: bool,
+    initial: GaussianState,
+    mask: BoolArray,
+    phi: FloatArray,
+    qd: FloatArray,
+    u: FloatArray,
+    form: str,
+    off: FloatArray | None,
+    n: int,
+) -> FilterResult:
     batch = z.shape[:-2]
     b = len(batch)
     n_steps, m = z.shape[-2:]
@@ -230,9 +306,12 @@ def _run_general(t: FloatArray, z: FloatArray, h: FloatArray, r: FloatArray, r_p
     nu_a, s_a = _alloc(batch, n_steps, m), _alloc(batch, n_steps, m, m)
     nis_a, ll_a, nobs_a = _alloc(batch, n_steps), _alloc(batch, n_steps), _alloc(batch, n_steps)
     k_a = _alloc(batch, n_steps, n, m)
-    state = _trusted(GaussianState, mean=np.broadcast_to(initial.mean, batch + (n,)),
-                     cov=np.broadcast_to(initial.cov, batch + (n, n)),
-                     time=np.broadcast_to(initial.time, batch))
+    state = _trusted(
+        GaussianState,
+        mean=np.broadcast_to(initial.mean, batch + (n,)),
+        cov=np.broadcast_to(initial.cov, batch + (n, n)),
+        time=np.broadcast_to(initial.time, batch),
+    )
     for k in range(n_steps):
         sv = (slice(None),) * b + (k,)
         prior = predict(state, phi_b[sv], qd_b[sv], time=tb[sv], control=u_b[sv])
@@ -244,13 +323,28 @@ def _run_general(t: FloatArray, z: FloatArray, h: FloatArray, r: FloatArray, r_p
         pm[sv], pc[sv], fm[sv], fc[sv] = prior.mean, prior.cov, state.mean, state.cov
         nu_a[sv], s_a[sv], nis_a[sv] = info.innovation, info.innovation_cov, info.nis
         ll_a[sv], nobs_a[sv], k_a[sv] = info.log_likelihood, info.n_observed, info.gain
-    return _result(tb, pm, pc, fm, fc, phi_b, qd_b, u_b, nu_a, s_a, nis_a, ll_a, k_a, nobs_a,
-                   mask, h, np.broadcast_to(r, batch + ((n_steps,) if r_per_step else ())
-                                            + (m, m)))
+    return _result(
+        tb,
+        pm,
+        pc,
+        fm,
+        fc,
+        phi_b,
+        qd_b,
+        u_b,
+        nu_a,
+        s_a,
+        nis_a,
+        ll_a,
+        k_a,
+        nobs_a,
+        mask,
+        h,
+        np.broadcast_to(r, batch + ((n_steps,) if r_per_step else ()) + (m, m)),
+    )
 
 
-def _bad_tracks(cov: FloatArray, h: FloatArray, r: FloatArray, mask: BoolArray
-                ) -> list[int] | None:
+def _bad_tracks(cov: FloatArray, h: FloatArray, r: FloatArray, mask: BoolArray) -> list[int] | None:
     if cov.ndim < 3:
         return None
     hm, rm = _masked_model(h, r, mask)
@@ -258,9 +352,19 @@ def _bad_tracks(cov: FloatArray, h: FloatArray, r: FloatArray, mask: BoolArray
     return [int(i) for i in np.flatnonzero(np.linalg.eigvalsh(s).min(axis=-1) <= 0)]
 
 
-def _run_shared(t: FloatArray, z: FloatArray, h: FloatArray, r: FloatArray,
-                initial: GaussianState, mask: BoolArray, phi: FloatArray, qd: FloatArray,
-                u: FloatArray, form: str, off: FloatArray | None) -> FilterResult:
+def _run_shared(
+    t: FloatArray,
+    z: FloatArray,
+    h: FloatArray,
+    r: FloatArray,
+    initial: GaussianState,
+    mask: BoolArray,
+    phi: FloatArray,
+    qd: FloatArray,
+    u: FloatArray,
+    form: str,
+    off: FloatArray | None,
+) -> FilterResult:
     """All tracks share the covariance recursion: compute it once, batch only the means."""
     batch = z.shape[:-2]
     b = len(batch)
@@ -292,9 +396,9 @@ def _run_shared(t: FloatArray, z: FloatArray, h: FloatArray, r: FloatArray,
         zm = zm - np.where(mask, off, 0.0)
     for k in range(n_steps):
         sv = (slice(None),) * b + (k,)
-        xp = np.einsum("ij,...j->...i", phi[k], x) + u[k]
-        nu = zm[sv] - np.einsum("ij,...j->...i", hm_a[k], xp)
-        x = xp + np.einsum("ij,...j->...i", k_a[k], nu)
+        xp = matvec(phi[k], x) + u[k]
+        nu = zm[sv] - matvec(hm_a[k], xp)
+        x = xp + matvec(k_a[k], nu)
         pm[sv], fm[sv], nu_a[sv] = xp, x, nu
     n_obs = np.broadcast_to(mask0.sum(axis=-1).astype(np.float64), batch + (n_steps,))
     nis, ll = _innovation_stats(nu_a, s_a, logdet, n_obs)
@@ -303,9 +407,25 @@ def _run_shared(t: FloatArray, z: FloatArray, h: FloatArray, r: FloatArray,
     def bc(a: FloatArray) -> FloatArray:
         return np.broadcast_to(a, full_shape + a.shape[1:])
 
-    return _result(np.broadcast_to(t, full_shape), pm, bc(pc), fm, bc(fc), bc(phi), bc(qd),
-                   bc(u), nu_a, bc(s_a), nis, ll, bc(k_a), n_obs, mask, h,
-                   np.broadcast_to(r, full_shape[:-1] + (m, m)))
+    return _result(
+        np.broadcast_to(t, full_shape),
+        pm,
+        bc(pc),
+        fm,
+        bc(fc),
+        bc(phi),
+        bc(qd),
+        bc(u),
+        nu_a,
+        bc(s_a),
+        nis,
+        ll,
+        bc(k_a),
+        n_obs,
+        mask,
+        h,
+        np.broadcast_to(r, full_shape[:-1] + (m, m)),
+    )
 
 
 def _ro(a: AnyArray) -> AnyArray:
@@ -314,18 +434,49 @@ def _ro(a: AnyArray) -> AnyArray:
     return a
 
 
-def _result(t: FloatArray, pm: FloatArray, pc: FloatArray, fm: FloatArray, fc: FloatArray,
-            phi: FloatArray, qd: FloatArray, u: FloatArray, nu: FloatArray, s: FloatArray,
-            nis: FloatArray, ll: FloatArray, k: FloatArray, n_obs: FloatArray,
-            mask: BoolArray, h: FloatArray, r: FloatArray) -> FilterResult:
+def _result(
+    t: FloatArray,
+    pm: FloatArray,
+    pc: FloatArray,
+    fm: FloatArray,
+    fc: FloatArray,
+    phi: FloatArray,
+    qd: FloatArray,
+    u: FloatArray,
+    nu: FloatArray,
+    s: FloatArray,
+    nis: FloatArray,
+    ll: FloatArray,
+    k: FloatArray,
+    n_obs: FloatArray,
+    mask: BoolArray,
+    h: FloatArray,
+    r: FloatArray,
+) -> FilterResult:
     t = _ro(np.array(t, dtype=np.float64)) if t.flags.writeable else t
     predicted = _trusted(GaussianState, mean=_ro(pm), cov=_ro(pc), time=t)
     filtered = _trusted(GaussianState, mean=_ro(fm), cov=_ro(fc), time=t)
-    info = _trusted(StepInfo, innovation=_ro(nu), innovation_cov=_ro(s), nis=_ro(nis),
-                    log_likelihood=_ro(ll), gain=_ro(k), n_observed=_ro(np.asarray(n_obs)))
-    return _trusted(FilterResult, predicted=predicted, filtered=filtered, transition=_ro(phi),
-                    process_cov=_ro(qd), control=_ro(u), info=info, mask=_ro(mask),
-                    measurement_matrix=_ro(np.array(h)), measurement_cov=_ro(r))
+    info = _trusted(
+        StepInfo,
+        innovation=_ro(nu),
+        innovation_cov=_ro(s),
+        nis=_ro(nis),
+        log_likelihood=_ro(ll),
+        gain=_ro(k),
+        n_observed=_ro(np.asarray(n_obs)),
+    )
+    return _trusted(
+        FilterResult,
+        predicted=predicted,
+        filtered=filtered,
+        transition=_ro(phi),
+        process_cov=_ro(qd),
+        control=_ro(u),
+        info=info,
+        mask=_ro(mask),
+        measurement_matrix=_ro(np.array(h)),
+        measurement_cov=_ro(r),
+    )
 
 
 __all__ = ["kalman_filter"]

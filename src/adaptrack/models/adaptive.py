@@ -35,9 +35,7 @@ def singer_accel_std(max_accel_mps2: float, prob_max_accel: float, prob_no_accel
     pm = check_positive_scalar(prob_max_accel, "prob_max_accel", allow_zero=True)
     p0 = check_positive_scalar(prob_no_accel, "prob_no_accel", allow_zero=True)
     if 2 * pm + p0 > 1.0:
-        raise ValueError(
-            f"2 * prob_max_accel + prob_no_accel must be <= 1; got {2 * pm + p0}"
-        )
+        raise ValueError(f"2 * prob_max_accel + prob_no_accel must be <= 1; got {2 * pm + p0}")
     return a * math.sqrt((1.0 + 4.0 * pm - p0) / 3.0)
 
 
@@ -72,14 +70,19 @@ class InverseDynamics(_AxisModel):
 
     def __post_init__(self) -> None:
         n = _check_axes(self.n_axes)
-        object.__setattr__(self, "lambda_per_s2",
-                           _per_axis(self.lambda_per_s2, n, "lambda_per_s2", nonnegative=True))
-        object.__setattr__(self, "accel_psd",
-                           _per_axis(self.accel_psd, n, "accel_psd", nonnegative=True))
+        object.__setattr__(
+            self,
+            "lambda_per_s2",
+            _per_axis(self.lambda_per_s2, n, "lambda_per_s2", nonnegative=True),
+        )
+        object.__setattr__(
+            self, "accel_psd", _per_axis(self.accel_psd, n, "accel_psd", nonnegative=True)
+        )
 
     @classmethod
-    def from_intensity(cls, lambda_per_s2: float, intensity_m2ps: float,
-                       n_axes: int = 1) -> InverseDynamics:
+    def from_intensity(
+        cls, lambda_per_s2: float, intensity_m2ps: float, n_axes: int = 1
+    ) -> InverseDynamics:
         """M1 in the seed's parameterisation: input ``w`` of intensity ``gamma`` [m^2/s].
 
         The acceleration PSD is then ``lambda * gamma`` (spec B.3, option ``gamma_fixed``).
@@ -91,12 +94,16 @@ class InverseDynamics(_AxisModel):
     def _axis_block(self, axis: int) -> Block:
         k = math.sqrt(self.lambda_per_s2[axis])  # type: ignore[index]
         qa = self.accel_psd[axis]  # type: ignore[index]
-        return Block(np.array([[0.0, 1.0], [0.0, -k]]), _e(2, 1), np.array([[qa]]),
-                     *_no_control(2), closed_form=lambda dt: _m1_analytic(dt, k, qa))
+        return Block(
+            np.array([[0.0, 1.0], [0.0, -k]]),
+            _e(2, 1),
+            np.array([[qa]]),
+            *_no_control(2),
+            closed_form=lambda dt: _m1_analytic(dt, k, qa),
+        )
 
 
-def _m1_analytic(dt: FloatArray, k: float, qa: float) -> tuple[FloatArray, FloatArray,
-                                                                 FloatArray]:
+def _m1_analytic(dt: FloatArray, k: float, qa: float) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Spec 0.3.2 / B.5: phi forms for ``k dt < 1`` (valid at k = 0), closed forms (77), (78)."""
     y = k * dt
     small = y < 1.0
@@ -104,8 +111,7 @@ def _m1_analytic(dt: FloatArray, k: float, qa: float) -> tuple[FloatArray, Float
     p1, p1d, p2 = phi(1, -ys), phi(1, -2 * ys), phi(2, -ys)
     p3, p3d = phi(3, -ys), phi(3, -2 * ys)
     s_p01, s_g0, s_g1 = dt * p1, dt**2 * p2, dt * p1
-    s_q00, s_q01, s_q11 = (qa * dt**3 * (4 * p3d - 2 * p3), qa * dt**2 * p1**2 / 2,
-                           qa * dt * p1d)
+    s_q00, s_q01, s_q11 = (qa * dt**3 * (4 * p3d - 2 * p3), qa * dt**2 * p1**2 / 2, qa * dt * p1d)
     kl = k if k > 0 else 1.0
     dl = np.where(small, 1.0 / kl, dt)
     rk = np.exp(-kl * dl)
@@ -117,8 +123,11 @@ def _m1_analytic(dt: FloatArray, k: float, qa: float) -> tuple[FloatArray, Float
     p01 = np.where(small, s_p01, l_p01)
     one, z = np.ones_like(dt), np.zeros_like(dt)
     phi_ = np.stack([np.stack([one, p01], -1), np.stack([z, np.exp(-y)], -1)], -2)
-    q00, q01, q11 = (np.where(small, s_q00, l_q00), np.where(small, s_q01, l_q01),
-                     np.where(small, s_q11, l_q11))
+    q00, q01, q11 = (
+        np.where(small, s_q00, l_q00),
+        np.where(small, s_q01, l_q01),
+        np.where(small, s_q11, l_q11),
+    )
     qd = np.stack([np.stack([q00, q01], -1), np.stack([q01, q11], -1)], -2)
     gam = np.stack([np.where(small, s_g0, l_g0), np.where(small, s_g1, l_g1)], -1)
     return phi_, qd, gam[..., None]
@@ -157,27 +166,42 @@ class ShapingFilter(_AxisModel):
 
     def __post_init__(self) -> None:
         n = _check_axes(self.n_axes)
-        object.__setattr__(self, "lambda_per_s2",
-                           _per_axis(self.lambda_per_s2, n, "lambda_per_s2", nonnegative=True))
-        object.__setattr__(self, "alpha_per_s",
-                           _per_axis(self.alpha_per_s, n, "alpha_per_s", positive=True))
-        object.__setattr__(self, "shaping_std",
-                           _per_axis(self.shaping_std, n, "shaping_std", nonnegative=True))
+        object.__setattr__(
+            self,
+            "lambda_per_s2",
+            _per_axis(self.lambda_per_s2, n, "lambda_per_s2", nonnegative=True),
+        )
+        object.__setattr__(
+            self, "alpha_per_s", _per_axis(self.alpha_per_s, n, "alpha_per_s", positive=True)
+        )
+        object.__setattr__(
+            self, "shaping_std", _per_axis(self.shaping_std, n, "shaping_std", nonnegative=True)
+        )
         if self.coupling not in ("sqrt_lambda", "unit"):
             raise ValueError(f"coupling must be 'sqrt_lambda' or 'unit'; got {self.coupling!r}")
 
     @classmethod
-    def from_singer_rule(cls, lambda_per_s2: float, alpha_per_s: float, max_accel_mps2: float,
-                         prob_max_accel: float, prob_no_accel: float,
-                         n_axes: int = 1) -> ShapingFilter:
+    def from_singer_rule(
+        cls,
+        lambda_per_s2: float,
+        alpha_per_s: float,
+        max_accel_mps2: float,
+        prob_max_accel: float,
+        prob_no_accel: float,
+        n_axes: int = 1,
+    ) -> ShapingFilter:
         """M2 with ``sigma_M = sigma_a / sqrt(lambda)`` from Singer's rule (spec B.4).
 
         The acceleration input ``k xi`` then has RMS ``sigma_a``; ``lambda`` must be > 0.
         """
         lam = check_positive_scalar(lambda_per_s2, "lambda_per_s2")
         sa = singer_accel_std(max_accel_mps2, prob_max_accel, prob_no_accel)
-        return cls(lambda_per_s2=lam, alpha_per_s=alpha_per_s, shaping_std=sa / math.sqrt(lam),
-                   n_axes=n_axes)
+        return cls(
+            lambda_per_s2=lam,
+            alpha_per_s=alpha_per_s,
+            shaping_std=sa / math.sqrt(lam),
+            n_axes=n_axes,
+        )
 
     def _axis_block(self, axis: int) -> Block:
         k = math.sqrt(self.lambda_per_s2[axis])  # type: ignore[index]

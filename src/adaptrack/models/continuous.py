@@ -60,12 +60,21 @@ def noise_input_matrix(model: MotionModel) -> FloatArray:
 def noise_psd(model: MotionModel) -> FloatArray:
     """White-noise spectral density matrix ``Qc`` (w, w) of a motion model."""
     blocks, _ = model.blocks()
-    return assemble([b.noise_psd for b in blocks], np.arange(sum(b.noise_psd.shape[0]
-                                                                for b in blocks)), square=True)
+    return assemble(
+        [b.noise_psd for b in blocks],
+        np.arange(sum(b.noise_psd.shape[0] for b in blocks)),
+        square=True,
+    )
 
 
-def _per_axis(value: float | Sequence[float], n_axes: int, name: str, *, positive: bool = False,
-              nonnegative: bool = False) -> tuple[float, ...]:
+def _per_axis(
+    value: float | Sequence[float],
+    n_axes: int,
+    name: str,
+    *,
+    positive: bool = False,
+    nonnegative: bool = False,
+) -> tuple[float, ...]:
     arr = as_float_array(value, name)
     if arr.ndim == 0:
         arr = np.full(n_axes, float(arr))
@@ -159,8 +168,13 @@ class LinearSDE:
         names = tuple(self.state_names)
         if len(names) != n:
             raise ValueError(f"state_names must have {n} entries; got {len(names)}")
-        for k, v in (("drift", f), ("noise_input", g), ("noise_psd", q), ("control_input", b),
-                     ("control", u)):
+        for k, v in (
+            ("drift", f),
+            ("noise_input", g),
+            ("noise_psd", q),
+            ("control_input", b),
+            ("control", u),
+        ):
             v = v.copy()
             v.flags.writeable = False
             object.__setattr__(self, k, v)
@@ -173,8 +187,9 @@ class LinearSDE:
 
     def blocks(self) -> tuple[list[Block], np.ndarray]:
         """One block holding the whole model."""
-        return [Block(self.drift, self.noise_input, self.noise_psd, self.control_input,
-                      self.control)], np.arange(self.state_dim)
+        return [
+            Block(self.drift, self.noise_input, self.noise_psd, self.control_input, self.control)
+        ], np.arange(self.state_dim)
 
 
 class _AxisModel:
@@ -228,8 +243,9 @@ class ConstantVelocity(_AxisModel):
 
     def __post_init__(self) -> None:
         n = _check_axes(self.n_axes)
-        object.__setattr__(self, "accel_psd", _per_axis(self.accel_psd, n, "accel_psd",
-                                                         nonnegative=True))
+        object.__setattr__(
+            self, "accel_psd", _per_axis(self.accel_psd, n, "accel_psd", nonnegative=True)
+        )
 
     def _axis_block(self, axis: int) -> Block:
         q = self.accel_psd[axis]  # type: ignore[index]
@@ -237,13 +253,19 @@ class ConstantVelocity(_AxisModel):
         def closed(dt: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
             one, z = np.ones_like(dt), np.zeros_like(dt)
             phi_ = np.stack([np.stack([one, dt], -1), np.stack([z, one], -1)], -2)
-            qd = q * np.stack([np.stack([dt**3 / 3, dt**2 / 2], -1),
-                               np.stack([dt**2 / 2, dt], -1)], -2)
+            qd = q * np.stack(
+                [np.stack([dt**3 / 3, dt**2 / 2], -1), np.stack([dt**2 / 2, dt], -1)], -2
+            )
             gam = np.stack([dt**2 / 2, dt], -1)[..., None]
             return phi_, qd, gam
 
-        return Block(np.array([[0.0, 1.0], [0.0, 0.0]]), _e(2, 1), np.array([[q]]),
-                     *_no_control(2), closed_form=closed)
+        return Block(
+            np.array([[0.0, 1.0], [0.0, 0.0]]),
+            _e(2, 1),
+            np.array([[q]]),
+            *_no_control(2),
+            closed_form=closed,
+        )
 
 
 @dataclass(frozen=True, eq=False)
@@ -266,20 +288,31 @@ class ConstantAcceleration(_AxisModel):
 
     def __post_init__(self) -> None:
         n = _check_axes(self.n_axes)
-        object.__setattr__(self, "jerk_psd", _per_axis(self.jerk_psd, n, "jerk_psd",
-                                                        nonnegative=True))
+        object.__setattr__(
+            self, "jerk_psd", _per_axis(self.jerk_psd, n, "jerk_psd", nonnegative=True)
+        )
 
     def _axis_block(self, axis: int) -> Block:
         q = self.jerk_psd[axis]  # type: ignore[index]
 
         def closed(dt: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
             one, z = np.ones_like(dt), np.zeros_like(dt)
-            phi_ = np.stack([np.stack([one, dt, dt**2 / 2], -1), np.stack([z, one, dt], -1),
-                             np.stack([z, z, one], -1)], -2)
-            qd = q * np.stack([
-                np.stack([dt**5 / 20, dt**4 / 8, dt**3 / 6], -1),
-                np.stack([dt**4 / 8, dt**3 / 3, dt**2 / 2], -1),
-                np.stack([dt**3 / 6, dt**2 / 2, dt], -1)], -2)
+            phi_ = np.stack(
+                [
+                    np.stack([one, dt, dt**2 / 2], -1),
+                    np.stack([z, one, dt], -1),
+                    np.stack([z, z, one], -1),
+                ],
+                -2,
+            )
+            qd = q * np.stack(
+                [
+                    np.stack([dt**5 / 20, dt**4 / 8, dt**3 / 6], -1),
+                    np.stack([dt**4 / 8, dt**3 / 3, dt**2 / 2], -1),
+                    np.stack([dt**3 / 6, dt**2 / 2, dt], -1),
+                ],
+                -2,
+            )
             gam = np.stack([dt**3 / 6, dt**2 / 2, dt], -1)[..., None]
             return phi_, qd, gam
 
@@ -323,12 +356,19 @@ class Singer(_AxisModel):
 
     def __post_init__(self) -> None:
         n = _check_axes(self.n_axes)
-        object.__setattr__(self, "time_constant_s",
-                           _per_axis(self.time_constant_s, n, "time_constant_s", positive=True))
-        object.__setattr__(self, "accel_std_mps2",
-                           _per_axis(self.accel_std_mps2, n, "accel_std_mps2", nonnegative=True))
-        object.__setattr__(self, "mean_accel_mps2",
-                           _per_axis(self.mean_accel_mps2, n, "mean_accel_mps2"))
+        object.__setattr__(
+            self,
+            "time_constant_s",
+            _per_axis(self.time_constant_s, n, "time_constant_s", positive=True),
+        )
+        object.__setattr__(
+            self,
+            "accel_std_mps2",
+            _per_axis(self.accel_std_mps2, n, "accel_std_mps2", nonnegative=True),
+        )
+        object.__setattr__(
+            self, "mean_accel_mps2", _per_axis(self.mean_accel_mps2, n, "mean_accel_mps2")
+        )
 
     def _axis_block(self, axis: int) -> Block:
         tau = self.time_constant_s[axis]  # type: ignore[index]
@@ -337,13 +377,20 @@ class Singer(_AxisModel):
         qc = 2.0 * sw**2 / tau
         f = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, -1.0 / tau]])
         g = _e(3, 2)
-        return Block(f, g, np.array([[qc]]), g / tau, np.array([mw]),
-                     closed_form=lambda dt: _singer_analytic(dt, tau, sw),
-                     source_form=lambda dt: _singer_source(dt, tau, sw))
+        return Block(
+            f,
+            g,
+            np.array([[qc]]),
+            g / tau,
+            np.array([mw]),
+            closed_form=lambda dt: _singer_analytic(dt, tau, sw),
+            source_form=lambda dt: _singer_source(dt, tau, sw),
+        )
 
 
-def _singer_analytic(dt: FloatArray, tau: float, sw: float) -> tuple[FloatArray, FloatArray,
-                                                                       FloatArray]:
+def _singer_analytic(
+    dt: FloatArray, tau: float, sw: float
+) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Spec 0.3.2 / A.4 in adaptrack order [r, v, w]: phi forms for x < 1, closed forms else.
 
     Returns Phi, Qd (white) and Gamma of [G, B] = [e_w, e_w / tau].
@@ -357,9 +404,14 @@ def _singer_analytic(dt: FloatArray, tau: float, sw: float) -> tuple[FloatArray,
     p3, p3d, p4, p5d = phi(3, -xs), phi(3, -2 * xs), phi(4, -xs), phi(5, -2 * xs)
     # seed order [w, v, r]
     ph_s = {"vw": dt * p1, "rw": dt**2 * p2}
-    q_s = {"ww": dt * p1d, "wv": dt**2 * p1**2 / 2, "wr": dt**3 * (4 * p3d - p2),
-           "vv": dt**3 * (4 * p3d - 2 * p3), "vr": dt**4 * p2**2 / 2,
-           "rr": dt**5 * (16 * p5d - 2 * p4)}
+    q_s = {
+        "ww": dt * p1d,
+        "wv": dt**2 * p1**2 / 2,
+        "wr": dt**3 * (4 * p3d - p2),
+        "vv": dt**3 * (4 * p3d - 2 * p3),
+        "vr": dt**4 * p2**2 / 2,
+        "rr": dt**5 * (16 * p5d - 2 * p4),
+    }
     q_s = {k: qc * v for k, v in q_s.items()}
     g_s = {"w": dt * p1, "v": dt**2 * p2, "r": dt**3 * p3}
     # closed forms (x >= 1), evaluated with x clipped to >= 1
@@ -368,40 +420,63 @@ def _singer_analytic(dt: FloatArray, tau: float, sw: float) -> tuple[FloatArray,
     rho = np.exp(-dl / t)
     s2 = sw**2
     ph_l = {"vw": t * (1 - rho), "rw": t * dl - t**2 * (1 - rho)}
-    q_l = {"ww": s2 * (1 - rho**2), "wv": s2 * t * (1 - rho) ** 2,
-           "wr": s2 * t * (t * (1 - rho**2) - 2 * dl * rho),
-           "vv": s2 * t * (2 * dl - 3 * t + 4 * t * rho - t * rho**2),
-           "vr": s2 * t * (dl - t + t * rho) ** 2,
-           "rr": s2 * t * (2 * dl**3 / 3 - 2 * dl**2 * t + 2 * dl * t**2 + t**3
-                           - 4 * dl * t**2 * rho - t**3 * rho**2)}
-    g_l = {"w": t * (1 - rho), "v": t * dl - t**2 * (1 - rho),
-           "r": t * dl**2 / 2 - t**2 * dl + t**3 * (1 - rho)}
+    q_l = {
+        "ww": s2 * (1 - rho**2),
+        "wv": s2 * t * (1 - rho) ** 2,
+        "wr": s2 * t * (t * (1 - rho**2) - 2 * dl * rho),
+        "vv": s2 * t * (2 * dl - 3 * t + 4 * t * rho - t * rho**2),
+        "vr": s2 * t * (dl - t + t * rho) ** 2,
+        "rr": s2
+        * t
+        * (
+            2 * dl**3 / 3
+            - 2 * dl**2 * t
+            + 2 * dl * t**2
+            + t**3
+            - 4 * dl * t**2 * rho
+            - t**3 * rho**2
+        ),
+    }
+    g_l = {
+        "w": t * (1 - rho),
+        "v": t * dl - t**2 * (1 - rho),
+        "r": t * dl**2 / 2 - t**2 * dl + t**3 * (1 - rho),
+    }
 
-    def pick(key: str, small_d: Mapping[str, FloatArray],
-             large_d: Mapping[str, FloatArray]) -> FloatArray:
+    def pick(
+        key: str, small_d: Mapping[str, FloatArray], large_d: Mapping[str, FloatArray]
+    ) -> FloatArray:
         return np.where(small, small_d[key], large_d[key])
 
     one, z = np.ones_like(dt), np.zeros_like(dt)
     vw, rw = pick("vw", ph_s, ph_l), pick("rw", ph_s, ph_l)
     ew = np.exp(-x)
     # adaptrack order [r, v, w]
-    phi_ = np.stack([np.stack([one, dt, rw], -1), np.stack([z, one, vw], -1),
-                     np.stack([z, z, ew], -1)], -2)
+    phi_ = np.stack(
+        [np.stack([one, dt, rw], -1), np.stack([z, one, vw], -1), np.stack([z, z, ew], -1)], -2
+    )
     q = {k: pick(k, q_s, q_l) for k in q_s}
-    qd = np.stack([np.stack([q["rr"], q["vr"], q["wr"]], -1),
-                   np.stack([q["vr"], q["vv"], q["wv"]], -1),
-                   np.stack([q["wr"], q["wv"], q["ww"]], -1)], -2)
+    qd = np.stack(
+        [
+            np.stack([q["rr"], q["vr"], q["wr"]], -1),
+            np.stack([q["vr"], q["vv"], q["wv"]], -1),
+            np.stack([q["wr"], q["wv"], q["ww"]], -1),
+        ],
+        -2,
+    )
     gam = np.stack([pick("r", g_s, g_l), pick("v", g_s, g_l), pick("w", g_s, g_l)], -1)
     return phi_, qd, np.stack([gam, gam / tau], -1)
 
 
-def _singer_source(dt: FloatArray, tau: float, sw: float) -> tuple[FloatArray, FloatArray,
-                                                                     FloatArray]:
+def _singer_source(
+    dt: FloatArray, tau: float, sw: float
+) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Seed 000's printed Euler-type form (4), (5), in adaptrack order [r, v, w] (spec A.4)."""
     rho = np.exp(-dt / tau)
     one, z = np.ones_like(dt), np.zeros_like(dt)
-    phi_ = np.stack([np.stack([one, dt, z], -1), np.stack([z, one, dt], -1),
-                     np.stack([z, z, rho], -1)], -2)
+    phi_ = np.stack(
+        [np.stack([one, dt, z], -1), np.stack([z, one, dt], -1), np.stack([z, z, rho], -1)], -2
+    )
     qd = np.zeros(dt.shape + (3, 3))
     qd[..., 2, 2] = sw**2 * (1 - rho**2)
     return phi_, qd, np.zeros(dt.shape + (3, 2))
@@ -419,8 +494,10 @@ def seed000_permutation() -> FloatArray:
 def as_motion_model(model: object, name: str = "model") -> MotionModel:
     """Check that ``model`` implements :class:`MotionModel` (TypeError otherwise)."""
     if not isinstance(model, MotionModel):
-        raise TypeError(f"{name} must be a motion model (e.g. adaptrack.models.Singer); got "
-                        f"{type(model).__name__}")
+        raise TypeError(
+            f"{name} must be a motion model (e.g. adaptrack.models.Singer); got "
+            f"{type(model).__name__}"
+        )
     return model
 
 

@@ -51,8 +51,14 @@ class Discretization(NamedTuple):
     process_cov: FloatArray
 
 
-def discretize(model: MotionModel, dt: ArrayLike, method: Method = "expm", *,
-               noise: Noise = "white", order: int = 2) -> Discretization:
+def discretize(
+    model: MotionModel,
+    dt: ArrayLike,
+    method: Method = "expm",
+    *,
+    noise: Noise = "white",
+    order: int = 2,
+) -> Discretization:
     """Discretise a continuous motion model over steps ``dt``.
 
     Parameters
@@ -88,8 +94,9 @@ def discretize(model: MotionModel, dt: ArrayLike, method: Method = "expm", *,
     return Discretization(phi_, qd)
 
 
-def control_offset(model: MotionModel, dt: ArrayLike, method: Method = "expm", *,
-                   order: int = 2) -> FloatArray:
+def control_offset(
+    model: MotionModel, dt: ArrayLike, method: Method = "expm", *, order: int = 2
+) -> FloatArray:
     """Offset ``u_n = Gamma_B u`` added by the model's known constant input over ``dt``.
 
     Returns an array of shape ``dt.shape + (n,)`` (zeros for models without an input, e.g. a
@@ -99,9 +106,14 @@ def control_offset(model: MotionModel, dt: ArrayLike, method: Method = "expm", *
     return offset
 
 
-def discretize_with_input(model: MotionModel, dt: ArrayLike, method: Method = "expm", *,
-                          noise: Noise = "white", order: int = 2
-                          ) -> tuple[FloatArray, FloatArray, FloatArray]:
+def discretize_with_input(
+    model: MotionModel,
+    dt: ArrayLike,
+    method: Method = "expm",
+    *,
+    noise: Noise = "white",
+    order: int = 2,
+) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Return ``(Phi, Qd, control offset)``; see :func:`discretize` and :func:`control_offset`."""
     model = as_motion_model(model)
     dt_arr = as_float_array(dt, "dt")
@@ -109,23 +121,24 @@ def discretize_with_input(model: MotionModel, dt: ArrayLike, method: Method = "e
         idx = tuple(int(i) for i in np.argwhere(dt_arr < 0)[0])
         raise ValueError(f"dt must be >= 0; got {dt_arr[idx]} at index {idx}")
     if method not in ("expm", "analytic", "taylor", "source"):
-        raise ValueError(
-            f"method must be 'expm', 'analytic', 'taylor' or 'source'; got {method!r}")
+        raise ValueError(f"method must be 'expm', 'analytic', 'taylor' or 'source'; got {method!r}")
     if noise not in ("white", "piecewise"):
         raise ValueError(f"noise must be 'white' or 'piecewise'; got {noise!r}")
-    if method == "taylor" and (isinstance(order, bool) or not isinstance(order, int)
-                               or order < 0):
+    if method == "taylor" and (isinstance(order, bool) or not isinstance(order, int) or order < 0):
         raise ValueError(f"order must be an int >= 0 for method='taylor'; got {order!r}")
     uniq, inv = np.unique(dt_arr, return_inverse=True)
-    parts = [_discretize_model(model, uniq[i:i + _CHUNK], method, noise, order)
-             for i in range(0, uniq.size, _CHUNK)]
+    parts = [
+        _discretize_model(model, uniq[i : i + _CHUNK], method, noise, order)
+        for i in range(0, uniq.size, _CHUNK)
+    ]
     inv = inv.reshape(dt_arr.shape)
     phi_u, qd_u, off_u = (np.concatenate([p[j] for p in parts]) for j in range(3))
     return phi_u[inv], qd_u[inv], off_u[inv]
 
 
-def _discretize_model(model: MotionModel, dt: FloatArray, method: str, noise: str, order: int
-                      ) -> tuple[FloatArray, FloatArray, FloatArray]:
+def _discretize_model(
+    model: MotionModel, dt: FloatArray, method: str, noise: str, order: int
+) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Discretise every block for the 1-D array of distinct steps ``dt`` and assemble."""
     blocks, perm = model.blocks()
     phis, qds, offsets = [], [], []
@@ -135,25 +148,34 @@ def _discretize_model(model: MotionModel, dt: FloatArray, method: str, noise: st
         qds.append(qd_b)
         c = b.control.shape[0]
         w = b.noise_input.shape[1]
-        offsets.append(np.einsum("...ij,j->...i", gam_b[..., w:w + c], b.control)[..., None])
-    return (assemble(phis, perm, square=True), assemble(qds, perm, square=True),
-            assemble(offsets, perm, square=False)[..., 0])
+        offsets.append(np.einsum("...ij,j->...i", gam_b[..., w : w + c], b.control)[..., None])
+    return (
+        assemble(phis, perm, square=True),
+        assemble(qds, perm, square=True),
+        assemble(offsets, perm, square=False)[..., 0],
+    )
 
 
-def _discretize_block(b: Block, dt: FloatArray, method: str, noise: str, order: int
-                      ) -> tuple[FloatArray, FloatArray, FloatArray]:
+def _discretize_block(
+    b: Block, dt: FloatArray, method: str, noise: str, order: int
+) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Phi, Qd (noise convention applied) and Gamma of [G B] for one block."""
     d = b.dim
     if method == "source":
         if b.source_form is None:
-            raise ValueError("method='source' exists only for the Singer model (seed 000's "
-                             "printed form, spec A.4)")
+            raise ValueError(
+                "method='source' exists only for the Singer model (seed 000's "
+                "printed form, spec A.4)"
+            )
         if np.any(b.control):
-            raise ValueError("method='source' assumes zero mean acceleration (spec A.3); "
-                             "got a non-zero mean_accel_mps2")
+            raise ValueError(
+                "method='source' assumes zero mean acceleration (spec A.3); "
+                "got a non-zero mean_accel_mps2"
+            )
         if noise != "white":
-            raise ValueError("method='source' defines its own process noise (spec A.4); "
-                             "leave noise='white'")
+            raise ValueError(
+                "method='source' defines its own process noise (spec A.4); leave noise='white'"
+            )
         return b.source_form(dt)
     if method == "analytic" and b.closed_form is not None:
         phi_, qd, gam = b.closed_form(dt)
@@ -190,8 +212,9 @@ def _expm_batched(m: FloatArray) -> FloatArray:
     """
     norm = np.abs(m).sum(axis=-2).max(axis=-1)
     with np.errstate(divide="ignore"):
-        s = np.where(norm <= 0.5, 0,
-                     np.ceil(np.log2(np.where(norm > 0, norm, 1.0) / 0.5))).astype(int)
+        s = np.where(norm <= 0.5, 0, np.ceil(np.log2(np.where(norm > 0, norm, 1.0) / 0.5))).astype(
+            int
+        )
     a = m / (2.0**s)[..., None, None]
     eye = np.eye(m.shape[-1])
     e = eye + a / _EXPM_TAYLOR_DEGREE
@@ -245,8 +268,13 @@ def _taylor_substep(b: Block, p: int):  # type: ignore[no-untyped-def]
     gq = _gq(b)
     inp = _inputs(b)
     fp = [np.linalg.matrix_power(f, i) for i in range(p + 3)]
-    terms = [[fp[i] @ gq @ fp[j].T / (math.factorial(i) * math.factorial(j) * (i + j + 1))
-              for j in range(p + 3 - i)] for i in range(p + 3)]
+    terms = [
+        [
+            fp[i] @ gq @ fp[j].T / (math.factorial(i) * math.factorial(j) * (i + j + 1))
+            for j in range(p + 3 - i)
+        ]
+        for i in range(p + 3)
+    ]
     gam_terms = [fp[i] @ inp / math.factorial(i + 1) for i in range(p + 1)]
 
     def step(h: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -254,21 +282,29 @@ def _taylor_substep(b: Block, p: int):  # type: ignore[no-untyped-def]
         phi_ = sum(fp[i] * hh**i / math.factorial(i) for i in range(p + 1))
         gam = sum(gam_terms[i] * hh ** (i + 1) for i in range(p + 1))
         qd = sum(terms[i][j] * hh ** (i + j + 1) for i in range(p + 3) for j in range(p + 3 - i))
-        return (np.broadcast_to(phi_, h.shape + f.shape).copy(),
-                np.broadcast_to(qd, h.shape + f.shape).copy(),
-                np.broadcast_to(gam, h.shape + inp.shape).copy())
+        return (
+            np.broadcast_to(phi_, h.shape + f.shape).copy(),
+            np.broadcast_to(qd, h.shape + f.shape).copy(),
+            np.broadcast_to(gam, h.shape + inp.shape).copy(),
+        )
 
     return step
 
 
-def _doubling_recipe(b: Block, dt: FloatArray, substep) -> tuple[FloatArray, FloatArray,  # type: ignore[no-untyped-def]
-                                                                     FloatArray]:
+def _doubling_recipe(
+    b: Block, dt: FloatArray, substep
+) -> tuple[
+    FloatArray,
+    FloatArray,  # type: ignore[no-untyped-def]
+    FloatArray,
+]:
     """Spec 0.3.1: sub-step ``h = dt / 2^s`` (per entry of dt), then ``s`` doublings."""
     norm1 = float(np.abs(b.drift).sum(axis=0).max())
     x = norm1 * dt
     with np.errstate(divide="ignore"):
-        s = np.where(x <= _SUBSTEP_NORM, 0,
-                     np.ceil(np.log2(np.where(x > 0, x, 1.0) / _SUBSTEP_NORM))).astype(int)
+        s = np.where(
+            x <= _SUBSTEP_NORM, 0, np.ceil(np.log2(np.where(x > 0, x, 1.0) / _SUBSTEP_NORM))
+        ).astype(int)
     phi_, qd, gam = substep(dt / 2.0**s)
     for i in range(int(s.max(initial=0))):
         todo = (i < s)[..., None, None]

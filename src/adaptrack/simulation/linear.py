@@ -17,9 +17,16 @@ def _require_rng(rng: object) -> np.random.Generator:
     return rng
 
 
-def simulate_linear_trajectory(model: MotionModel, times: ArrayLike, initial_mean: ArrayLike,
-                               initial_cov: ArrayLike, *, n_runs: int | None = None,
-                               rng: np.random.Generator, method: Method = "expm") -> FloatArray:
+def simulate_linear_trajectory(
+    model: MotionModel,
+    times: ArrayLike,
+    initial_mean: ArrayLike,
+    initial_cov: ArrayLike,
+    *,
+    n_runs: int | None = None,
+    rng: np.random.Generator,
+    method: Method = "expm",
+) -> FloatArray:
     """Sample state trajectories of a linear SDE exactly at the given times.
 
     ``x_0 ~ N(initial_mean, initial_cov)`` at ``times[..., 0]``, then
@@ -50,8 +57,10 @@ def simulate_linear_trajectory(model: MotionModel, times: ArrayLike, initial_mea
     m0 = as_float_array(initial_mean, "initial_mean", min_ndim=1)
     p0 = as_float_array(initial_cov, "initial_cov", min_ndim=2)
     if m0.shape != (n,) or p0.shape != (n, n):
-        raise ValueError(f"initial_mean and initial_cov must have shapes ({n},) and ({n}, {n}); "
-                         f"got {m0.shape} and {p0.shape}")
+        raise ValueError(
+            f"initial_mean and initial_cov must have shapes ({n},) and ({n}, {n}); "
+            f"got {m0.shape} and {p0.shape}"
+        )
     check_symmetric_pd(p0, "initial_cov", semidefinite=True)
     batch: tuple[int, ...] = t.shape[:-1]
     if n_runs is not None:
@@ -73,17 +82,23 @@ def simulate_linear_trajectory(model: MotionModel, times: ArrayLike, initial_mea
     return out
 
 
-def simulate_linear_measurements(states: ArrayLike, measurement_matrix: ArrayLike,
-                                 measurement_cov: ArrayLike, *, rng: np.random.Generator
-                                 ) -> FloatArray:
+def simulate_linear_measurements(
+    states: ArrayLike,
+    measurement_matrix: ArrayLike,
+    measurement_cov: ArrayLike,
+    *,
+    rng: np.random.Generator,
+) -> FloatArray:
     """Measurements ``z = H x + v``, ``v ~ N(0, R)``, for states (..., n); returns (..., m)."""
     rng = _require_rng(rng)
     x = as_float_array(states, "states", min_ndim=1)
     h = as_float_array(measurement_matrix, "measurement_matrix", min_ndim=2)
     r = as_float_array(measurement_cov, "measurement_cov", min_ndim=2)
     if h.shape[1] != x.shape[-1] or r.shape != (h.shape[0], h.shape[0]):
-        raise ValueError(f"measurement_matrix (m, {x.shape[-1]}) and measurement_cov (m, m) "
-                         f"must match the states; got {h.shape} and {r.shape}")
+        raise ValueError(
+            f"measurement_matrix (m, {x.shape[-1]}) and measurement_cov (m, m) "
+            f"must match the states; got {h.shape} and {r.shape}"
+        )
     check_symmetric_pd(r, "measurement_cov")
     noise = matvec(np.linalg.cholesky(r), rng.standard_normal(x.shape[:-1] + (h.shape[0],)))
     return np.einsum("ij,...j->...i", h, x) + noise

@@ -1,0 +1,1 @@
+"""Speed benchmarks of adaptrack against peer libraries, measured in the same run."""

@@ -1,0 +1,5 @@
+"""Run the benchmarks: ``python -m benchmarks [--quick] [--json PATH]`` (repository root)."""
+
+from .runner import main
+
+main()
