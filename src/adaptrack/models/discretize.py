@@ -32,7 +32,7 @@ import numpy as np
 from .._linalg import mT, symmetrize
 from .._typing import ArrayLike, FloatArray
 from .._validation import as_float_array
-from ._layout import Block, assemble
+from ._layout import Block, ClosedForm, assemble
 from .continuous import MotionModel, as_motion_model
 
 Method = Literal["expm", "analytic", "taylor", "source"]
@@ -225,7 +225,7 @@ def _expm_batched(m: FloatArray) -> FloatArray:
     return e
 
 
-def _expm_substep(b: Block):  # type: ignore[no-untyped-def]
+def _expm_substep(b: Block) -> ClosedForm:
     """Van Loan block exponentials for one (short) step h.
 
     The Van Loan exponential is linear in its noise block ``G Qc G^T h``; where that block is
@@ -262,7 +262,7 @@ def _expm_substep(b: Block):  # type: ignore[no-untyped-def]
     return step
 
 
-def _taylor_substep(b: Block, p: int):  # type: ignore[no-untyped-def]
+def _taylor_substep(b: Block, p: int) -> ClosedForm:
     """Spec 0.3.3: truncated series of order p for Phi, Gamma and the white-noise Qd."""
     f = b.drift
     gq = _gq(b)
@@ -292,12 +292,8 @@ def _taylor_substep(b: Block, p: int):  # type: ignore[no-untyped-def]
 
 
 def _doubling_recipe(
-    b: Block, dt: FloatArray, substep
-) -> tuple[
-    FloatArray,
-    FloatArray,  # type: ignore[no-untyped-def]
-    FloatArray,
-]:
+    b: Block, dt: FloatArray, substep: ClosedForm
+) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Spec 0.3.1: sub-step ``h = dt / 2^s`` (per entry of dt), then ``s`` doublings."""
     norm1 = float(np.abs(b.drift).sum(axis=0).max())
     x = norm1 * dt
