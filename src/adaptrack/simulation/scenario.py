@@ -19,7 +19,7 @@ from .._toml import load_toml
 from ..models.continuous import LinearSDE
 from .linear import simulate_linear_trajectory
 from .measurements import Measurements, simulate_cartesian, simulate_polar_2d
-from .segments import Truth, TrajectorySpec, segment_from_mapping, simulate_truth
+from .segments import TrajectorySpec, Truth, segment_from_mapping, simulate_truth
 
 
 @dataclass(frozen=True)
@@ -38,7 +38,7 @@ class AttitudeSpec:
     initial_angle_std_rad: float
 
     def model(self) -> LinearSDE:
-        """The 9-state linear SDE [angles, rates, gust accelerations]."""
+        """Return the 9-state linear SDE [angles, rates, gust accelerations]."""
         wn, z, tau = self.natural_freq_radps, self.damping, self.gust_time_constant_s
         i3 = np.eye(3)
         f = np.block(
@@ -193,7 +193,7 @@ def scenario_from_mapping(data: dict[str, Any], where: str) -> Scenario:
 
 def sample_times(scenario: Scenario, n_runs: int, rng: np.random.Generator) -> np.ndarray:
     """Sample times (n_runs, T): a regular grid, optionally jittered (uniform +-jitter_s)."""
-    n = int(round(scenario.duration_s / scenario.step_s)) + 1
+    n = round(scenario.duration_s / scenario.step_s) + 1
     grid = scenario.step_s * np.arange(n)
     if scenario.jitter_s <= 0:
         return np.broadcast_to(grid, (n_runs, n)).copy()
