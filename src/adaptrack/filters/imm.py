@@ -1,0 +1,264 @@
+"""Interacting multiple model (IMM) estimator over models of different state sizes.
+
+Cycle per step: mix -> per-model predict -> per-model update -> mode probabilities ->
+combine. Step 0 is update-only (the prior applies to the first measurement, spec 0.2).
+
+Models may have different states (e.g. constant velocity ``x, vx``, constant acceleration
+``x, vx, ax`` and M2 ``x, vx, xi_x``). States are matched by name. When mixing into model j,
+a component i contributes its own values for the states it shares with j; the states of j
+that i lacks are taken from model j's own estimate (mean and covariance block, uncorrelated
+with i's states). The combined output covers the states common to all models.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.special import logsumexp
+
+from .._linalg import symmetrize
+from .._typing import ArrayLike, FloatArray
+from .._validation import as_float_array, check_symmetric_pd, check_times
+from ..models.continuous import MotionModel, as_motion_model
+from ..models.discretize import Method, Noise, discretize_with_input
+from ..types import GaussianState, _trusted
+from .kalman import _check_form, _component_mask, _update, predict
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class IMMResult:
+    """Output of :func:`imm_filter`.
+
+    Attributes
+    ----------
+    filtered : GaussianState
+        Combined estimate over ``state_names`` (the states common to all models),
+        shapes (..., T, n_out) and (..., T, n_out, n_out).
+    state_names : tuple of str
+    mode_probabilities : ndarray, shape (..., T, M)
+        Posterior model probabilities after each measurement.
+    components : tuple of GaussianState
+        Each model's filtered estimate (..., T, n_i).
+    log_likelihood : ndarray, shape (..., T)
+        Log-likelihood of each measurement under the mixture.
+    """
+
+    filtered: GaussianState
+    state_names: tuple[str, ...]
+    mode_probabilities: FloatArray
+    components: tuple[GaussianState, ...]
+    log_likelihood: FloatArray
+
+
+def _embed(src_names: tuple[str, ...], dst_names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """Indices (in dst, in src) of the states shared by two models."""
+    dst_idx = [j for j, s in enumerate(dst_names) if s in src_names]
+    src_idx = [src_names.index(dst_names[j]) for j in dst_idx]
+    return np.array(dst_idx, dtype=int), np.array(src_idx, dtype=int)
+
+
+def imm_filter(
+    times: ArrayLike,
+    measurements: ArrayLike,
+    models: Sequence[MotionModel],
+    measured_states: Sequence[str],
+    measurement_cov: ArrayLike,
+    initial: Sequence[GaussianState],
+    transition_probs: ArrayLike,
+    initial_probs: ArrayLike,
+    *,
+    mask: ArrayLike | None = None,
+    method: Method = "expm",
+    noise: Noise = "white",
+    form: str = "joseph",
+) -> IMMResult:
+    """Run an IMM estimator over one track or a batch of tracks.
+
+    Parameters
+    ----------
+    times : array_like, shape (T,) or (N, T)
+        Strictly increasing measurement times [s].
+    measurements : array_like, shape (T, m) or (N, T, m)
+        Measured values of ``measured_states`` (in that order).
+    models : sequence of MotionModel, length M
+        Each must have every state in ``measured_states``.
+    measured_states : sequence of str, length m
+        Names of the measured states, e.g. ``("x", "y")``.
+    measurement_cov : array_like, shape (m, m)
+        Measurement noise covariance.
+    initial : sequence of GaussianState, length M
+        Prior of each model at the first measurement time (or earlier).
+    transition_probs : array_like, shape (M, M)
+        Markov matrix ``pi[i, j] = P(model j at k | model i at k-1)``, rows sum to 1.
+    initial_probs : array_like, shape (M,)
+        Prior model probabilities.
+    mask : array_like of bool, shape (..., T) or (..., T, m), optional
+        True where a measurement (component) is present.
+    method, noise : discretisation options.
+    form : {"joseph", "standard"}
+
+    Returns
+    -------
+    IMMResult
+    """
+    models = [as_motion_model(m, f"models[{i}]") for i, m in enumerate(models)]
+    n_models = len(models)
+    if n_models == 0:
+        raise ValueError("models must hold at least one model")
+    names = [m.state_names for m in models]
+    measured = tuple(measured_states)
+    for i, nm in enumerate(names):
+        missing = [s for s in measured if s not in nm]
+        if missing:
+            raise ValueError(f"models[{i}] has no state(s) {missing}; its states are {nm}")
+    t = as_float_array(times, "times", min_ndim=1)
+    z = as_float_array(measurements, "measurements", min_ndim=2, allow_nan=True)
+    batch, n_steps, m = z.shape[:-2], z.shape[-2], z.shape[-1]
+    if m != len(measured) or t.shape not in ((n_steps,), batch + (n_steps,)):
+        raise ValueError(
+            f"measurements (..., T, {len(measured)}) and times (T,) or (N, T) must "
+            f"match measured_states; got {z.shape} and {t.shape}"
+        )
+    check_times(t, "times")
+    r = as_float_array(measurement_cov, "measurement_cov", min_ndim=2)
+    if r.shape != (m, m):
+        raise ValueError(f"measurement_cov must have shape ({m}, {m}); got {r.shape}")
+    check_symmetric_pd(r, "measurement_cov")
+    pi = as_float_array(transition_probs, "transition_probs", min_ndim=2)
+    mu0 = as_float_array(initial_probs, "initial_probs", min_ndim=1)
+    if pi.shape != (n_models, n_models) or mu0.shape != (n_models,):
+        raise ValueError(
+            f"transition_probs must be ({n_models}, {n_models}) and initial_probs "
+            f"({n_models},); got {pi.shape} and {mu0.shape}"
+        )
+    if np.any(pi < 0) or not np.allclose(pi.sum(axis=1), 1.0, rtol=0, atol=1e-12):
+        raise ValueError("transition_probs must be non-negative with rows summing to 1")
+    if np.any(mu0 < 0) or not np.isclose(mu0.sum(), 1.0, rtol=0, atol=1e-12):
+        raise ValueError("initial_probs must be non-negative and sum to 1")
+    if len(initial) != n_models:
+        raise ValueError(
+            f"initial must hold one GaussianState per model ({n_models}); got {len(initial)}"
+        )
+    for i, (st, mdl) in enumerate(zip(initial, models, strict=True)):
+        if not isinstance(st, GaussianState) or st.dim != mdl.state_dim:
+            raise ValueError(f"initial[{i}] must be a GaussianState over {mdl.state_names}")
+        check_symmetric_pd(st.cov, f"initial[{i}].cov", semidefinite=True)
+    mk = np.array(_component_mask(mask, z.shape, "mask"))
+    if np.any(np.isnan(z) & mk):
+        idx = tuple(int(v) for v in np.argwhere(np.isnan(z) & mk)[0])
+        raise ValueError(f"measurements is NaN at index {idx} where it is marked present")
+    form = _check_form(form)
+    tb = np.broadcast_to(t, batch + (n_steps,))
+    t_prev = np.concatenate(
+        [np.broadcast_to(initial[0].time, batch)[..., None], tb[..., :-1]], axis=-1
+    )
+    dt = tb - t_prev
+    if np.any(dt < 0):
+        raise ValueError("initial times must not be after the first measurement time")
+    disc = [discretize_with_input(mdl, dt, method, noise=noise) for mdl in models]
+    hs = [
+        np.eye(mdl.state_dim)[[nm.index(s) for s in measured]]
+        for mdl, nm in zip(models, names, strict=True)
+    ]
+    out_names = tuple(s for s in names[0] if all(s in nm for nm in names))
+    out_idx = [[nm.index(s) for s in out_names] for nm in names]
+    emb = [[_embed(names[i], names[j]) for j in range(n_models)] for i in range(n_models)]
+
+    states = [
+        _trusted(
+            GaussianState,
+            mean=np.broadcast_to(st.mean, batch + (st.dim,)),
+            cov=np.broadcast_to(st.cov, batch + (st.dim, st.dim)),
+            time=np.broadcast_to(st.time, batch),
+        )
+        for st in initial
+    ]
+    log_mu = np.broadcast_to(np.log(np.where(mu0 > 0, mu0, 1e-300)), batch + (n_models,))
+    comp_mean = [np.empty(batch + (n_steps, mdl.state_dim)) for mdl in models]
+    comp_cov = [np.empty(batch + (n_steps, mdl.state_dim, mdl.state_dim)) for mdl in models]
+    probs = np.empty(batch + (n_steps, n_models))
+    ll_mix = np.empty(batch + (n_steps,))
+    comb_mean = np.empty(batch + (n_steps, len(out_names)))
+    comb_cov = np.empty(batch + (n_steps, len(out_names), len(out_names)))
+    with np.errstate(divide="ignore"):
+        log_pi = np.log(pi)
+    for k in range(n_steps):
+        if k == 0:
+            mixed, log_c = states, log_mu
+        else:
+            mixed, log_c = _mix(states, log_mu, log_pi, emb)
+        lls = []
+        for j, mdl in enumerate(models):
+            phi, qd, u = (
+                a[..., k, :, :] if a.ndim == dt.ndim + 2 else a[..., k, :] for a in disc[j]
+            )
+            prior = predict(mixed[j], phi, qd, time=tb[..., k], control=u)
+            states[j], info = _update(prior, z[..., k, :], hs[j], r, mk[..., k, :], form)
+            lls.append(info.log_likelihood)
+            comp_mean[j][..., k, :], comp_cov[j][..., k, :, :] = states[j].mean, states[j].cov
+        ll = np.stack(lls, axis=-1)
+        joint = ll + log_c
+        ll_mix[..., k] = logsumexp(joint, axis=-1)
+        log_mu = joint - ll_mix[..., k][..., None]
+        mu = np.exp(log_mu)
+        probs[..., k, :] = mu
+        means = np.stack([states[j].mean[..., out_idx[j]] for j in range(n_models)], -2)
+        covs = np.stack(
+            [states[j].cov[..., out_idx[j], :][..., out_idx[j]] for j in range(n_models)], -3
+        )
+        xm = np.einsum("...j,...ji->...i", mu, means)
+        d = means - xm[..., None, :]
+        comb_mean[..., k, :] = xm
+        comb_cov[..., k, :, :] = symmetrize(
+            np.einsum("...j,...jab->...ab", mu, covs + d[..., :, None] * d[..., None, :])
+        )
+    comps = tuple(
+        _trusted(GaussianState, mean=comp_mean[j], cov=comp_cov[j], time=tb)
+        for j in range(n_models)
+    )
+    filtered = _trusted(GaussianState, mean=comb_mean, cov=comb_cov, time=tb)
+    return IMMResult(filtered, out_names, probs, comps, ll_mix)
+
+
+def _mix(
+    states: list[GaussianState],
+    log_mu: FloatArray,
+    log_pi: FloatArray,
+    emb: list[list[tuple[np.ndarray, np.ndarray]]],
+) -> tuple[list[GaussianState], FloatArray]:
+    """IMM interaction: mixed initial conditions per model and predicted log weights."""
+    n_models = len(states)
+    log_joint = log_mu[..., :, None] + log_pi  # (..., i, j)
+    log_c = logsumexp(log_joint, axis=-2)  # (..., j)
+    w = np.exp(log_joint - log_c[..., None, :])  # mixing probabilities mu_{i|j}
+    mixed = []
+    for j in range(n_models):
+        own = states[j]
+        embedded_m, embedded_p = [], []
+        for i in range(n_models):
+            dst, src = emb[i][j]
+            mean = np.array(own.mean)
+            cov = np.array(own.cov)
+            if dst.size:
+                mean[..., dst] = states[i].mean[..., src]
+                cov[..., dst[:, None], dst[None, :]] = states[i].cov[
+                    ..., src[:, None], src[None, :]
+                ]
+                rest = np.setdiff1d(np.arange(own.dim), dst)
+                cov[..., dst[:, None], rest[None, :]] = 0.0
+                cov[..., rest[:, None], dst[None, :]] = 0.0
+            embedded_m.append(mean)
+            embedded_p.append(cov)
+        xs = np.stack(embedded_m, -2)  # (..., i, n_j)
+        ps = np.stack(embedded_p, -3)
+        wj = w[..., :, j]
+        x0 = np.einsum("...i,...in->...n", wj, xs)
+        d = xs - x0[..., None, :]
+        p0 = np.einsum("...i,...iab->...ab", wj, ps + d[..., :, None] * d[..., None, :])
+        mixed.append(_trusted(GaussianState, mean=x0, cov=symmetrize(p0), time=own.time))
+    return mixed, log_c
+
+
+__all__ = ["IMMResult", "imm_filter"]
