@@ -225,6 +225,8 @@ def _nominal_q(
             raise ValueError(f"dwna_accel_var must be >= 0; got {var}")
         base = np.array([[step**4 / 4, step**3 / 2], [step**3 / 2, step**2]])
         return var[:, None, None] * base
+    if q is None:  # unreachable: exactly one of the two is given
+        raise ValueError("nominal_process_cov is required when dwna_accel_var is not given")
     qa = as_float_array(q, "nominal_process_cov", min_ndim=2)
     if qa.shape not in ((2, 2), (d, 2, 2)):
         raise ValueError(
@@ -270,7 +272,9 @@ def _published(
     est, cov, xh, p_nom = _init(z, step, r0, n_steps)
     p_rep = p_nom.copy()
     used = np.zeros((rows, n_steps), dtype=bool)
-    bx, bv, bg = np.zeros((rows, nb, 2)), np.zeros((rows, nb)), np.zeros((rows, nb))
+    bx: FloatArray = np.zeros((rows, nb, 2))
+    bv: FloatArray = np.zeros((rows, nb))
+    bg: FloatArray = np.zeros((rows, nb))
     count = np.zeros(rows, dtype=int)
     ns = np.zeros(rows, dtype=int)
     sxv, hh, sr = np.zeros((rows, 2)), np.zeros((rows, nb)), np.zeros(rows)

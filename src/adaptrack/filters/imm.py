@@ -53,7 +53,7 @@ class IMMResult:
 
 
 def _embed(src_names: tuple[str, ...], dst_names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
-    """Indices (in dst, in src) of the states shared by two models."""
+    """Return the indices (in dst, in src) of the states shared by two models."""
     dst_idx = [j for j, s in enumerate(dst_names) if s in src_names]
     src_idx = [src_names.index(dst_names[j]) for j in dst_idx]
     return np.array(dst_idx, dtype=int), np.array(src_idx, dtype=int)
@@ -190,7 +190,7 @@ def imm_filter(
         else:
             mixed, log_c = _mix(states, log_mu, log_pi, emb)
         lls = []
-        for j, mdl in enumerate(models):
+        for j in range(n_models):
             phi, qd, u = (
                 a[..., k, :, :] if a.ndim == dt.ndim + 2 else a[..., k, :] for a in disc[j]
             )

@@ -45,9 +45,12 @@ class Measurements:
 
 
 def _detections(shape: tuple[int, ...], prob: float, rng: np.random.Generator) -> BoolArray:
+    """Draw the detection mask; the first two epochs are detections (track initiation)."""
     if prob >= 1.0:
         return np.ones(shape, dtype=bool)
-    return rng.uniform(size=shape) < prob
+    mask = rng.uniform(size=shape) < prob
+    mask[..., :2] = True
+    return mask
 
 
 def simulate_cartesian(

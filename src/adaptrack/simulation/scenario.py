@@ -120,7 +120,7 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
                 f"unknown scenario {str(name_or_path)!r}; built-in scenarios: "
                 f"{', '.join(builtin_scenarios())}; or pass a .toml path"
             )
-        ref = resources.files("adaptrack.simulation").joinpath("scenarios", f"{name_or_path}.toml")
+        ref = resources.files("adaptrack.simulation") / "scenarios" / f"{name_or_path}.toml"
         with resources.as_file(ref) as p:
             return scenario_from_mapping(load_toml(p), str(name_or_path))
     if not path.is_file():

@@ -10,6 +10,7 @@ sampled exactly (its exact discretisation) at the requested times, independently
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import cast
 
 import numpy as np
 
@@ -195,9 +196,11 @@ def simulate_truth(
     pos = np.empty(t.shape + (d,))
     vel = np.empty_like(pos)
     acc = np.zeros_like(pos)
-    p = np.broadcast_to(np.asarray(spec.initial_position_m, float), (n_runs, d)).copy()
-    v = np.broadcast_to(np.asarray(spec.initial_velocity_mps, float), (n_runs, d)).copy()
-    a = np.zeros((n_runs, d))
+    p: FloatArray = np.broadcast_to(np.asarray(spec.initial_position_m, float), (n_runs, d)).copy()
+    v: FloatArray = np.broadcast_to(
+        np.asarray(spec.initial_velocity_mps, float), (n_runs, d)
+    ).copy()
+    a: FloatArray = np.zeros((n_runs, d))
     start = 0.0
     # after the last segment the target keeps its velocity
     tail = Segment("constant_velocity", max(float(t.max()) - spec.duration_s, 0.0) + 1.0)
@@ -206,7 +209,9 @@ def simulate_truth(
         end = start + seg.duration_s
         inside = (t >= start) & (t < end)
         if seg.kind == "singer":
-            p, v, a = _singer_segment(seg, p, v, a, t, start, end, inside, pos, vel, acc, rng)  # type: ignore[arg-type]
+            p, v, a = _singer_segment(
+                seg, p, v, a, t, start, end, inside, pos, vel, acc, cast(np.random.Generator, rng)
+            )
         else:
             tau = np.where(inside, t - start, 0.0)
             sp, sv, sa = _advance(seg, p, v, a, tau)
