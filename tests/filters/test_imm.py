@@ -1,0 +1,103 @@
+"""IMM: reduction to the KF, FilterPy cross-check, models of different sizes, batching."""
+
+import numpy as np
+import pytest
+from filterpy.kalman import IMMEstimator, KalmanFilter
+
+import adaptrack as at
+from adaptrack.filters.imm import imm_filter
+from adaptrack.models import ConstantAcceleration, ConstantVelocity, ShapingFilter, discretize
+
+
+def data(rng, n_tracks=3, n_steps=80):
+    t = np.cumsum(rng.uniform(0.05, 0.3, n_steps))
+    z = rng.normal(size=(n_tracks, n_steps, 1)) * 2 + (5 * t + 0.3 * t**2)[:, None]
+    return t, z
+
+
+def test_single_model_imm_is_the_kalman_filter(rng):
+    t, z = data(rng)
+    model = ConstantVelocity(accel_psd=2.0)
+    prior = at.GaussianState([0.0, 1.0], np.diag([100.0, 10.0]), t[0])
+    res = imm_filter(t, z, [model], ("x",), [[4.0]], [prior], [[1.0]], [1.0])
+    kf = at.kalman_filter(t, z, model, [[1.0, 0.0]], [[4.0]], prior)
+    np.testing.assert_allclose(res.filtered.mean, kf.filtered.mean, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(res.filtered.cov, kf.filtered.cov, rtol=1e-12, atol=1e-13)
+    np.testing.assert_allclose(res.log_likelihood, kf.info.log_likelihood, rtol=1e-12)
+    np.testing.assert_array_equal(res.mode_probabilities, 1.0)
+
+
+@pytest.mark.crosscheck
+def test_matches_filterpy_imm_with_equal_state_sizes(rng):
+    dt = 0.1
+    t = dt * np.arange(60)
+    z = rng.normal(size=(60, 1)) * 3 + (10 * t + np.where(t > 3, 4 * (t - 3) ** 2, 0))[:, None]
+    models = [ConstantVelocity(accel_psd=0.05), ConstantVelocity(accel_psd=50.0)]
+    pi = np.array([[0.97, 0.03], [0.05, 0.95]])
+    mu0 = np.array([0.6, 0.4])
+    priors = [
+        at.GaussianState([0.0, 5.0], np.diag([25.0, 9.0]), t[0]),
+        at.GaussianState([1.0, 4.0], np.diag([16.0, 30.0]), t[0]),
+    ]
+    # FilterPy's initial probabilities are those of the step before the first measurement
+    # (its first update weights by mu0 @ M); adaptrack's are the prior at the first one
+    res = imm_filter(t, z, models, ("x",), [[9.0]], priors, pi, mu0 @ pi)
+    filters = []
+    for m, p in zip(models, priors):
+        kf = KalmanFilter(dim_x=2, dim_z=1)
+        kf.F, kf.Q = discretize(m, dt)
+        kf.H, kf.R = np.array([[1.0, 0.0]]), np.array([[9.0]])
+        kf.x, kf.P = np.array(p.mean), np.array(p.cov)
+        filters.append(kf)
+    imm = IMMEstimator(filters, mu0.copy(), pi.copy())
+    xs, ps, mus = [], [], []
+    for k in range(t.size):
+        if k:
+            imm.predict()
+        imm.update(z[k].copy())
+        xs.append(imm.x.copy())
+        ps.append(imm.P.copy())
+        mus.append(imm.mu.copy())
+    np.testing.assert_allclose(res.filtered.mean, np.array(xs), rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(res.filtered.cov, np.array(ps), rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(res.mode_probabilities, np.array(mus), rtol=1e-9, atol=1e-12)
+
+
+def test_models_of_different_sizes(rng):
+    t = np.cumsum(rng.uniform(0.05, 0.3, 80))
+    z = rng.normal(size=(3, 80, 1)) * 2 + (5 * t + 5 * t**2)[:, None]  # 10 m/s^2
+    models = [
+        ConstantVelocity(accel_psd=0.1),
+        ConstantAcceleration(jerk_psd=1.0),
+        ShapingFilter(lambda_per_s2=0.05, alpha_per_s=0.3, shaping_std=5.0),
+    ]
+    priors = [
+        at.GaussianState(np.zeros(m.state_dim), 100 * np.eye(m.state_dim), t[0]) for m in models
+    ]
+    pi = np.full((3, 3), 0.025) + 0.925 * np.eye(3)
+    res = imm_filter(t, z, models, ("x",), [[4.0]], priors, pi, [1 / 3] * 3)
+    assert res.state_names == ("x", "vx")
+    np.testing.assert_allclose(res.mode_probabilities.sum(-1), 1.0, atol=1e-12)
+    assert res.components[1].mean.shape == (3, 80, 3)
+    eig = np.linalg.eigvalsh(res.filtered.cov)
+    assert np.all(eig > 0)
+    # accelerating data: the CA model gains weight over the pure CV model
+    assert res.mode_probabilities[:, -20:, 1].mean() > res.mode_probabilities[:, -20:, 0].mean()
+    # batch == loop
+    for i in range(3):
+        one = imm_filter(t, z[i], models, ("x",), [[4.0]], priors, pi, [1 / 3] * 3)
+        np.testing.assert_allclose(res.filtered.mean[i], one.filtered.mean, rtol=1e-11, atol=1e-11)
+
+
+def test_imm_bad_input(rng):
+    t, z = data(rng)
+    m = ConstantVelocity()
+    p = at.GaussianState([0.0, 0.0], np.eye(2), t[0])
+    with pytest.raises(ValueError, match=r"models\[0\] has no state\(s\) \['y'\]"):
+        imm_filter(t, z, [m], ("y",), [[1.0]], [p], [[1.0]], [1.0])
+    with pytest.raises(ValueError, match="rows summing to 1"):
+        imm_filter(t, z, [m, m], ("x",), [[1.0]], [p, p], [[0.5, 0.4], [0.5, 0.5]], [0.5, 0.5])
+    with pytest.raises(ValueError, match="initial_probs must be non-negative and sum to 1"):
+        imm_filter(t, z, [m], ("x",), [[1.0]], [p], [[1.0]], [0.5])
+    with pytest.raises(ValueError, match="initial must hold one GaussianState per model"):
+        imm_filter(t, z, [m, m], ("x",), [[1.0]], [p], np.eye(2), [0.5, 0.5])
