@@ -60,7 +60,7 @@ def test_c2_4_difference_annihilates_quadratics():
 
 @pytest.mark.parametrize("ident", ["published", "mehra"])
 def test_c2_8_equivariance_to_position_and_velocity_offsets(ident):
-    t, x, z = table1(20, seed=5)
+    t, _x, z = table1(20, seed=5)
     base = innovation_adaptive_filter(
         t, z[..., None], measurement_var=25.0, dwna_accel_var=22.0, identification=ident
     ).filtered.mean
@@ -82,7 +82,7 @@ def test_c2_8_equivariance_to_position_and_velocity_offsets(ident):
 
 @pytest.mark.parametrize("ident", ["published", "mehra"])
 def test_c2_9_adaptation_frozen_is_the_nominal_kalman_filter(ident):
-    t, x, z = table1(10)
+    t, _x, z = table1(10)
     res = innovation_adaptive_filter(
         t,
         z[..., None],
