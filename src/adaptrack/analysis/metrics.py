@@ -23,6 +23,7 @@ def nees(error: ArrayLike, cov: ArrayLike) -> FloatArray:
     Returns
     -------
     ndarray, shape (...)
+        ``inf`` where ``cov`` is singular and the error has a component outside its range.
     """
     e = as_float_array(error, "error", min_ndim=1)
     p = as_float_array(cov, "cov", min_ndim=2)
@@ -30,7 +31,18 @@ def nees(error: ArrayLike, cov: ArrayLike) -> FloatArray:
         raise ValueError(
             f"cov must have shape (..., {e.shape[-1]}, {e.shape[-1]}) to match error; got {p.shape}"
         )
-    return np.einsum("...i,...i->...", e, solve_vec(p, e))
+    try:
+        return np.einsum("...i,...i->...", e, solve_vec(p, e))
+    except np.linalg.LinAlgError:
+        # a singular covariance: error components outside its range give an infinite NEES
+        w, v = np.linalg.eigh(p)
+        proj = np.einsum("...ji,...j->...i", v, e) ** 2
+        tiny = np.finfo(float).eps * np.abs(w).max(axis=-1, keepdims=True)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            terms = np.where(
+                w > tiny, proj / np.where(w > tiny, w, 1.0), np.where(proj > 0, np.inf, 0.0)
+            )
+        return terms.sum(axis=-1)
 
 
 def rmse(error: ArrayLike, axis: int | tuple[int, ...] | None = None) -> FloatArray:

@@ -86,8 +86,8 @@ def imm_filter(
         Each must have every state in ``measured_states``.
     measured_states : sequence of str, length m
         Names of the measured states, e.g. ``("x", "y")``.
-    measurement_cov : array_like, shape (m, m)
-        Measurement noise covariance.
+    measurement_cov : array_like, shape (m, m) or (..., T, m, m)
+        Measurement noise covariance, shared or per step.
     initial : sequence of GaussianState, length M
         Prior of each model at the first measurement time (or earlier).
     transition_probs : array_like, shape (M, M)
@@ -123,8 +123,11 @@ def imm_filter(
         )
     check_times(t, "times")
     r = as_float_array(measurement_cov, "measurement_cov", min_ndim=2)
-    if r.shape != (m, m):
-        raise ValueError(f"measurement_cov must have shape ({m}, {m}); got {r.shape}")
+    if r.shape not in ((m, m), batch + (n_steps, m, m)):
+        raise ValueError(
+            f"measurement_cov must have shape ({m}, {m}) or "
+            f"{batch + (n_steps, m, m)}; got {r.shape}"
+        )
     check_symmetric_pd(r, "measurement_cov")
     pi = as_float_array(transition_probs, "transition_probs", min_ndim=2)
     mu0 = as_float_array(initial_probs, "initial_probs", min_ndim=1)
@@ -195,7 +198,8 @@ def imm_filter(
                 a[..., k, :, :] if a.ndim == dt.ndim + 2 else a[..., k, :] for a in disc[j]
             )
             prior = predict(mixed[j], phi, qd, time=tb[..., k], control=u)
-            states[j], info = _update(prior, z[..., k, :], hs[j], r, mk[..., k, :], form)
+            rk = r if r.ndim == 2 else r[..., k, :, :]
+            states[j], info = _update(prior, z[..., k, :], hs[j], rk, mk[..., k, :], form)
             lls.append(info.log_likelihood)
             comp_mean[j][..., k, :], comp_cov[j][..., k, :, :] = states[j].mean, states[j].cov
         ll = np.stack(lls, axis=-1)
