@@ -104,7 +104,7 @@ def polar_kinematics_to_enu(a: ArrayLike) -> FloatArray:
     x = as_float_array(a, "a", min_ndim=1)
     if x.shape[-1] != 9:
         raise ValueError(f"a must have shape (..., 9); got {x.shape}")
-    r, e, b, rd, ed, bd, rdd, edd, bdd = (x[..., i : i + 1] for i in range(9))
+    r, _, _, rd, ed, bd, rdd, edd, bdd = (x[..., i : i + 1] for i in range(9))
     d = _unit_derivatives(x[..., 1], x[..., 2])
     ud = ed * d["ue"] + bd * d["ub"]
     udd = (
@@ -120,7 +120,7 @@ def polar_kinematics_jacobian(a: ArrayLike) -> FloatArray:
     x = as_float_array(a, "a", min_ndim=1)
     if x.shape[-1] != 9:
         raise ValueError(f"a must have shape (..., 9); got {x.shape}")
-    r, e, b, rd, ed, bd, rdd, edd, bdd = (x[..., i : i + 1] for i in range(9))
+    r, _, _, rd, ed, bd, rdd, edd, bdd = (x[..., i : i + 1] for i in range(9))
     d = _unit_derivatives(x[..., 1], x[..., 2])
     ud = ed * d["ue"] + bd * d["ub"]
     udd = (

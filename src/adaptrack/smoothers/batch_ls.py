@@ -235,7 +235,7 @@ def fit_polynomial(
 def _whitening(
     rt: FloatArray, r: FloatArray, weights: str, scale: FloatArray, k: int
 ) -> FloatArray:
-    """The (3K, 3K) matrix that maps scaled observations to whitened ones."""
+    """Return the (3K, 3K) matrix that maps scaled observations to whitened ones."""
     if weights == "full":
         inv_chol = np.linalg.solve(np.linalg.cholesky(rt), np.broadcast_to(np.eye(3), rt.shape))
     else:
