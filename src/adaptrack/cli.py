@@ -4,15 +4,23 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 from pathlib import Path
 
+import numpy as np
+import pandas as pd
 import typer
 from rich.console import Console
 from rich.progress import Progress
 from rich.table import Table
 
 from .analysis.evaluation import Evaluation, evaluate_scenario
+from .analysis.flights import FlightRow, evaluate_flight, smooth_kalman, smooth_lsq
 from .analysis.singer_study import run_singer_study
+from .coords.geodetic import enu_to_ecef, enu_to_ecef_rotation
+from .io.navigation import read_navigation_measurements
+from .io.tables import DataFormatError, read_flight_csv, write_table_atomic
+from .models.continuous import Singer
 from .simulation.scenario import load_scenario
 
 app = typer.Typer(
@@ -87,7 +95,10 @@ def _write_json(path: Path, payload: object) -> None:
 
 @app.command()
 def evaluate(
-    scenario: str = typer.Argument(..., help="Built-in scenario name or a scenario .toml."),
+    scenario: str = typer.Argument(
+        ..., help="Built-in scenario name, a scenario .toml, or 'flights' followed by files."
+    ),
+    files: list[Path] = typer.Argument(None, help="Flight CSV files (with 'flights')."),
     runs: int = typer.Option(100, "--runs", min=1, help="Evaluation runs."),
     seed: int = typer.Option(0, "--seed", help="Random seed."),
     train_runs: int = typer.Option(50, "--train-runs", min=1, help="Tuning runs."),
@@ -96,7 +107,14 @@ def evaluate(
     ),
     json_path: Path | None = typer.Option(None, "--json", help="Write the table as JSON."),
 ) -> None:
-    """Compare the CV-KF, the seed-002 adaptive filters, IMM and tuned M1/M2 on a scenario."""
+    """Compare the CV-KF, the seed-002 adaptive filters, IMM and tuned M1/M2 on a scenario.
+
+    ``adaptrack evaluate flights FILE...`` instead compares navigation smoothers (triple-node
+    and position-only LSQ, Kalman filter, RTS smoother) on recorded flights used as truth.
+    """
+    if scenario == "flights":
+        _evaluate_flights(files or [], seed, json_path)
+        return
     try:
         sc = load_scenario(scenario)
     except ValueError as exc:
@@ -115,6 +133,126 @@ def evaluate(
     if json_path is not None:
         _write_json(json_path, result.to_json())
         console.print(f"wrote {json_path}")
+
+
+def _evaluate_flights(files: list[Path], seed: int, json_path: Path | None) -> None:
+    if not files:
+        _fail("'evaluate flights' needs at least one flight CSV file")
+    rows: list[FlightRow] = []
+    console = Console()
+    with Progress(console=console, transient=True) as progress:
+        task = progress.add_task("flights", total=len(files))
+        for path in files:
+            try:
+                flight = read_flight_csv(path)
+                rows += evaluate_flight(flight, seed=seed)
+            except ValueError as exc:
+                _fail(str(exc))
+            progress.update(task, advance=1)
+    table = Table(title=f"navigation smoothing on recorded flights (seed {seed})")
+    for col in ("flight", "method", "position RMSE [m]", "velocity RMSE [m/s]", "scored scans"):
+        table.add_column(col, justify="left" if col in ("flight", "method") else "right")
+    for r in rows:
+        table.add_row(
+            r.flight,
+            r.method,
+            f"{r.position_rmse_m:.2f}",
+            f"{r.velocity_rmse_mps:.2f}",
+            str(r.n_scored),
+        )
+    console.print(table)
+    if json_path is not None:
+        _write_json(json_path, {"seed": seed, "rows": [dataclasses.asdict(r) for r in rows]})
+        console.print(f"wrote {json_path}")
+
+
+def _parse_site(text: str) -> tuple[float, float, float]:
+    try:
+        lat, lon, alt = (float(v) for v in text.split(","))
+    except ValueError:
+        raise typer.BadParameter("--site must be LAT,LON,ALT (degrees, degrees, metres)") from None
+    if not (abs(lat) <= 90 and abs(lon) <= 360 and math.isfinite(alt)):
+        raise typer.BadParameter(f"--site {text}: latitude/longitude out of range")
+    return math.radians(lat), math.radians(lon), alt
+
+
+@app.command()
+def smooth(
+    measurements: Path = typer.Argument(..., help="CSV/Parquet of radar and velocity nodes."),
+    site: str = typer.Option(..., "--site", help="Radar site LAT,LON,ALT (deg, deg, m)."),
+    method: str = typer.Option("lsq", "--method", help="lsq or rts."),
+    degree: int = typer.Option(2, "--degree", min=0, help="Polynomial degree (lsq)."),
+    window: float = typer.Option(20.0, "--window", help="Sliding window [s] (lsq)."),
+    range_std_m: float = typer.Option(30.0, "--range-std-m"),
+    azimuth_std_deg: float = typer.Option(0.08, "--azimuth-std-deg"),
+    elevation_std_deg: float = typer.Option(0.1, "--elevation-std-deg"),
+    velocity_std_mps: float = typer.Option(1.0, "--velocity-std-mps"),
+    out: Path = typer.Option(..., "--out", help="Output CSV or Parquet."),
+) -> None:
+    """Smooth radar (and velocity) measurements; write ENU and ECEF estimates with covariance."""
+    lat, lon, alt = _parse_site(site)
+    if method not in ("lsq", "rts"):
+        raise typer.BadParameter("--method must be 'lsq' or 'rts'")
+    try:
+        nodes = read_navigation_measurements(
+            measurements,
+            range_std_m=range_std_m,
+            azimuth_std_rad=math.radians(azimuth_std_deg),
+            elevation_std_rad=math.radians(elevation_std_deg),
+            velocity_std_mps=velocity_std_mps,
+        )
+        if method == "lsq":
+            est = smooth_lsq(nodes, use_velocity=True, degree=degree, window_s=window)
+        else:
+            est = smooth_kalman(nodes, Singer(time_constant_s=20.0, accel_std_mps2=2.0, n_axes=3))
+    except (DataFormatError, ValueError) as exc:
+        _fail(str(exc))
+    write_table_atomic(_estimates_frame(est.time, est.mean, est.cov, (lat, lon, alt)), out)
+    Console().print(f"wrote {out} ({est.time.size} epochs)")
+
+
+def _estimates_frame(
+    t: np.ndarray, mean: np.ndarray, cov: np.ndarray, site: tuple[float, float, float]
+) -> pd.DataFrame:
+    """ENU and ECEF position/velocity with standard deviations and the ENU covariance."""
+    rot = enu_to_ecef_rotation(site[0], site[1])
+    big = np.kron(np.eye(2), rot)
+    cov6 = cov[:, :6, :6]
+    ecef_cov = big @ cov6 @ big.T
+    cols: dict[str, np.ndarray] = {"time_s": t}
+    enu = [
+        "east_m",
+        "north_m",
+        "up_m",
+        "velocity_east_mps",
+        "velocity_north_mps",
+        "velocity_up_mps",
+    ]
+    ecef = ["ecef_x_m", "ecef_y_m", "ecef_z_m", "ecef_vx_mps", "ecef_vy_mps", "ecef_vz_mps"]
+    ok = np.all(np.isfinite(mean[:, :6]), axis=-1)  # NaN rows: windows with too few nodes
+    ecef_vals = np.full((t.size, 6), np.nan)
+    ecef_vals[ok] = np.concatenate([enu_to_ecef(mean[ok, :3], *site), mean[ok, 3:6] @ rot.T], -1)
+    for i, name in enumerate(enu):
+        cols[name] = mean[:, i]
+    for i, name in enumerate(ecef):
+        cols[name] = ecef_vals[:, i]
+    for i, name in enumerate(enu):
+        cols[
+            name.replace("_m", "_std_m", 1)
+            if name.endswith("_m")
+            else name.replace("_mps", "_std_mps")
+        ] = np.sqrt(cov6[:, i, i])
+    for i, name in enumerate(ecef):
+        cols[
+            name.replace("_m", "_std_m", 1)
+            if name.endswith("_m")
+            else name.replace("_mps", "_std_mps")
+        ] = np.sqrt(ecef_cov[:, i, i])
+    short = ["e", "n", "u", "ve", "vn", "vu"]
+    for i in range(6):
+        for j in range(i + 1, 6):
+            cols[f"cov_{short[i]}_{short[j]}"] = cov6[:, i, j]
+    return pd.DataFrame(cols)
 
 
 def _evaluation_table(result: Evaluation, published: dict[str, list[float]] | None) -> Table:

@@ -281,11 +281,14 @@ def smooth_polynomial(
     window_s: float | None = None,
     weights: Weights = "full",
     joint: bool = True,
+    insufficient: Literal["raise", "nan"] = "raise",
 ) -> GaussianState:
     """Smoothed ``[p, v, a]`` (T, 9) at ``eval_times``: one fit over all nodes, or sliding.
 
     With ``window_s``, each evaluation time gets its own fit to the nodes within
     ``+-window_s / 2`` of it (centred there); otherwise a single whole-interval fit is used.
+    A window whose nodes do not determine the polynomial (a gap in the data) raises, or with
+    ``insufficient="nan"`` gives NaN estimates at that time (never a silent omission).
     """
     te = np.atleast_1d(as_float_array(eval_times, "eval_times"))
     if window_s is None:
@@ -311,7 +314,10 @@ def smooth_polynomial(
                 joint=joint,
             )
         except ValueError as exc:
-            raise ValueError(f"window at t = {tt} s: {exc}") from None
+            if insufficient == "raise":
+                raise ValueError(f"window at t = {tt} s: {exc}") from None
+            means[i], cov_out[i] = np.nan, np.nan
+            continue
         est = fit.evaluate([tt])
         means[i], cov_out[i] = est.mean[0], est.cov[0]
     return _trusted(GaussianState, mean=means, cov=cov_out, time=te)

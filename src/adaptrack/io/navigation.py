@@ -1,0 +1,108 @@
+"""Reading radar and velocity measurement tables for navigation smoothing.
+
+One row per node, ``time_s`` plus one complete group:
+
+* radar: ``range_m``, ``azimuth_deg`` or ``azimuth_rad`` (clockwise from north),
+  ``elevation_deg`` or ``elevation_rad``;
+* velocity (a second source): ``velocity_east_mps``, ``velocity_north_mps``,
+  ``velocity_up_mps`` in the radar's ENU frame.
+
+Degrees are converted once, here. Times must be strictly increasing within each group.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..analysis.flights import NavigationNodes
+from ..coords.radar import polar_to_enu, polar_to_enu_cov
+from .tables import DataFormatError, check_increasing, numeric_column, read_table
+
+VELOCITY_COLUMNS = ["velocity_east_mps", "velocity_north_mps", "velocity_up_mps"]
+
+
+def _angle(frame, name: str, path: Path, limit: float) -> np.ndarray:  # type: ignore[no-untyped-def]
+    deg, rad = f"{name}_deg", f"{name}_rad"
+    if deg in frame.columns and rad in frame.columns:
+        raise DataFormatError(f"{path}: both {deg!r} and {rad!r} given (mixed units); keep one")
+    if rad in frame.columns:
+        v = numeric_column(frame, rad, path, allow_nan=True)
+        bad = np.abs(v) > limit
+        if np.any(bad):
+            row = int(np.argmax(bad))
+            raise DataFormatError(
+                f"{path}: row {row + 1}, column {rad!r}: {v[row]} is out of "
+                f"range for radians (|value| <= {limit:.4g}); degrees given?"
+            )
+        return v
+    if deg in frame.columns:
+        return np.deg2rad(numeric_column(frame, deg, path, allow_nan=True))
+    raise DataFormatError(f"{path}: missing column {deg!r} or {rad!r}")
+
+
+def read_navigation_measurements(
+    path: str | Path,
+    *,
+    range_std_m: float,
+    azimuth_std_rad: float,
+    elevation_std_rad: float,
+    velocity_std_mps: float,
+) -> NavigationNodes:
+    """Read a measurement table into ENU position and velocity nodes with covariances."""
+    p = Path(path)
+    frame = read_table(p)
+    if "time_s" not in frame.columns:
+        raise DataFormatError(f"{p}: missing column 'time_s'; found {list(frame.columns)}")
+    t = numeric_column(frame, "time_s", p)
+    has_radar = "range_m" in frame.columns
+    has_vel = all(c in frame.columns for c in VELOCITY_COLUMNS)
+    if not has_radar:
+        raise DataFormatError(f"{p}: missing column 'range_m' (radar nodes are required)")
+    rng_m = numeric_column(frame, "range_m", p, allow_nan=True)
+    az = _angle(frame, "azimuth", p, 2 * np.pi)
+    el = _angle(frame, "elevation", p, np.pi / 2)
+    radar_group = np.stack([rng_m, az, el], -1)
+    vel = (
+        np.stack([numeric_column(frame, c, p, allow_nan=True) for c in VELOCITY_COLUMNS], -1)
+        if has_vel
+        else np.full((t.size, 3), np.nan)
+    )
+    r_full = np.all(np.isfinite(radar_group), -1)
+    v_full = np.all(np.isfinite(vel), -1)
+    partial = (np.any(np.isfinite(radar_group), -1) & ~r_full) | (
+        np.any(np.isfinite(vel), -1) & ~v_full
+    )
+    neither = ~r_full & ~v_full
+    both = r_full & v_full
+    for bad, what in (
+        (partial, "an incomplete radar or velocity group"),
+        (neither, "no complete radar or velocity group"),
+        (both, "both a radar and a velocity group (one node per row)"),
+    ):
+        if bad.any():
+            raise DataFormatError(f"{p}: row {int(np.argmax(bad)) + 1}: {what}")
+    if np.any(rng_m[r_full] <= 0):
+        row = int(np.flatnonzero(r_full & (rng_m <= 0))[0])
+        raise DataFormatError(f"{p}: row {row + 1}, column 'range_m': must be > 0")
+    check_increasing(t[r_full], p, "time_s (radar rows)")
+    check_increasing(t[v_full], p, "time_s (velocity rows)")
+    if r_full.sum() < 3:
+        raise DataFormatError(f"{p}: at least 3 radar rows are needed; got {int(r_full.sum())}")
+    polar = radar_group[r_full]
+    cov = polar_to_enu_cov(
+        polar, np.diag([range_std_m**2, azimuth_std_rad**2, elevation_std_rad**2])
+    )
+    nv = int(v_full.sum())
+    return NavigationNodes(
+        t[r_full],
+        polar_to_enu(polar),
+        cov,
+        t[v_full],
+        vel[v_full],
+        np.broadcast_to(velocity_std_mps**2 * np.eye(3), (nv, 3, 3)),
+    )
+
+
+__all__ = ["read_navigation_measurements"]
