@@ -282,7 +282,7 @@ def _evaluation_table(result: Evaluation, published: dict[str, list[float]] | No
         hint = next((v for k, v in compares.items() if row.filter.startswith(k)), "")
         note = "; ".join(x for x in (row.note, hint if published else "") if x)
         table.add_row(
-            row.filter, *(f"{row.rmse_m[k]:.2f}" for k in intervals), f"{row.anees:.2f}", note
+            row.filter, *(f"{row.rmse_m[k]:.4g}" for k in intervals), f"{row.anees:.2f}", note
         )
     return table
 

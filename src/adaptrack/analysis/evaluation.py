@@ -184,13 +184,17 @@ def evaluate_scenario(
     say("CV-KF envelope")
     rows.append(_envelope_row(data, masks, step))
     say("tuning CV")
-    cv = tune_constant_velocity(train)
+    # search ranges of the noise levels (spec B.7 uses [1e-3, 1e3] m^2/s^3; scenarios in other
+    # units, e.g. radians, set their own)
+    psd_bounds = tuple(float(v) for v in scenario.settings.get("psd_bounds", (1e-3, 1e3)))
+    jerk_bounds = tuple(float(v) for v in scenario.settings.get("jerk_psd_bounds", (1e-3, 1e4)))
+    cv = tune_constant_velocity(train, bounds=(psd_bounds[0], psd_bounds[1]))
     say("tuning M1 (profile over lambda)")
     m1 = tune_inverse_dynamics(train, cv=cv, lambdas=np.geomspace(1e-4, 1.0, profile_points))
     say("tuning M2")
     m2 = tune_shaping_filter(train, m1=m1)
     say("tuning CA")
-    ca = tune_constant_acceleration(train)
+    ca = tune_constant_acceleration(train, bounds=(jerk_bounds[0], jerk_bounds[1]))
     tuning = {r.model: r.to_dict() for r in (cv, m1, m2, ca)}
     for label, res_t, extra in (
         ("CV-KF, tuned", cv, 0.0),
