@@ -150,11 +150,19 @@ def _evaluate_flights(files: list[Path], seed: int, json_path: Path | None) -> N
                 _fail(str(exc))
             progress.update(task, advance=1)
     table = Table(title=f"navigation smoothing on recorded flights (seed {seed})")
-    for col in ("flight", "method", "position RMSE [m]", "velocity RMSE [m/s]", "scored scans"):
+    for col in (
+        "flight",
+        "scan [s]",
+        "method",
+        "position RMSE [m]",
+        "velocity RMSE [m/s]",
+        "scored scans",
+    ):
         table.add_column(col, justify="left" if col in ("flight", "method") else "right")
     for r in rows:
         table.add_row(
             r.flight,
+            f"{r.scan_s:g}",
             r.method,
             f"{r.position_rmse_m:.2f}",
             f"{r.velocity_rmse_mps:.2f}",

@@ -48,6 +48,7 @@ class FlightRow:
 
     flight: str
     method: str
+    scan_s: float
     position_rmse_m: float
     velocity_rmse_mps: float
     n_scored: int
@@ -139,7 +140,9 @@ def simulate_flight_measurements(
     return FlightMeasurements(site, flight.times, pos, vel, radar_idx, nodes)
 
 
-def _score(name: str, method: str, est: GaussianState, m: FlightMeasurements) -> FlightRow:
+def _score(
+    name: str, method: str, est: GaussianState, m: FlightMeasurements, scan_s: float
+) -> FlightRow:
     idx = m.radar_index
     ep = est.mean[:, :3] - m.truth_position[idx]
     ev = est.mean[:, 3:6] - m.truth_velocity[idx]
@@ -148,6 +151,7 @@ def _score(name: str, method: str, est: GaussianState, m: FlightMeasurements) ->
     return FlightRow(
         name,
         method,
+        scan_s,
         math.sqrt(float(np.mean(np.sum(ep[okp] ** 2, -1)))),
         math.sqrt(float(np.mean(np.sum(ev[okv] ** 2, -1)))),
         int(okp.sum()),
@@ -213,27 +217,41 @@ def smooth_kalman(nodes: NavigationNodes, model: Singer, *, smooth: bool = True)
 
 
 def evaluate_flight(
-    flight: Flight, *, seed: int = 0, scan_s: float = 4.8, degree: int = 2, window_s: float = 20.0
+    flight: Flight,
+    *,
+    seed: int = 0,
+    scans_s: tuple[float, ...] = (4.8, 1.0),
+    degree: int = 2,
+    window_s: float = 20.0,
 ) -> list[FlightRow]:
-    """RMSE of ``lsq_triple``, ``lsq_position``, ``kf`` and ``rts`` on one flight."""
-    m = simulate_flight_measurements(flight, seed=seed, scan_s=scan_s)
+    """RMSE of ``lsq_triple``, ``lsq_position``, ``kf`` and ``rts`` on one flight.
+
+    One set of rows per radar scan period (default: the ASR-11's 4.8 s and a 1 s variant).
+    """
     model = Singer(time_constant_s=20.0, accel_std_mps2=2.0, n_axes=3)
-    return [
-        _score(
-            flight.name,
-            "lsq_triple",
-            smooth_lsq(m.nodes, use_velocity=True, degree=degree, window_s=window_s),
-            m,
-        ),
-        _score(
-            flight.name,
-            "lsq_position",
-            smooth_lsq(m.nodes, use_velocity=False, degree=degree, window_s=window_s),
-            m,
-        ),
-        _score(flight.name, "kf", smooth_kalman(m.nodes, model, smooth=False), m),
-        _score(flight.name, "rts", smooth_kalman(m.nodes, model, smooth=True), m),
-    ]
+    rows = []
+    for scan in scans_s:
+        m = simulate_flight_measurements(flight, seed=seed, scan_s=scan)
+        n = flight.name
+        rows += [
+            _score(
+                n,
+                "lsq_triple",
+                smooth_lsq(m.nodes, use_velocity=True, degree=degree, window_s=window_s),
+                m,
+                scan,
+            ),
+            _score(
+                n,
+                "lsq_position",
+                smooth_lsq(m.nodes, use_velocity=False, degree=degree, window_s=window_s),
+                m,
+                scan,
+            ),
+            _score(n, "kf", smooth_kalman(m.nodes, model, smooth=False), m, scan),
+            _score(n, "rts", smooth_kalman(m.nodes, model, smooth=True), m, scan),
+        ]
+    return rows
 
 
 __all__ = [

@@ -11,6 +11,7 @@ from .geodetic import (
 from .radar import (
     enu_to_polar,
     enu_to_polar_rates,
+    polar_kinematics_cov_to_ecef,
     polar_kinematics_jacobian,
     polar_kinematics_to_enu,
     polar_to_enu,
@@ -25,6 +26,7 @@ __all__ = [
     "enu_to_polar",
     "enu_to_polar_rates",
     "geodetic_to_ecef",
+    "polar_kinematics_cov_to_ecef",
     "polar_kinematics_jacobian",
     "polar_kinematics_to_enu",
     "polar_to_enu",

@@ -169,9 +169,28 @@ def polar_to_enu_cov(polar: ArrayLike, polar_cov: ArrayLike) -> FloatArray:
     return j @ c @ mT(j)
 
 
+def polar_kinematics_cov_to_ecef(
+    a: ArrayLike, cov_a: ArrayLike, lat: float, lon: float
+) -> FloatArray:
+    """Covariance (..., 9, 9) of ECEF ``[p, v, a]`` from the radar vector's covariance (eq. 13).
+
+    ``R_gas = J_abs [J_rel [J_loc R_a J_loc^T] J_rel^T] J_abs^T`` with ``J_loc`` the closed-form
+    Jacobian of :func:`polar_kinematics_jacobian`, ``J_rel = blockdiag(R, R, R)`` (``R`` the
+    ENU-to-ECEF rotation of the site) and ``J_abs = I`` (a site fixed on the Earth).
+    """
+    from .geodetic import enu_to_ecef_rotation
+
+    j_loc = polar_kinematics_jacobian(a)
+    c = as_float_array(cov_a, "cov_a", min_ndim=2)
+    local = j_loc @ c @ mT(j_loc)
+    j_rel = np.kron(np.eye(3), enu_to_ecef_rotation(lat, lon))
+    return j_rel @ local @ j_rel.T
+
+
 __all__ = [
     "enu_to_polar",
     "enu_to_polar_rates",
+    "polar_kinematics_cov_to_ecef",
     "polar_kinematics_jacobian",
     "polar_kinematics_to_enu",
     "polar_to_enu",
