@@ -120,8 +120,8 @@ def simulate_flight_measurements(
             f"{MAX_RANGE_M / 1e3:.0f} km of the radar site"
         )
     radar_idx = radar_idx[in_cover]
-    other = np.setdiff1d(np.arange(flight.times.size), radar_idx)
-    vel_idx = other[(other % 2 == 1) & np.all(np.isfinite(vel[other]), axis=-1)]
+    rows = np.arange(flight.times.size)
+    vel_idx = rows[(rows % 2 == 1) & np.all(np.isfinite(vel), axis=-1)]
     polar = enu_to_polar(pos[radar_idx])
     noise = rng.standard_normal(polar.shape) * [RANGE_STD_M, AZIMUTH_STD_RAD, ELEVATION_STD_RAD]
     meas = polar + noise
@@ -188,32 +188,28 @@ def smooth_kalman(nodes: NavigationNodes, model: Singer, *, smooth: bool = True)
     The filter starts at the first radar detection (its prior position); velocity nodes before
     it cannot initialise a track and are not used.
     """
-    keep = nodes.velocity_times > nodes.radar_times[0]
-    t_all = np.concatenate([nodes.radar_times, nodes.velocity_times[keep]])
-    order = np.argsort(t_all, kind="stable")
-    n = t_all.size
-    is_radar = order < nodes.radar_times.size
+    keep = nodes.velocity_times >= nodes.radar_times[0]
+    t_vel = nodes.velocity_times[keep]
+    # one measurement per distinct epoch; a radar and a velocity node at the same time merge
+    t, inv = np.unique(np.concatenate([nodes.radar_times, t_vel]), return_inverse=True)
+    ir, iv = inv[: nodes.radar_times.size], inv[nodes.radar_times.size :]
+    n = t.size
     z = np.full((n, 6), np.nan)
     mask = np.zeros((n, 6), dtype=bool)
     r = np.broadcast_to(np.eye(6), (n, 6, 6)).copy()
-    z[is_radar, :3] = nodes.radar_position
-    r[is_radar, :3, :3] = nodes.radar_cov
-    mask[is_radar, :3] = True
-    z[~is_radar, 3:] = nodes.velocity[keep]
-    r[~is_radar, 3:, 3:] = nodes.velocity_cov[keep]
-    mask[~is_radar, 3:] = True
-    t = t_all[order]
-    if np.any(np.diff(t) <= 0):
-        raise ValueError(
-            "radar and velocity nodes share a time: the Kalman smoother needs distinct epochs"
-        )
+    z[ir, :3] = nodes.radar_position
+    r[ir, :3, :3] = nodes.radar_cov
+    mask[ir, :3] = True
+    z[iv, 3:] = nodes.velocity[keep]
+    r[iv, 3:, 3:] = nodes.velocity_cov[keep]
+    mask[iv, 3:] = True
     p0 = np.diag([RANGE_STD_M**2] * 3 + [300.0**2] * 3 + [10.0**2] * 3)
     p0[:3, :3] = nodes.radar_cov[0]
     prior = GaussianState(np.concatenate([nodes.radar_position[0], np.zeros(6)]), p0, t[0])
     h = np.hstack([np.eye(6), np.zeros((6, 3))])
     res = kalman_filter(t, z, model, h, r, prior, mask=mask)
     est = rts_smooth(res) if smooth else res.filtered
-    return GaussianState(est.mean[is_radar], est.cov[is_radar], t[is_radar])
+    return GaussianState(est.mean[ir], est.cov[ir], t[ir])
 
 
 def evaluate_flight(
