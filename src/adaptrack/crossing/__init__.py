@@ -1,0 +1,1 @@
+"""Railway level-crossing application: site model, traffic, radar simulation, tracking."""

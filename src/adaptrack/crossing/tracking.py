@@ -1,0 +1,276 @@
+"""Tracking vehicles from radar detections (range, azimuth, radial speed), batched over runs.
+
+Two extended Kalman filters, both using the radial speed and coasting (prediction only)
+through missed detections:
+
+* :func:`track_free_2d`: planar position and velocity ``[x, y, vx, vy]`` with a motion model
+  for two axes (default nearly constant velocity);
+* :func:`track_on_road`: the along-road coordinate as the generalised coordinate of seed 001
+  (any one-axis motion model: constant acceleration, M1, M2, ...) plus the vehicle's lateral
+  offset in its lane (a slow random walk), mapped to the plane with the known road geometry.
+
+The measurement noise knows the class-dependent wander of the reflection point along the body
+(a rank-one term ``sigma_b^2 J u u^T J^T``, ``u`` the direction of travel). A track starts at
+its first detection (position from range and azimuth with the known radar height, speed from
+the radial speed along the line of sight); before that its estimates are NaN.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from .._typing import BoolArray, FloatArray
+from ..filters.kalman import _update, predict
+from ..models.continuous import ConstantVelocity, MotionModel
+from ..models.discretize import discretize
+from ..types import GaussianState, _trusted
+from .road import Road
+from .site import RadarSpec
+
+CROSS_LOS_SPEED_STD_MPS = 10.0
+
+
+@dataclass(frozen=True, eq=False)
+class TrackEstimates:
+    """Estimated planar position (N, T, 2), velocity (N, T, 2) and speed (N, T).
+
+    NaN before a track starts. ``position_cov`` (N, T, 2, 2) is the filter's position
+    covariance.
+    """
+
+    position: FloatArray
+    velocity: FloatArray
+    speed: FloatArray
+    position_cov: FloatArray
+
+
+def _polar_jacobian(
+    pos: FloatArray, vel: FloatArray, radar: RadarSpec
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Predicted (r, az, vr) (N, 3) and its Jacobians w.r.t. position and velocity (N, 3, 2)."""
+    rel = pos - np.asarray(radar.position_m)
+    h2 = rel[..., 0] ** 2 + rel[..., 1] ** 2
+    r = np.sqrt(h2 + radar.height_m**2)
+    rv = np.einsum("...i,...i->...", rel, vel)
+    z = np.stack([r, np.arctan2(rel[..., 0], rel[..., 1]), rv / r], -1)
+    jp = np.zeros(pos.shape[:-1] + (3, 2))
+    jp[..., 0, :] = rel / r[..., None]
+    jp[..., 1, 0] = rel[..., 1] / h2
+    jp[..., 1, 1] = -rel[..., 0] / h2
+    jp[..., 2, :] = vel / r[..., None] - (rv / r**3)[..., None] * rel
+    jv = np.zeros_like(jp)
+    jv[..., 2, :] = rel / r[..., None]
+    return z, jp, jv
+
+
+def _wrap(a: FloatArray) -> FloatArray:
+    return (a + np.pi) % (2 * np.pi) - np.pi
+
+
+def _measurement_cov(
+    radar: RadarSpec, jp: FloatArray, direction: FloatArray, scatter_std_m: float
+) -> FloatArray:
+    r0 = np.diag([radar.range_std_m**2, radar.azimuth_std_rad**2, radar.radial_speed_std_mps**2])
+    b = np.einsum("...ij,...j->...i", jp, direction)
+    return r0 + scatter_std_m**2 * b[..., :, None] * b[..., None, :]
+
+
+def _initial_point(z: FloatArray, radar: RadarSpec) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Planar position, line-of-sight unit vector and horizontal range of detections (N, 3)."""
+    rho = np.sqrt(np.maximum(z[..., 0] ** 2 - radar.height_m**2, 0.01))
+    los = np.stack([np.sin(z[..., 1]), np.cos(z[..., 1])], -1)
+    return np.asarray(radar.position_m) + rho[..., None] * los, los, rho
+
+
+def _run(
+    times: FloatArray,
+    z: FloatArray,
+    detected: BoolArray,
+    n: int,
+    transition: Callable[[FloatArray], tuple[FloatArray, FloatArray]],
+    measure: Callable[[FloatArray], tuple[FloatArray, FloatArray, FloatArray]],
+    initial: Callable[[FloatArray], tuple[FloatArray, FloatArray]],
+) -> tuple[FloatArray, FloatArray, BoolArray]:
+    """Run the batched EKF loop; each run starts at its first detection."""
+    n_runs, n_steps = detected.shape
+    mean = np.zeros((n_runs, n))
+    cov = np.broadcast_to(np.eye(n), (n_runs, n, n)).copy()
+    started = np.zeros(n_runs, dtype=bool)
+    means = np.full((n_runs, n_steps, n), np.nan)
+    covs = np.full((n_runs, n_steps, n, n), np.nan)
+    t_prev = times[:, 0]
+    for k in range(n_steps):
+        t = times[:, k]
+        phi, qd = transition(np.where(started, t - t_prev, 0.0))
+        state = predict(_trusted(GaussianState, mean=mean, cov=cov, time=t_prev), phi, qd, time=t)
+        zpred, h, r = measure(state.mean)
+        upd = detected[:, k] & started
+        z_eff = z[:, k].copy()
+        z_eff[~upd] = zpred[~upd]
+        resid = z_eff - zpred
+        resid[:, 1] = _wrap(resid[:, 1])
+        lin = resid + np.einsum("nij,nj->ni", h, state.mean)
+        post, _ = _update(state, lin, h, r, np.broadcast_to(upd[:, None], (n_runs, 3)), "joseph")
+        mean, cov = np.array(post.mean), np.array(post.cov)
+        new = detected[:, k] & ~started
+        if new.any():
+            m0, p0 = initial(z[new, k])
+            mean[new], cov[new] = m0, p0
+            started |= new
+        means[started, k], covs[started, k] = mean[started], cov[started]
+        t_prev = t
+    return means, covs, started
+
+
+def track_free_2d(
+    times: FloatArray,
+    z: FloatArray,
+    detected: BoolArray,
+    radar: RadarSpec,
+    *,
+    model: MotionModel | None = None,
+    scatter_std_m: float = 0.0,
+) -> TrackEstimates:
+    """Planar EKF ``[x, y, vx, vy]`` on (range, azimuth, radial speed) detections."""
+    model = ConstantVelocity(accel_psd=10.0, n_axes=2) if model is None else model
+    if model.state_names[:4] != ("x", "y", "vx", "vy"):
+        raise ValueError("track_free_2d needs a 2-axis model whose first states are x, y, vx, vy")
+    n = model.state_dim
+
+    def transition(dt: FloatArray) -> tuple[FloatArray, FloatArray]:
+        return discretize(model, dt, "analytic")
+
+    def measure(x: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        zp, jp, jv = _polar_jacobian(x[:, :2], x[:, 2:4], radar)
+        h = np.zeros((x.shape[0], 3, n))
+        h[:, :, :2], h[:, :, 2:4] = jp, jv
+        speed = np.linalg.norm(x[:, 2:4], axis=-1, keepdims=True)
+        rel = x[:, :2] - np.asarray(radar.position_m)
+        u = np.where(
+            speed > 0.5,
+            x[:, 2:4] / np.maximum(speed, 1e-9),
+            -rel / np.linalg.norm(rel, axis=-1, keepdims=True),
+        )
+        return zp, h, _measurement_cov(radar, jp, u, scatter_std_m)
+
+    def initial(zk: FloatArray) -> tuple[FloatArray, FloatArray]:
+        p, los, rho = _initial_point(zk, radar)
+        m = zk.shape[0]
+        mean = np.zeros((m, n))
+        mean[:, :2] = p
+        mean[:, 2:4] = (zk[:, 2] * zk[:, 0] / rho)[:, None] * los
+        perp = np.stack([los[:, 1], -los[:, 0]], -1)
+        jac = np.stack([los * (zk[:, 0] / rho)[:, None], rho[:, None] * perp], -1)
+        pos_cov = (
+            jac
+            @ np.diag([radar.range_std_m**2 + scatter_std_m**2, radar.azimuth_std_rad**2])
+            @ np.swapaxes(jac, -1, -2)
+        )
+        cov = np.zeros((m, n, n))
+        cov[:, :2, :2] = pos_cov
+        cov[:, 2:4, 2:4] = ((radar.radial_speed_std_mps * zk[:, 0] / rho) ** 2)[:, None, None] * (
+            los[:, :, None] * los[:, None, :]
+        ) + CROSS_LOS_SPEED_STD_MPS**2 * (perp[:, :, None] * perp[:, None, :])
+        for i in range(4, n):
+            cov[:, i, i] = 9.0
+        return mean, cov
+
+    means, covs, _ = _run(times, z, detected, n, transition, measure, initial)
+    vel = means[..., 2:4]
+    return TrackEstimates(means[..., :2], vel, np.linalg.norm(vel, axis=-1), covs[..., :2, :2])
+
+
+def track_on_road(
+    times: FloatArray,
+    z: FloatArray,
+    detected: BoolArray,
+    radar: RadarSpec,
+    road: Road,
+    *,
+    model: MotionModel,
+    scatter_std_m: float = 0.0,
+    lateral_psd: float = 0.01,
+    lateral_std_m: float = 0.5,
+) -> TrackEstimates:
+    """Road-constrained EKF: one-axis ``model`` for the along-road coordinate + lateral offset.
+
+    ``model`` states are ``[s, ds/dt, ...]`` (e.g. ``ConstantAcceleration()``,
+    ``ShapingFilter(...)``); ``ds/dt`` is negative while the vehicle approaches.
+    """
+    k = model.state_dim
+    if model.state_names[:2] != ("x", "vx"):
+        raise ValueError("track_on_road needs a one-axis model with states (x, vx, ...)")
+    n = k + 1
+    eps = 1e-3
+
+    def transition(dt: FloatArray) -> tuple[FloatArray, FloatArray]:
+        phi_a, q_a = discretize(model, dt, "analytic")
+        phi = np.zeros(dt.shape + (n, n))
+        qd = np.zeros(dt.shape + (n, n))
+        phi[..., :k, :k], qd[..., :k, :k] = phi_a, q_a
+        phi[..., k, k] = 1.0
+        qd[..., k, k] = lateral_psd * dt
+        return phi, qd
+
+    def planar(x: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        s, vs, d = x[:, 0], x[:, 1], x[:, k]
+        pos = road.lane_point(s, d)
+        tangent = -road.inbound_direction(s)
+        return pos, vs[:, None] * tangent, tangent
+
+    def measure(x: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        pos, vel, tangent = planar(x)
+        zp, jp, jv = _polar_jacobian(pos, vel, radar)
+        h = np.zeros((x.shape[0], 3, n))
+        for idx in (0, k):  # s and lateral offset: central differences through the geometry
+            dx = np.zeros(n)
+            dx[idx] = eps
+            zp1 = _polar_jacobian(*planar(x + dx)[:2], radar)[0]
+            zm1 = _polar_jacobian(*planar(x - dx)[:2], radar)[0]
+            diff = zp1 - zm1
+            diff[:, 1] = _wrap(diff[:, 1])
+            h[:, :, idx] = diff / (2 * eps)
+        h[:, :, 1] = np.einsum("nij,nj->ni", jv, tangent)
+        return zp, h, _measurement_cov(radar, jp, -tangent, scatter_std_m)
+
+    def initial(zk: FloatArray) -> tuple[FloatArray, FloatArray]:
+        p, _, _ = _initial_point(zk, radar)
+        s0, d0 = road.project(p)
+        tangent = -road.inbound_direction(s0)
+        rel = road.lane_point(s0, d0) - np.asarray(radar.position_m)
+        r = np.sqrt(np.sum(rel**2, -1) + radar.height_m**2)
+        along = np.einsum("ni,ni->n", rel, tangent) / r
+        ok = np.abs(along) > 0.3
+        vs0 = np.where(ok, zk[:, 2] / np.where(ok, along, 1.0), 0.0)
+        m = zk.shape[0]
+        mean = np.zeros((m, n))
+        mean[:, 0], mean[:, 1], mean[:, k] = s0, vs0, np.clip(d0, -1.0, 1.0)
+        cov = np.zeros((m, n, n))
+        cov[:, 0, 0] = 1.0 + scatter_std_m**2
+        cov[:, 1, 1] = np.where(
+            ok, (radar.radial_speed_std_mps / np.where(ok, np.abs(along), 1.0)) ** 2 + 1.0, 30.0**2
+        )
+        for i in range(2, k):
+            cov[:, i, i] = 9.0 if model.state_names[i].startswith("a") else 25.0
+        cov[:, k, k] = lateral_std_m**2
+        return mean, cov
+
+    means, covs, _ = _run(times, z, detected, n, transition, measure, initial)
+    s, vs, d = means[..., 0], means[..., 1], means[..., k]
+    pos = road.lane_point(np.nan_to_num(s), np.nan_to_num(d))
+    pos[np.isnan(s)] = np.nan
+    vel = vs[..., None] * -road.inbound_direction(np.nan_to_num(s))
+    # planar position covariance from the along-road and lateral variances
+    t_dir = -road.inbound_direction(np.nan_to_num(s))
+    right = np.stack([t_dir[..., 1], -t_dir[..., 0]], -1)
+    pc = (
+        covs[..., 0, 0, None, None] * t_dir[..., :, None] * t_dir[..., None, :]
+        + covs[..., k, k, None, None] * right[..., :, None] * right[..., None, :]
+    )
+    return TrackEstimates(pos, vel, np.abs(vs), pc)
+
+
+__all__ = ["TrackEstimates", "track_free_2d", "track_on_road"]
