@@ -60,6 +60,25 @@ class Road:
         y = np.interp(q, self.s, self.xy[:, 1])
         return np.stack([x, y], -1), np.interp(q, self.s, self.heading)
 
+    def lane_geometry(
+        self, s: ArrayLike, offset_m: ArrayLike = 0.0
+    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """Lane point (..., 2), outward tangent (..., 2), right normal (..., 2), curvature.
+
+        The right normal is the right of the inbound direction; derivatives:
+        ``dp/ds = t (1 + kappa (w/2 + d))``, ``dp/dd = right``, ``dt/ds = -kappa right``.
+        """
+        q = np.clip(as_float_array(s, "s"), 0.0, self.length_m)
+        x = np.interp(q, self.s, self.xy[:, 0])
+        y = np.interp(q, self.s, self.xy[:, 1])
+        th = np.interp(q, self.s, self.heading)
+        kappa = np.interp(q, self.s, self.curvature)
+        sin, cos = np.sin(th), np.cos(th)
+        tangent = np.stack([sin, cos], -1)
+        right = np.stack([-cos, sin], -1)
+        off = 0.5 * self.lane_width_m + np.asarray(offset_m, dtype=float)
+        return np.stack([x, y], -1) + off[..., None] * right, tangent, right, kappa
+
     def lane_point(self, s: ArrayLike, offset_m: ArrayLike = 0.0) -> FloatArray:
         """Point (..., 2) of the approach lane at ``s``, ``offset_m`` to the right of its centre."""
         p, th = self.centreline(s)

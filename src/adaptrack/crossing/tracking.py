@@ -101,10 +101,12 @@ def _run(
     started = np.zeros(n_runs, dtype=bool)
     means = np.full((n_runs, n_steps, n), np.nan)
     covs = np.full((n_runs, n_steps, n, n), np.nan)
+    # all transitions at once (before a track starts its state is replaced at initialisation)
+    phis, qds = transition(np.diff(times, axis=1, prepend=times[:, :1]))
     t_prev = times[:, 0]
     for k in range(n_steps):
         t = times[:, k]
-        phi, qd = transition(np.where(started, t - t_prev, 0.0))
+        phi, qd = phis[:, k], qds[:, k]
         state = predict(_trusted(GaussianState, mean=mean, cov=cov, time=t_prev), phi, qd, time=t)
         zpred, h, r = measure(state.mean)
         upd = detected[:, k] & started
@@ -141,7 +143,7 @@ def track_free_2d(
     n = model.state_dim
 
     def transition(dt: FloatArray) -> tuple[FloatArray, FloatArray]:
-        return discretize(model, dt, "analytic")
+        return discretize(model, dt)
 
     def measure(x: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
         zp, jp, jv = _polar_jacobian(x[:, :2], x[:, 2:4], radar)
@@ -204,10 +206,9 @@ def track_on_road(
     if model.state_names[:2] != ("x", "vx"):
         raise ValueError("track_on_road needs a one-axis model with states (x, vx, ...)")
     n = k + 1
-    eps = 1e-3
 
     def transition(dt: FloatArray) -> tuple[FloatArray, FloatArray]:
-        phi_a, q_a = discretize(model, dt, "analytic")
+        phi_a, q_a = discretize(model, dt)
         phi = np.zeros(dt.shape + (n, n))
         qd = np.zeros(dt.shape + (n, n))
         phi[..., :k, :k], qd[..., :k, :k] = phi_a, q_a
@@ -215,25 +216,18 @@ def track_on_road(
         qd[..., k, k] = lateral_psd * dt
         return phi, qd
 
-    def planar(x: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
-        s, vs, d = x[:, 0], x[:, 1], x[:, k]
-        pos = road.lane_point(s, d)
-        tangent = -road.inbound_direction(s)
-        return pos, vs[:, None] * tangent, tangent
-
     def measure(x: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
-        pos, vel, tangent = planar(x)
+        s, vs, d = x[:, 0], x[:, 1], x[:, k]
+        pos, tangent, right, kappa = road.lane_geometry(s, d)
+        vel = vs[:, None] * tangent
         zp, jp, jv = _polar_jacobian(pos, vel, radar)
+        lever = 1.0 + kappa * (0.5 * road.lane_width_m + d)
+        dpos_ds = lever[:, None] * tangent
+        dvel_ds = -(vs * kappa)[:, None] * right
         h = np.zeros((x.shape[0], 3, n))
-        for idx in (0, k):  # s and lateral offset: central differences through the geometry
-            dx = np.zeros(n)
-            dx[idx] = eps
-            zp1 = _polar_jacobian(*planar(x + dx)[:2], radar)[0]
-            zm1 = _polar_jacobian(*planar(x - dx)[:2], radar)[0]
-            diff = zp1 - zm1
-            diff[:, 1] = _wrap(diff[:, 1])
-            h[:, :, idx] = diff / (2 * eps)
+        h[:, :, 0] = np.einsum("nij,nj->ni", jp, dpos_ds) + np.einsum("nij,nj->ni", jv, dvel_ds)
         h[:, :, 1] = np.einsum("nij,nj->ni", jv, tangent)
+        h[:, :, k] = np.einsum("nij,nj->ni", jp, right)
         return zp, h, _measurement_cov(radar, jp, -tangent, scatter_std_m)
 
     def initial(zk: FloatArray) -> tuple[FloatArray, FloatArray]:
