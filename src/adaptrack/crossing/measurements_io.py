@@ -1,0 +1,143 @@
+"""Radar object-list tables: write simulated detections, read and validate recorded ones.
+
+Columns (one row per detection): ``object_id``, ``radar``, ``time_s``, ``range_m``,
+``azimuth_rad`` (or ``azimuth_deg``, converted once here), ``radial_speed_mps``; optionally
+``vehicle_class`` (motorcycle, car, truck, bus), as radar object lists report it. Times must be
+strictly increasing per object; radars must exist in the site.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from .._typing import FloatArray
+from ..io.tables import DataFormatError, numeric_column, read_table, require_columns
+from .radar_sim import CrossingRuns
+from .site import Site
+from .traffic import VEHICLES
+
+COLUMNS = ["object_id", "radar", "time_s", "range_m", "azimuth_rad", "radial_speed_mps"]
+
+
+def detections_frame(
+    runs: CrossingRuns, radar: str, first_object_id: int, time_offset_s: FloatArray
+) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Return detections and truth of simulated runs as tables (one object per run)."""
+    rows, truth = [], []
+    for i in range(runs.times.shape[0]):
+        det = runs.detected[i]
+        oid = first_object_id + i
+        t = runs.times[i] + time_offset_s[i]
+        rows.append(
+            pd.DataFrame(
+                {
+                    "object_id": oid,
+                    "radar": radar,
+                    "time_s": t[det],
+                    "range_m": runs.measurements[i, det, 0],
+                    "azimuth_rad": runs.measurements[i, det, 1],
+                    "radial_speed_mps": runs.measurements[i, det, 2],
+                }
+            )
+        )
+        truth.append(
+            pd.DataFrame(
+                {
+                    "object_id": oid,
+                    "time_s": runs.true_times[i] + time_offset_s[i],
+                    "east_m": runs.position[i, :, 0],
+                    "north_m": runs.position[i, :, 1],
+                    "speed_mps": runs.speed[i],
+                    "along_road_m": runs.along_road_m[i],
+                }
+            )
+        )
+    return pd.concat(rows, ignore_index=True), pd.concat(truth, ignore_index=True)
+
+
+@dataclass(frozen=True, eq=False)
+class ObjectDetections:
+    """Detections of one radar object: times (T,), measurements (T, 3) and its radar."""
+
+    object_id: int
+    radar: str
+    times: FloatArray
+    measurements: FloatArray
+    vehicle_class: str | None = None
+
+
+def read_detections(path: str | Path, site: Site) -> list[ObjectDetections]:
+    """Read and validate a detection table; errors name file, row and column."""
+    p = Path(path)
+    frame = read_table(p)
+    az_col = "azimuth_rad" if "azimuth_rad" in frame.columns else "azimuth_deg"
+    if "azimuth_rad" in frame.columns and "azimuth_deg" in frame.columns:
+        raise DataFormatError(f"{p}: both 'azimuth_rad' and 'azimuth_deg' (mixed units)")
+    require_columns(
+        frame, ["object_id", "radar", "time_s", "range_m", az_col, "radial_speed_mps"], p
+    )
+    oid = numeric_column(frame, "object_id", p)
+    if np.any(oid != np.round(oid)):
+        row = int(np.argmax(oid != np.round(oid)))
+        raise DataFormatError(f"{p}: row {row + 1}, column 'object_id': not an integer")
+    t = numeric_column(frame, "time_s", p)
+    r = numeric_column(frame, "range_m", p)
+    az = numeric_column(frame, az_col, p)
+    vr = numeric_column(frame, "radial_speed_mps", p)
+    if az_col == "azimuth_deg":
+        az = np.deg2rad(az)
+    elif np.any(np.abs(az) > 2 * np.pi):
+        row = int(np.argmax(np.abs(az) > 2 * np.pi))
+        raise DataFormatError(
+            f"{p}: row {row + 1}, column 'azimuth_rad': {az[row]} is out of "
+            "range for radians; degrees given? (use an azimuth_deg column)"
+        )
+    if np.any(r <= 0):
+        row = int(np.argmax(r <= 0))
+        raise DataFormatError(f"{p}: row {row + 1}, column 'range_m': must be > 0")
+    radars = {x.name for x in site.radars}
+    names = frame["radar"].astype(str).to_numpy()
+    unknown = ~np.isin(names, list(radars))
+    if unknown.any():
+        row = int(np.argmax(unknown))
+        raise DataFormatError(
+            f"{p}: row {row + 1}, column 'radar': unknown radar "
+            f"{names[row]!r}; the site has {sorted(radars)}"
+        )
+    out = []
+    for obj in np.unique(oid):
+        sel = np.flatnonzero(oid == obj)
+        ts = t[sel]
+        bad = np.diff(ts) <= 0
+        if bad.any():
+            row = int(sel[np.argmax(bad) + 1])
+            raise DataFormatError(
+                f"{p}: row {row + 1}, column 'time_s': times of object "
+                f"{int(obj)} are not strictly increasing"
+            )
+        if len(set(names[sel])) != 1:
+            raise DataFormatError(
+                f"{p}: object {int(obj)} is reported by several radars; "
+                "one radar per object is supported"
+            )
+        cls = None
+        if "vehicle_class" in frame.columns:
+            cls = str(frame["vehicle_class"].iloc[sel[0]])
+            if cls not in VEHICLES:
+                raise DataFormatError(
+                    f"{p}: row {sel[0] + 1}, column 'vehicle_class': unknown "
+                    f"class {cls!r}; expected one of {sorted(VEHICLES)}"
+                )
+        out.append(
+            ObjectDetections(
+                int(obj), str(names[sel[0]]), ts, np.stack([r[sel], az[sel], vr[sel]], -1), cls
+            )
+        )
+    return out
+
+
+__all__ = ["COLUMNS", "ObjectDetections", "detections_frame", "read_detections"]
