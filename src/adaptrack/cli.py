@@ -18,9 +18,10 @@ from rich.table import Table
 from .analysis.evaluation import Evaluation, evaluate_scenario
 from .analysis.flights import FlightRow, evaluate_flight, smooth_kalman, smooth_lsq
 from .coords.geodetic import enu_to_ecef, enu_to_ecef_rotation
-from .crossing.compliance import evaluate_site
+from .crossing.compliance import ComplianceResult, ComplianceRow, evaluate_site
 from .crossing.measurements_io import detections_frame, read_detections
 from .crossing.radar_sim import simulate_case
+from .crossing.report import build_report, render_html, sample_tracks
 from .crossing.site import load_site
 from .crossing.tracking import track_on_road
 from .crossing.traffic import DEFAULT_CASES, VEHICLES, applicable
@@ -44,7 +45,9 @@ def _main() -> None:
 def demo(
     runs: int = typer.Option(20, "--runs", min=1, help="Monte-Carlo runs per class and case."),
     seed: int = typer.Option(0, "--seed", help="Random seed."),
-    out: Path = typer.Option(Path("out"), "--out", help="Directory for summary.json."),
+    out: Path = typer.Option(
+        Path("out"), "--out", help="Directory for summary.json and report.html."
+    ),
     site: str = typer.Option("lx_default", "--site", help="Built-in site name or a .toml."),
     workers: int = typer.Option(
         0, "--workers", min=0, help="Worker processes (0: one per CPU core)."
@@ -85,10 +88,49 @@ def demo(
             f"{name} vs road EKF (CV): position {g['position']:+.1f} %, speed {g['speed']:+.1f} %"
         )
     _write_json(out / "summary.json", result.to_json())
-    console.print(
-        f"wrote {out / 'summary.json'} in {result.elapsed_s:.1f} s "
-        "(the HTML report is not implemented yet)"
+    _write_text(
+        out / "report.html", render_html(build_report(result, st, samples=sample_tracks(st, seed)))
     )
+    console.print(
+        f"wrote {out / 'summary.json'} and {out / 'report.html'} "
+        f"(Monte Carlo {result.elapsed_s:.1f} s)"
+    )
+
+
+@app.command()
+def report(
+    summary: Path = typer.Argument(..., help="summary.json written by 'adaptrack demo'."),
+    out: Path = typer.Option(..., "--out", help="Output HTML file."),
+) -> None:
+    """Render the HTML compliance report of a demo summary (sample tracks re-simulated)."""
+    try:
+        data = json.loads(summary.read_text())
+        st = load_site(data["site"])
+        result = ComplianceResult(
+            data["site"],
+            int(data["runs"]),
+            int(data["seed"]),
+            [
+                ComplianceRow(
+                    r["filter"],
+                    r["vehicle_class"],
+                    r["case"],
+                    r["position_rms_m"],
+                    r["speed_rms_kmh"],
+                    r["speed_rel_rms_pct"],
+                    r["pass"],
+                    r["n_epochs"],
+                )
+                for r in data["rows"]
+            ],
+            float(data["elapsed_s"]),
+            data["worst_case"],
+            data["gain_over_cv_pct"],
+        )
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        _fail(f"{summary}: not a demo summary ({exc})")
+    _write_text(out, render_html(build_report(result, st, samples=sample_tracks(st, result.seed))))
+    Console().print(f"wrote {out}")
 
 
 @app.command()
@@ -189,12 +231,17 @@ def _fail(message: str) -> None:
     raise typer.Exit(code=1)
 
 
-def _write_json(path: Path, payload: object) -> None:
-    """Write JSON atomically (temporary file, then rename): nothing half-written."""
+def _write_text(path: Path, text: str) -> None:
+    """Write text atomically (temporary file, then rename): nothing half-written."""
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(payload, indent=2))
+    tmp.write_text(text)
     tmp.replace(path)
+
+
+def _write_json(path: Path, payload: object) -> None:
+    """Write JSON atomically."""
+    _write_text(path, json.dumps(payload, indent=2))
 
 
 @app.command()

@@ -28,6 +28,14 @@ def test_demo_writes_summary(tmp_path):
     for r in rows:
         assert {"filter", "case", "position_rms_m", "speed_rms_kmh", "pass"} <= set(r)
     assert not list(tmp_path.glob("*.tmp"))
+    html = (tmp_path / "report.html").read_text()
+    assert "Pass/fail per estimator, class and case" in html
+    # the report command re-renders from the summary
+    proc = run("report", str(tmp_path / "summary.json"), "--out", str(tmp_path / "again.html"))
+    assert proc.returncode == 0, proc.stderr
+    assert "Worst case per estimator" in (tmp_path / "again.html").read_text()
+    proc = run("report", str(tmp_path / "report.html"), "--out", str(tmp_path / "x.html"))
+    assert proc.returncode == 1 and "not a demo summary" in proc.stderr
 
 
 def test_usage_and_user_errors():
