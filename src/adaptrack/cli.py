@@ -25,6 +25,7 @@ from .crossing.report import build_report, render_html, sample_tracks
 from .crossing.site import load_site
 from .crossing.tracking import track_on_road
 from .crossing.traffic import DEFAULT_CASES, VEHICLES, applicable
+from .crossing.tuning import load_tuning, tune_road_model
 from .io.navigation import read_navigation_measurements
 from .io.tables import DataFormatError, read_flight_csv, write_table_atomic
 from .models.continuous import ConstantAcceleration, Singer
@@ -60,15 +61,26 @@ def demo(
         _fail(str(exc))
     console = Console()
     n_pairs = sum(1 for v in VEHICLES.values() for c in DEFAULT_CASES if applicable(c, v))
+    n_workers = workers or (os.cpu_count() or 1)
+    train_seed, eval_seed = (
+        int(x.generate_state(1)[0]) for x in np.random.SeedSequence(seed).spawn(2)
+    )
     with Progress(console=console, transient=True) as progress:
-        task = progress.add_task("simulating and tracking", total=n_pairs)
+        task = progress.add_task("tuning", total=n_pairs + 7)
 
         def step(msg: str) -> None:
             progress.update(task, advance=1, description=msg)
 
+        tuning = tune_road_model(st, n_runs=3, seed=train_seed, workers=n_workers, progress=step)
         result = evaluate_site(
-            st, runs, seed, workers=workers or (os.cpu_count() or 1), progress=step
+            st,
+            runs,
+            eval_seed,
+            workers=n_workers,
+            progress=step,
+            tuned_m1=(tuning.lambda_per_s2, tuning.accel_psd),
         )
+    result = dataclasses.replace(result, seed=seed)
     table = Table(
         title=f"{st.name}: worst case over classes and cases, {runs} runs, seed {seed}"
         f" (requirement 0.7 m, 2 km/h)"
@@ -87,9 +99,14 @@ def demo(
         console.print(
             f"{name} vs road EKF (CV): position {g['position']:+.1f} %, speed {g['speed']:+.1f} %"
         )
-    _write_json(out / "summary.json", result.to_json())
+    summary = {**result.to_json(), "tuning": dataclasses.asdict(tuning)}
+    _write_json(out / "summary.json", summary)
+    _write_text(out / "tuned.toml", tuning.to_toml())
     _write_text(
-        out / "report.html", render_html(build_report(result, st, samples=sample_tracks(st, seed)))
+        out / "report.html",
+        render_html(
+            build_report(result, st, samples=sample_tracks(st, seed), profile=tuning.profile)
+        ),
     )
     console.print(
         f"wrote {out / 'summary.json'} and {out / 'report.html'} "
@@ -181,10 +198,43 @@ def simulate(
 
 
 @app.command()
+def tune(
+    site: str = typer.Argument("lx_default", help="Built-in site name or a site .toml."),
+    out: Path = typer.Option(..., "--out", help="Tuned configuration (TOML)."),
+    runs: int = typer.Option(3, "--runs", min=1, help="Training runs per approach."),
+    seed: int = typer.Option(0, "--seed", help="Random seed of the training runs."),
+    workers: int = typer.Option(0, "--workers", min=0, help="Processes (0: one per core)."),
+) -> None:
+    """Tune the road-constrained model (M1: lambda, accel_psd) to a site's training runs."""
+    try:
+        st = load_site(site)
+    except ValueError as exc:
+        _fail(str(exc))
+    with Progress(transient=True) as progress:
+        task = progress.add_task("tuning", total=7)
+        tuning = tune_road_model(
+            st,
+            n_runs=runs,
+            seed=seed,
+            workers=workers or (os.cpu_count() or 1),
+            progress=lambda m: progress.update(task, advance=1, description=m),
+        )
+    _write_text(out, tuning.to_toml())
+    Console().print(
+        f"lambda = {tuning.lambda_per_s2:g} 1/s^2, accel_psd = "
+        f"{tuning.accel_psd:.4g} m^2/s^3, J_req = {tuning.criterion:.4f} "
+        f"(CV baseline {tuning.baseline_criterion:.4f}); wrote {out}"
+    )
+
+
+@app.command()
 def track(
     measurements: Path = typer.Argument(..., help="Detections table (CSV or Parquet)."),
     site: str = typer.Option("lx_default", "--site", help="Built-in site name or a .toml."),
     out: Path = typer.Option(..., "--out", help="Estimates table (CSV or Parquet)."),
+    config: Path | None = typer.Option(
+        None, "--config", help="Tuned configuration from 'adaptrack tune' or 'demo'."
+    ),
 ) -> None:
     """Track every radar object with the road-constrained EKF; write per-object estimates.
 
@@ -193,6 +243,11 @@ def track(
     try:
         st = load_site(site)
         objects = read_detections(measurements, st)
+        model = (
+            load_tuning(config).model()
+            if config is not None
+            else ConstantAcceleration(jerk_psd=3.0)
+        )
     except ValueError as exc:
         _fail(str(exc))
     road_of_radar = {v: k for k, v in st.settings.get("radar_of_road", {}).items()}
@@ -206,7 +261,7 @@ def track(
             np.ones((1, obj.times.size), dtype=bool),
             radar,
             st.roads[road_name],
-            model=ConstantAcceleration(jerk_psd=3.0),
+            model=model,
             scatter_std_m=VEHICLES[obj.vehicle_class or "car"].scatter_std_m,
         )
         frames.append(

@@ -28,6 +28,8 @@ def test_demo_writes_summary(tmp_path):
     for r in rows:
         assert {"filter", "case", "position_rms_m", "speed_rms_kmh", "pass"} <= set(r)
     assert not list(tmp_path.glob("*.tmp"))
+    assert "lambda_per_s2" in (tmp_path / "tuned.toml").read_text()
+    assert {"lambda_per_s2", "accel_psd", "profile"} <= set(summary["tuning"])
     html = (tmp_path / "report.html").read_text()
     assert "Pass/fail per estimator, class and case" in html
     # the report command re-renders from the summary

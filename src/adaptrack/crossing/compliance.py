@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from ..models.adaptive import ShapingFilter, singer_accel_std
+from ..models.adaptive import InverseDynamics, ShapingFilter, singer_accel_std
 from ..models.continuous import ConstantAcceleration, ConstantVelocity
 from .radar_sim import CrossingRuns, simulate_case
 from .site import Site
@@ -79,8 +79,11 @@ class ComplianceResult:
 Tracker = Callable[[CrossingRuns, Site, Case, VehicleClass], TrackEstimates]
 
 
-def default_trackers() -> dict[str, Tracker]:
-    """Free 2-D EKF, road-constrained CV (the rectilinear baseline), CA and M2 (untuned)."""
+def default_trackers(tuned_m1: tuple[float, float] | None = None) -> dict[str, Tracker]:
+    """Free 2-D EKF, road-constrained CV (the rectilinear baseline), CA and M2 (untuned).
+
+    ``tuned_m1 = (lambda_per_s2, accel_psd)`` adds the road EKF with the site-tuned M1.
+    """
     sig_a = singer_accel_std(9.0, 0.05, 0.5)
 
     def free(runs: CrossingRuns, site: Site, case: Case, veh: VehicleClass) -> TrackEstimates:
@@ -106,7 +109,13 @@ def default_trackers() -> dict[str, Tracker]:
 
         return run
 
+    tuned = {}
+    if tuned_m1 is not None:
+        tuned["road EKF (M1, tuned)"] = road(
+            InverseDynamics(lambda_per_s2=tuned_m1[0], accel_psd=tuned_m1[1])
+        )
     return {
+        **tuned,
         "free 2-D EKF (CV)": free,
         "road EKF (CV)": road(ConstantVelocity(accel_psd=3.0)),
         "road EKF (CA)": road(ConstantAcceleration(jerk_psd=3.0)),
@@ -153,9 +162,10 @@ def evaluate_pair(
     n_runs: int,
     seed: np.random.SeedSequence,
     trackers: dict[str, Tracker] | None = None,
+    tuned_m1: tuple[float, float] | None = None,
 ) -> list[ComplianceRow]:
     """Simulate one class x case ``n_runs`` times and score every tracker on the same runs."""
-    trackers = default_trackers() if trackers is None else trackers
+    trackers = default_trackers(tuned_m1) if trackers is None else trackers
     pd_by_class = site.settings.get("detection_probability", {})
     runs = simulate_case(
         site.roads[case.road],
@@ -190,6 +200,7 @@ def evaluate_site(
     classes: dict[str, VehicleClass] | None = None,
     trackers: dict[str, Tracker] | None = None,
     workers: int = 1,
+    tuned_m1: tuple[float, float] | None = None,
     progress: Callable[[str], None] | None = None,
 ) -> ComplianceResult:
     """Simulate every applicable class x case ``n_runs`` times and score every tracker.
@@ -203,12 +214,12 @@ def evaluate_site(
     seeds = np.random.SeedSequence(seed).spawn(len(pairs))
     if workers > 1 and trackers is not None:
         raise ValueError("custom trackers run in-process only (workers=1)")
-    names = list(default_trackers() if trackers is None else trackers)
+    names = list(default_trackers(tuned_m1) if trackers is None else trackers)
     rows: list[ComplianceRow] = []
     if workers > 1:
         with ProcessPoolExecutor(max_workers=workers) as pool:
             futures = [
-                pool.submit(evaluate_pair, site, c, v, n_runs, ss)
+                pool.submit(evaluate_pair, site, c, v, n_runs, ss, None, tuned_m1)
                 for (c, v), ss in zip(pairs, seeds, strict=True)
             ]
             for (c, v), fut in zip(pairs, futures, strict=True):
@@ -217,7 +228,7 @@ def evaluate_site(
                     progress(f"{v.name} / {c.name}")
     else:
         for (c, v), ss in zip(pairs, seeds, strict=True):
-            rows += evaluate_pair(site, c, v, n_runs, ss, trackers)
+            rows += evaluate_pair(site, c, v, n_runs, ss, trackers, tuned_m1)
             if progress:
                 progress(f"{v.name} / {c.name}")
     trackers_names = names

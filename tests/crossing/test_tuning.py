@@ -1,0 +1,37 @@
+"""Design-time adaptation to a site."""
+
+import numpy as np
+
+from adaptrack.crossing.site import load_site
+from adaptrack.crossing.tuning import (
+    load_tuning,
+    road_criterion,
+    training_runs,
+    tune_road_model,
+)
+from adaptrack.models import InverseDynamics
+
+
+def test_tuning_is_never_worse_than_cv_and_round_trips(tmp_path):
+    site = load_site("lx_default")
+    res = tune_road_model(site, n_runs=1, seed=3, lambdas=(0.01, 0.3))
+    # nesting oracle: lambda = 0 (the CV model) is part of the profile
+    assert res.criterion <= res.baseline_criterion
+    assert res.profile["lambda_per_s2"][0] == 0.0
+    assert res.profile["criterion"][0] == res.baseline_criterion
+    # the reported criterion is what the tuned model achieves on the same training runs
+    training = training_runs(site, 1, 3)
+    again = road_criterion(res.model(), site, training)
+    assert np.isclose(again, res.criterion, rtol=1e-12)
+    path = tmp_path / "tuned.toml"
+    path.write_text(res.to_toml())
+    back = load_tuning(path)
+    assert back == res
+    assert isinstance(back.model(), InverseDynamics)
+
+
+def test_parallel_tuning_gives_the_same_result():
+    site = load_site("lx_default")
+    a = tune_road_model(site, n_runs=1, seed=5, lambdas=(0.1,), workers=1)
+    b = tune_road_model(site, n_runs=1, seed=5, lambdas=(0.1,), workers=2)
+    assert a == b
