@@ -20,7 +20,7 @@ from .analysis.flights import FlightRow, evaluate_flight, smooth_kalman, smooth_
 from .coords.geodetic import enu_to_ecef, enu_to_ecef_rotation
 from .crossing.compliance import ComplianceResult, ComplianceRow, evaluate_site
 from .crossing.measurements_io import detections_frame, read_detections
-from .crossing.radar_sim import simulate_case
+from .crossing.radar_sim import simulate_site_case
 from .crossing.report import build_report, render_html, sample_tracks
 from .crossing.site import load_site
 from .crossing.tracking import track_on_road
@@ -169,20 +169,7 @@ def simulate(
     next_id, clock = 1, 0.0
     for (case, veh), ss in zip(pairs, seeds, strict=True):
         radar = st.radar_for(case.road)
-        sim = simulate_case(
-            st.roads[case.road],
-            radar,
-            veh,
-            case,
-            n_runs=runs,
-            rng=np.random.default_rng(ss),
-            start_m=st.zone_m + st.run_in_m,
-            stop_line_m=st.stop_line_m,
-            detection_probability=float(
-                st.settings.get("detection_probability", {}).get(veh.name, 0.95)
-            ),
-            lateral_offset_std_m=float(st.settings.get("lateral_offset_std_m", 0.3)),
-        )
+        sim = simulate_site_case(st, case, veh, n_runs=runs, rng=np.random.default_rng(ss))
         offsets = clock + np.zeros(runs)
         det, tru = detections_frame(sim, radar.name, next_id, offsets)
         det.insert(1, "vehicle_class", veh.name)

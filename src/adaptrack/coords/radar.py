@@ -95,21 +95,30 @@ def _unit_derivatives(e: FloatArray, b: FloatArray) -> dict[str, FloatArray]:
     }
 
 
+def _radar_vector(
+    a: ArrayLike,
+) -> tuple[tuple[FloatArray, ...], dict[str, FloatArray], FloatArray, FloatArray]:
+    """Split the radar vector and form ``u`` derivatives, ``ud`` and ``udd`` (spec D.3)."""
+    x = as_float_array(a, "a", min_ndim=1)
+    if x.shape[-1] != 9:
+        raise ValueError(f"a must have shape (..., 9); got {x.shape}")
+    parts = tuple(x[..., i : i + 1] for i in range(9))
+    _, _, _, _, ed, bd, _, edd, bdd = parts
+    d = _unit_derivatives(x[..., 1], x[..., 2])
+    ud = ed * d["ue"] + bd * d["ub"]
+    udd = (
+        ed**2 * d["uee"] + 2 * ed * bd * d["ueb"] + bd**2 * d["ubb"] + edd * d["ue"] + bdd * d["ub"]
+    )
+    return parts, d, ud, udd
+
+
 def polar_kinematics_to_enu(a: ArrayLike) -> FloatArray:
     """ENU position, velocity, acceleration (..., 9) of the extended radar vector (..., 9).
 
     ``a = [r, eps, beta, rd, eps', beta', rdd, eps'', beta'']`` (spec D.2); the output is
     ``[p, pd, pdd]`` (spec D.3 stage 1), the derivatives of ``r(t) u(eps(t), beta(t))``.
     """
-    x = as_float_array(a, "a", min_ndim=1)
-    if x.shape[-1] != 9:
-        raise ValueError(f"a must have shape (..., 9); got {x.shape}")
-    r, _, _, rd, ed, bd, rdd, edd, bdd = (x[..., i : i + 1] for i in range(9))
-    d = _unit_derivatives(x[..., 1], x[..., 2])
-    ud = ed * d["ue"] + bd * d["ub"]
-    udd = (
-        ed**2 * d["uee"] + 2 * ed * bd * d["ueb"] + bd**2 * d["ubb"] + edd * d["ue"] + bdd * d["ub"]
-    )
+    (r, _, _, rd, _, _, rdd, _, _), d, ud, udd = _radar_vector(a)
     return np.concatenate(
         [r * d["u"], rd * d["u"] + r * ud, rdd * d["u"] + 2 * rd * ud + r * udd], -1
     )
@@ -117,15 +126,7 @@ def polar_kinematics_to_enu(a: ArrayLike) -> FloatArray:
 
 def polar_kinematics_jacobian(a: ArrayLike) -> FloatArray:
     """Closed-form Jacobian ``d[p, pd, pdd] / d a`` (..., 9, 9) (spec D.5, block triangular)."""
-    x = as_float_array(a, "a", min_ndim=1)
-    if x.shape[-1] != 9:
-        raise ValueError(f"a must have shape (..., 9); got {x.shape}")
-    r, _, _, rd, ed, bd, rdd, edd, bdd = (x[..., i : i + 1] for i in range(9))
-    d = _unit_derivatives(x[..., 1], x[..., 2])
-    ud = ed * d["ue"] + bd * d["ub"]
-    udd = (
-        ed**2 * d["uee"] + 2 * ed * bd * d["ueb"] + bd**2 * d["ubb"] + edd * d["ue"] + bdd * d["ub"]
-    )
+    (r, _, _, rd, ed, bd, rdd, edd, bdd), d, ud, udd = _radar_vector(a)
     ud_e = ed * d["uee"] + bd * d["ueb"]
     ud_b = ed * d["ueb"] + bd * d["ubb"]
     udd_e = (

@@ -21,7 +21,7 @@ import numpy as np
 
 from ..models.adaptive import InverseDynamics, ShapingFilter, singer_accel_std
 from ..models.continuous import ConstantAcceleration, ConstantVelocity
-from .radar_sim import CrossingRuns, simulate_case
+from .radar_sim import CrossingRuns, simulate_site_case
 from .site import Site
 from .tracking import TrackEstimates, track_free_2d, track_on_road
 from .traffic import DEFAULT_CASES, VEHICLES, Case, VehicleClass, applicable
@@ -166,19 +166,7 @@ def evaluate_pair(
 ) -> list[ComplianceRow]:
     """Simulate one class x case ``n_runs`` times and score every tracker on the same runs."""
     trackers = default_trackers(tuned_m1) if trackers is None else trackers
-    pd_by_class = site.settings.get("detection_probability", {})
-    runs = simulate_case(
-        site.roads[case.road],
-        site.radar_for(case.road),
-        veh,
-        case,
-        n_runs=n_runs,
-        rng=np.random.default_rng(seed),
-        start_m=site.zone_m + site.run_in_m,
-        stop_line_m=site.stop_line_m,
-        detection_probability=float(pd_by_class.get(veh.name, 0.95)),
-        lateral_offset_std_m=float(site.settings.get("lateral_offset_std_m", 0.3)),
-    )
+    runs = simulate_site_case(site, case, veh, n_runs=n_runs, rng=np.random.default_rng(seed))
     rows = []
     for name, tracker in trackers.items():
         pos, spd, rel, n = score(tracker(runs, site, case, veh), runs, site.zone_m)

@@ -18,7 +18,7 @@ import numpy as np
 
 from .._typing import BoolArray, FloatArray
 from .road import Road
-from .site import RadarSpec
+from .site import RadarSpec, Site
 from .traffic import Case, VehicleClass, along_road_profile, case_duration
 
 
@@ -109,4 +109,24 @@ def simulate_case(
     )
 
 
-__all__ = ["CrossingRuns", "radial_geometry", "simulate_case"]
+def simulate_site_case(
+    site: Site, case: Case, vehicle: VehicleClass, *, n_runs: int, rng: np.random.Generator
+) -> CrossingRuns:
+    """:func:`simulate_case` with the site's geometry, radar and traffic settings."""
+    return simulate_case(
+        site.roads[case.road],
+        site.radar_for(case.road),
+        vehicle,
+        case,
+        n_runs=n_runs,
+        rng=rng,
+        start_m=site.zone_m + site.run_in_m,
+        stop_line_m=site.stop_line_m,
+        detection_probability=float(
+            site.settings.get("detection_probability", {}).get(vehicle.name, 0.95)
+        ),
+        lateral_offset_std_m=float(site.settings.get("lateral_offset_std_m", 0.3)),
+    )
+
+
+__all__ = ["CrossingRuns", "radial_geometry", "simulate_case", "simulate_site_case"]

@@ -21,7 +21,7 @@ import numpy as np
 from .. import __version__
 from ..models.continuous import ConstantAcceleration
 from .compliance import POSITION_LIMIT_M, SPEED_LIMIT_KMH, ComplianceResult
-from .radar_sim import simulate_case
+from .radar_sim import simulate_site_case
 from .site import Site
 from .tracking import track_free_2d, track_on_road
 from .traffic import DEFAULT_CASES, VEHICLES
@@ -67,17 +67,8 @@ def sample_tracks(site: Site, seed: int) -> list[SampleTrack]:
     for i, (case_name, cls) in enumerate((("curve_60", "car"), ("stop_60", "bus"))):
         case, veh = cases[case_name], VEHICLES[cls]
         radar, road = site.radar_for(case.road), site.roads[case.road]
-        runs = simulate_case(
-            road,
-            radar,
-            veh,
-            case,
-            n_runs=1,
-            rng=np.random.default_rng(np.random.SeedSequence([seed, i])),
-            start_m=site.zone_m + site.run_in_m,
-            stop_line_m=site.stop_line_m,
-            detection_probability=0.95,
-            lateral_offset_std_m=0.3,
+        runs = simulate_site_case(
+            site, case, veh, n_runs=1, rng=np.random.default_rng(np.random.SeedSequence([seed, i]))
         )
         free = track_free_2d(
             runs.times, runs.measurements, runs.detected, radar, scatter_std_m=veh.scatter_std_m

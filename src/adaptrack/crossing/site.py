@@ -8,13 +8,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from .._toml import load_toml
+from .._toml import builtin_names, load_named_toml
 from .road import Road, RoadElement, build_road
 
 
@@ -63,25 +62,12 @@ class Site:
 
 def builtin_sites() -> list[str]:
     """Names of the sites shipped with adaptrack."""
-    files = (resources.files("adaptrack.crossing") / "sites").iterdir()
-    return sorted(p.name[:-5] for p in files if p.name.endswith(".toml"))
+    return builtin_names("adaptrack.crossing", "sites")
 
 
 def load_site(name_or_path: str | Path) -> Site:
     """Load a built-in site by name, or a site TOML file."""
-    path = Path(name_or_path)
-    if not path.suffix:
-        if str(name_or_path) not in builtin_sites():
-            raise ValueError(
-                f"unknown site {str(name_or_path)!r}; built-in sites: "
-                f"{', '.join(builtin_sites())}; or pass a .toml path"
-            )
-        ref = resources.files("adaptrack.crossing") / "sites" / f"{name_or_path}.toml"
-        with resources.as_file(ref) as p:
-            return site_from_mapping(load_toml(p), str(name_or_path))
-    if not path.is_file():
-        raise ValueError(f"site file {path} does not exist")
-    return site_from_mapping(load_toml(path), str(path))
+    return site_from_mapping(*load_named_toml(name_or_path, "adaptrack.crossing", "sites", "site"))
 
 
 def _get(data: dict[str, Any], key: str, where: str) -> Any:

@@ -23,7 +23,7 @@ from scipy.optimize import minimize_scalar
 from .._toml import load_toml
 from ..models.adaptive import InverseDynamics
 from .compliance import POSITION_LIMIT_M, SPEED_LIMIT_KMH
-from .radar_sim import CrossingRuns, simulate_case
+from .radar_sim import CrossingRuns, simulate_site_case
 from .site import Site
 from .tracking import track_on_road
 from .traffic import DEFAULT_CASES, VEHICLES, Case, VehicleClass
@@ -97,18 +97,7 @@ def training_runs(
     out = []
     for (cls, case_name), ss in zip(TRAINING, seeds, strict=True):
         case, veh = cases[case_name], VEHICLES[cls]
-        runs = simulate_case(
-            site.roads[case.road],
-            site.radar_for(case.road),
-            veh,
-            case,
-            n_runs=n_runs,
-            rng=np.random.default_rng(ss),
-            start_m=site.zone_m + site.run_in_m,
-            stop_line_m=site.stop_line_m,
-            detection_probability=0.95,
-            lateral_offset_std_m=float(site.settings.get("lateral_offset_std_m", 0.3)),
-        )
+        runs = simulate_site_case(site, case, veh, n_runs=n_runs, rng=np.random.default_rng(ss))
         out.append((case, veh, runs))
     return out
 

@@ -9,13 +9,12 @@ built-in scenario; a path loads a user file of the same form. ``simulate_scenari
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from .._toml import load_toml
+from .._toml import builtin_names, load_named_toml
 from ..models.continuous import LinearSDE
 from .linear import simulate_linear_trajectory
 from .measurements import Measurements, simulate_cartesian, simulate_polar_2d
@@ -107,25 +106,14 @@ def _fmt(x: float) -> str:
 
 def builtin_scenarios() -> list[str]:
     """Names of the scenarios shipped with adaptrack."""
-    files = resources.files("adaptrack.simulation").joinpath("scenarios").iterdir()
-    return sorted(p.name[:-5] for p in files if p.name.endswith(".toml"))
+    return builtin_names("adaptrack.simulation", "scenarios")
 
 
 def load_scenario(name_or_path: str | Path) -> Scenario:
     """Load a built-in scenario by name, or a scenario TOML file by path."""
-    path = Path(name_or_path)
-    if not path.suffix:
-        if str(name_or_path) not in builtin_scenarios():
-            raise ValueError(
-                f"unknown scenario {str(name_or_path)!r}; built-in scenarios: "
-                f"{', '.join(builtin_scenarios())}; or pass a .toml path"
-            )
-        ref = resources.files("adaptrack.simulation") / "scenarios" / f"{name_or_path}.toml"
-        with resources.as_file(ref) as p:
-            return scenario_from_mapping(load_toml(p), str(name_or_path))
-    if not path.is_file():
-        raise ValueError(f"scenario file {path} does not exist")
-    return scenario_from_mapping(load_toml(path), str(path))
+    return scenario_from_mapping(
+        *load_named_toml(name_or_path, "adaptrack.simulation", "scenarios", "scenario")
+    )
 
 
 def _require(data: dict[str, Any], key: str, where: str) -> Any:
