@@ -137,6 +137,8 @@ def report(
                     r["speed_rel_rms_pct"],
                     r["pass"],
                     r["n_epochs"],
+                    r.get("pcrlb_position_m", math.nan),
+                    r.get("pcrlb_speed_kmh", math.nan),
                 )
                 for r in data["rows"]
             ],

@@ -47,11 +47,19 @@ def test_simulate_then_track_meets_the_requirement(simulated):
     sub = meas[meas.object_id.isin(obj)]
     sub.to_csv(simulated / "two.csv", index=False)
     tuned = simulated / "tuned.toml"
-    tuned.write_text('site = "lx_default"\n[road_model]\nkind = "inverse_dynamics"\n'
-                     "lambda_per_s2 = 0.0\naccel_psd = 0.5\ncriterion = 0.2\n"
-                     "baseline_criterion = 0.2\n")
-    proc = run("track", str(simulated / "two.csv"), "--out", str(simulated / "est.csv"),
-               "--config", str(tuned))
+    tuned.write_text(
+        'site = "lx_default"\n[road_model]\nkind = "inverse_dynamics"\n'
+        "lambda_per_s2 = 0.0\naccel_psd = 0.5\ncriterion = 0.2\n"
+        "baseline_criterion = 0.2\n"
+    )
+    proc = run(
+        "track",
+        str(simulated / "two.csv"),
+        "--out",
+        str(simulated / "est.csv"),
+        "--config",
+        str(tuned),
+    )
     assert proc.returncode == 0, proc.stderr
     est = pd.read_csv(simulated / "est.csv")
     truth = pd.read_csv(simulated / "truth.csv")

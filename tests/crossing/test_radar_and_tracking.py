@@ -144,3 +144,44 @@ def test_compliance_is_independent_of_workers_and_structured():
     with pytest.raises(ValueError, match="custom trackers run in-process only"):
         evaluate_site(SITE, 1, 0, cases=cases, trackers={}, workers=2)
     _ = Case
+
+
+def test_road_pcrlb_matches_the_filter_covariance_on_point_targets():
+    """On a point target the EKF linearises at (nearly) the truth: its reported position and
+    speed variances must approach the bound's (same model, same Jacobians)."""
+    from adaptrack.crossing.tracking import road_pcrlb
+
+    case = CASE["pass_60"]
+    radar = dataclasses.replace(SITE.radar_for("B"), azimuth_bias_rad=0.0, time_jitter_s=0.0)
+    veh = dataclasses.replace(VEHICLES["car"], length_m=0.0)
+    runs = simulate_case(
+        SITE.roads["B"],
+        radar,
+        veh,
+        case,
+        n_runs=20,
+        rng=np.random.default_rng(2),
+        start_m=200.0,
+        stop_line_m=15.0,
+        detection_probability=1.0,
+        lateral_offset_std_m=0.0,
+    )
+    model = ConstantAcceleration(jerk_psd=3.0)
+    pos_var, spd_var = road_pcrlb(
+        runs.times,
+        runs.detected,
+        runs.along_road_m,
+        runs.speed,
+        runs.lateral_offset_m,
+        radar,
+        SITE.roads["B"],
+        model=model,
+    )
+    est = track_on_road(
+        runs.times, runs.measurements, runs.detected, radar, SITE.roads["B"], model=model
+    )
+    filt_pos_var = np.trace(est.position_cov, axis1=-2, axis2=-1)
+    late = slice(60, -5)
+    np.testing.assert_allclose(filt_pos_var[:, late], pos_var[:, late], rtol=0.15)
+    assert np.all(np.diff(pos_var[0, :40]) < 0)  # information accumulates while converging
+    assert np.all(spd_var[:, 5:] > 0)

@@ -185,6 +185,52 @@ def track_free_2d(
     return TrackEstimates(means[..., :2], vel, np.linalg.norm(vel, axis=-1), covs[..., :2, :2])
 
 
+def _road_transition(
+    model: MotionModel, lateral_psd: float
+) -> Callable[[FloatArray], tuple[FloatArray, FloatArray]]:
+    """Transitions of ``[model states, lateral offset]`` for steps ``dt`` (...,)."""
+    k = model.state_dim
+    n = k + 1
+
+    def transition(dt: FloatArray) -> tuple[FloatArray, FloatArray]:
+        phi_a, q_a = discretize(model, dt)
+        phi = np.zeros(dt.shape + (n, n))
+        qd = np.zeros(dt.shape + (n, n))
+        phi[..., :k, :k], qd[..., :k, :k] = phi_a, q_a
+        phi[..., k, k] = 1.0
+        qd[..., k, k] = lateral_psd * dt
+        return phi, qd
+
+    return transition
+
+
+def _road_measure(
+    road: Road, radar: RadarSpec, k: int, scatter_std_m: float
+) -> Callable[[FloatArray], tuple[FloatArray, FloatArray, FloatArray]]:
+    """Build the measurement function of road states ``[s, ds/dt, ..., d]`` (N, k + 1).
+
+    It returns the predicted detection, its Jacobian (analytic through the road geometry) and
+    the scatter-aware noise covariance.
+    """
+    n = k + 1
+
+    def measure(x: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        s, vs, d = x[:, 0], x[:, 1], x[:, k]
+        pos, tangent, right, kappa = road.lane_geometry(s, d)
+        vel = vs[:, None] * tangent
+        zp, jp, jv = _polar_jacobian(pos, vel, radar)
+        lever = 1.0 + kappa * (0.5 * road.lane_width_m + d)
+        dpos_ds = lever[:, None] * tangent
+        dvel_ds = -(vs * kappa)[:, None] * right
+        h = np.zeros((x.shape[0], 3, n))
+        h[:, :, 0] = np.einsum("nij,nj->ni", jp, dpos_ds) + np.einsum("nij,nj->ni", jv, dvel_ds)
+        h[:, :, 1] = np.einsum("nij,nj->ni", jv, tangent)
+        h[:, :, k] = np.einsum("nij,nj->ni", jp, right)
+        return zp, h, _measurement_cov(radar, jp, -tangent, scatter_std_m)
+
+    return measure
+
+
 def track_on_road(
     times: FloatArray,
     z: FloatArray,
@@ -206,29 +252,8 @@ def track_on_road(
     if model.state_names[:2] != ("x", "vx"):
         raise ValueError("track_on_road needs a one-axis model with states (x, vx, ...)")
     n = k + 1
-
-    def transition(dt: FloatArray) -> tuple[FloatArray, FloatArray]:
-        phi_a, q_a = discretize(model, dt)
-        phi = np.zeros(dt.shape + (n, n))
-        qd = np.zeros(dt.shape + (n, n))
-        phi[..., :k, :k], qd[..., :k, :k] = phi_a, q_a
-        phi[..., k, k] = 1.0
-        qd[..., k, k] = lateral_psd * dt
-        return phi, qd
-
-    def measure(x: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
-        s, vs, d = x[:, 0], x[:, 1], x[:, k]
-        pos, tangent, right, kappa = road.lane_geometry(s, d)
-        vel = vs[:, None] * tangent
-        zp, jp, jv = _polar_jacobian(pos, vel, radar)
-        lever = 1.0 + kappa * (0.5 * road.lane_width_m + d)
-        dpos_ds = lever[:, None] * tangent
-        dvel_ds = -(vs * kappa)[:, None] * right
-        h = np.zeros((x.shape[0], 3, n))
-        h[:, :, 0] = np.einsum("nij,nj->ni", jp, dpos_ds) + np.einsum("nij,nj->ni", jv, dvel_ds)
-        h[:, :, 1] = np.einsum("nij,nj->ni", jv, tangent)
-        h[:, :, k] = np.einsum("nij,nj->ni", jp, right)
-        return zp, h, _measurement_cov(radar, jp, -tangent, scatter_std_m)
+    transition = _road_transition(model, lateral_psd)
+    measure = _road_measure(road, radar, k, scatter_std_m)
 
     def initial(zk: FloatArray) -> tuple[FloatArray, FloatArray]:
         p, _, _ = _initial_point(zk, radar)
@@ -267,4 +292,60 @@ def track_on_road(
     return TrackEstimates(pos, vel, np.abs(vs), pc)
 
 
-__all__ = ["TrackEstimates", "track_free_2d", "track_on_road"]
+def road_pcrlb(
+    runs_times: FloatArray,
+    detected: BoolArray,
+    along_road_m: FloatArray,
+    speed: FloatArray,
+    lateral_offset_m: FloatArray,
+    radar: RadarSpec,
+    road: Road,
+    *,
+    model: MotionModel,
+    scatter_std_m: float = 0.0,
+    lateral_psd: float = 0.01,
+    lateral_std_m: float = 0.5,
+) -> tuple[FloatArray, FloatArray]:
+    """Posterior Cramer-Rao bound of the road-constrained model along true trajectories.
+
+    Information recursion (covariance form) with the Jacobians at the true state and each
+    run's own detection sequence, started at its first detection with the tracker's prior.
+    Returns the bound variance of the planar position [m^2] and of the speed [m^2/s^2],
+    shapes (N, T) (NaN before the first detection). The truth here is deterministic, so a
+    filter can beat this bound: it is the design reference of a target that really moves
+    like ``model``.
+    """
+    k = model.state_dim
+    n = k + 1
+    transition = _road_transition(model, lateral_psd)
+    measure = _road_measure(road, radar, k, scatter_std_m)
+    n_runs, n_steps = detected.shape
+    truth = np.zeros((n_runs, n_steps, n))
+    truth[..., 0], truth[..., 1] = along_road_m, -speed
+    truth[..., k] = lateral_offset_m[:, None]
+    phis, qds = transition(np.diff(runs_times, axis=1, prepend=runs_times[:, :1]))
+    p0 = np.diag([1.0 + scatter_std_m**2, 1.0] + [9.0] * (k - 2) + [lateral_std_m**2])
+    cov = np.broadcast_to(p0, (n_runs, n, n)).copy()
+    started = np.zeros(n_runs, dtype=bool)
+    pos_var = np.full((n_runs, n_steps), np.nan)
+    spd_var = np.full((n_runs, n_steps), np.nan)
+    for i in range(n_steps):
+        cov = np.where(
+            started[:, None, None],
+            phis[:, i] @ cov @ np.swapaxes(phis[:, i], -1, -2) + qds[:, i],
+            p0,
+        )
+        _, h, r = measure(truth[:, i])
+        upd = detected[:, i]
+        s_mat = h @ cov @ np.swapaxes(h, -1, -2) + r
+        gain = np.swapaxes(np.linalg.solve(s_mat, h @ cov), -1, -2)
+        ikh = np.eye(n) - gain @ h
+        new = ikh @ cov @ np.swapaxes(ikh, -1, -2) + gain @ r @ np.swapaxes(gain, -1, -2)
+        cov = np.where(upd[:, None, None], 0.5 * (new + np.swapaxes(new, -1, -2)), cov)
+        started |= upd
+        pos_var[started, i] = cov[started, 0, 0] + cov[started, k, k]
+        spd_var[started, i] = cov[started, 1, 1]
+    return pos_var, spd_var
+
+
+__all__ = ["TrackEstimates", "road_pcrlb", "track_free_2d", "track_on_road"]
