@@ -185,3 +185,37 @@ def test_road_pcrlb_matches_the_filter_covariance_on_point_targets():
     np.testing.assert_allclose(filt_pos_var[:, late], pos_var[:, late], rtol=0.15)
     assert np.all(np.diff(pos_var[0, :40]) < 0)  # information accumulates while converging
     assert np.all(spd_var[:, 5:] > 0)
+
+
+def test_converted_measurement_kf_tracks_but_needs_doppler_for_speed():
+    from adaptrack.crossing.tracking import track_converted
+
+    case = CASE["pass_60"]
+    radar = dataclasses.replace(SITE.radar_for("B"), azimuth_bias_rad=0.0, time_jitter_s=0.0)
+    veh = dataclasses.replace(VEHICLES["car"], length_m=0.0)
+    runs = simulate_case(
+        SITE.roads["B"],
+        radar,
+        veh,
+        case,
+        n_runs=30,
+        rng=np.random.default_rng(5),
+        start_m=200.0,
+        stop_line_m=15.0,
+        detection_probability=0.95,
+        lateral_offset_std_m=0.0,
+    )
+    zone = (runs.along_road_m <= 150) & (runs.true_times >= 1.0)
+    cm = track_converted(runs.times, runs.measurements, runs.detected, radar)
+    ekf = track_free_2d(runs.times, runs.measurements, runs.detected, radar)
+
+    def rms(est):
+        p = np.sqrt(np.mean(np.sum((est.position - runs.position) ** 2, -1)[zone]))
+        s = np.sqrt(np.mean(((est.speed - runs.speed) * 3.6)[zone] ** 2))
+        return p, s
+
+    (p_cm, s_cm), (_, s_ekf) = rms(cm), rms(ekf)
+    assert p_cm < 0.5
+    assert s_cm > 2 * s_ekf  # speed from differentiated positions vs radial speed
+    first = np.argmax(runs.detected, axis=1)
+    assert np.isnan(cm.speed[first > 0, 0]).all()

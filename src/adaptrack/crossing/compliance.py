@@ -24,7 +24,13 @@ from ..models.adaptive import InverseDynamics, ShapingFilter, singer_accel_std
 from ..models.continuous import ConstantAcceleration, ConstantVelocity
 from .radar_sim import CrossingRuns, simulate_site_case
 from .site import Site
-from .tracking import TrackEstimates, road_pcrlb, track_free_2d, track_on_road
+from .tracking import (
+    TrackEstimates,
+    road_pcrlb,
+    track_converted,
+    track_free_2d,
+    track_on_road,
+)
 from .traffic import DEFAULT_CASES, VEHICLES, Case, VehicleClass, applicable
 
 POSITION_LIMIT_M = 0.7
@@ -83,7 +89,7 @@ Tracker = Callable[[CrossingRuns, Site, Case, VehicleClass], TrackEstimates]
 
 
 def default_trackers(tuned_m1: tuple[float, float] | None = None) -> dict[str, Tracker]:
-    """Free 2-D EKF, road-constrained CV (the rectilinear baseline), CA and M2 (untuned).
+    """Free 2-D EKF and CMKF, road-constrained CV (the rectilinear baseline), CA, M2.
 
     ``tuned_m1 = (lambda_per_s2, accel_psd)`` adds the road EKF with the site-tuned M1.
     """
@@ -91,6 +97,15 @@ def default_trackers(tuned_m1: tuple[float, float] | None = None) -> dict[str, T
 
     def free(runs: CrossingRuns, site: Site, case: Case, veh: VehicleClass) -> TrackEstimates:
         return track_free_2d(
+            runs.times,
+            runs.measurements,
+            runs.detected,
+            site.radar_for(case.road),
+            scatter_std_m=veh.scatter_std_m,
+        )
+
+    def converted(runs: CrossingRuns, site: Site, case: Case, veh: VehicleClass) -> TrackEstimates:
+        return track_converted(
             runs.times,
             runs.measurements,
             runs.detected,
@@ -120,6 +135,7 @@ def default_trackers(tuned_m1: tuple[float, float] | None = None) -> dict[str, T
     return {
         **tuned,
         "free 2-D EKF (CV)": free,
+        "CMKF (2-D, no Doppler)": converted,
         "road EKF (CV)": road(ConstantVelocity(accel_psd=3.0)),
         "road EKF (CA)": road(ConstantAcceleration(jerk_psd=3.0)),
         "road EKF (M2)": road(

@@ -292,6 +292,61 @@ def track_on_road(
     return TrackEstimates(pos, vel, np.abs(vs), pc)
 
 
+def track_converted(
+    times: FloatArray,
+    z: FloatArray,
+    detected: BoolArray,
+    radar: RadarSpec,
+    *,
+    model: MotionModel | None = None,
+    scatter_std_m: float = 0.0,
+) -> TrackEstimates:
+    """Converted-measurement Kalman filter: range and azimuth to the plane, no radial speed.
+
+    Each detection becomes a planar position ``s + rho_c (sin az, cos az)`` with the horizontal
+    range ``rho = sqrt(r^2 - h^2)`` debiased for the azimuth noise (``rho_c = rho
+    exp(sigma_az^2 / 2)``, since ``E[sin(az + n)] = sin(az) exp(-sigma^2 / 2)``) and covariance
+    ``J diag(sigma_r^2 + sigma_b^2, sigma_az^2) J^T`` (body scatter counted along the line of
+    sight); then a linear Kalman filter (default nearly constant velocity, 2 axes) from a vague
+    prior. The radial speed is not used: speed comes from differentiated positions.
+    """
+    from ..filters.run import kalman_filter
+
+    model = ConstantVelocity(accel_psd=10.0, n_axes=2) if model is None else model
+    n = model.state_dim
+    zz = np.nan_to_num(z)
+    rho = np.sqrt(np.maximum(zz[..., 0] ** 2 - radar.height_m**2, 0.01))
+    debias = np.exp(radar.azimuth_std_rad**2 / 2)
+    los = np.stack([np.sin(zz[..., 1]), np.cos(zz[..., 1])], -1)
+    perp = np.stack([los[..., 1], -los[..., 0]], -1)
+    pos = np.asarray(radar.position_m) + (debias * rho)[..., None] * los
+    jac = np.stack([los * (zz[..., 0] / rho)[..., None], rho[..., None] * perp], -1)
+    cov = (
+        jac
+        @ np.diag([radar.range_std_m**2 + scatter_std_m**2, radar.azimuth_std_rad**2])
+        @ np.swapaxes(jac, -1, -2)
+    )
+    cov = np.where(detected[..., None, None], cov, np.eye(2))
+    h = np.zeros((2, n))
+    h[0, 0] = h[1, 1] = 1.0
+    p0 = np.diag([1e6, 1e6] + [1e4] * (n - 2))
+    prior = GaussianState(
+        np.zeros((times.shape[0], n)), np.broadcast_to(p0, (times.shape[0], n, n)), times[:, 0]
+    )
+    res = kalman_filter(
+        times, np.where(detected[..., None], pos, np.nan), model, h, cov, prior, mask=detected
+    )
+    started = np.cumsum(detected, axis=1) > 0
+    mean = np.where(started[..., None], res.filtered.mean, np.nan)
+    vel = mean[..., 2:4]
+    return TrackEstimates(
+        mean[..., :2],
+        vel,
+        np.linalg.norm(vel, axis=-1),
+        np.where(started[..., None, None], res.filtered.cov[..., :2, :2], np.nan),
+    )
+
+
 def road_pcrlb(
     runs_times: FloatArray,
     detected: BoolArray,
@@ -348,4 +403,4 @@ def road_pcrlb(
     return pos_var, spd_var
 
 
-__all__ = ["TrackEstimates", "road_pcrlb", "track_free_2d", "track_on_road"]
+__all__ = ["TrackEstimates", "road_pcrlb", "track_converted", "track_free_2d", "track_on_road"]
