@@ -31,6 +31,8 @@ from .io.tables import DataFormatError, read_flight_csv, write_table_atomic
 from .models.continuous import ConstantAcceleration, Singer
 from .simulation.scenario import load_scenario
 
+DEMO_LAMBDAS = (1e-3, 3e-2, 1.0)  # coarse M1 profile of the demo (lambda = 0 is always in)
+
 app = typer.Typer(
     help="adaptrack: adaptive motion estimation.", no_args_is_help=True, add_completion=False
 )
@@ -44,7 +46,7 @@ def _main() -> None:
 
 @app.command()
 def demo(
-    runs: int = typer.Option(20, "--runs", min=1, help="Monte-Carlo runs per class and case."),
+    runs: int = typer.Option(10, "--runs", min=1, help="Monte-Carlo runs per class and case."),
     seed: int = typer.Option(0, "--seed", help="Random seed."),
     out: Path = typer.Option(
         Path("out"), "--out", help="Directory for summary.json and report.html."
@@ -66,12 +68,14 @@ def demo(
         int(x.generate_state(1)[0]) for x in np.random.SeedSequence(seed).spawn(2)
     )
     with Progress(console=console, transient=True) as progress:
-        task = progress.add_task("tuning", total=n_pairs + 7)
+        task = progress.add_task("tuning", total=n_pairs + len(DEMO_LAMBDAS) + 1)
 
         def step(msg: str) -> None:
             progress.update(task, advance=1, description=msg)
 
-        tuning = tune_road_model(st, n_runs=3, seed=train_seed, workers=n_workers, progress=step)
+        tuning = tune_road_model(
+            st, n_runs=3, seed=train_seed, workers=n_workers, lambdas=DEMO_LAMBDAS, progress=step
+        )
         result = evaluate_site(
             st,
             runs,

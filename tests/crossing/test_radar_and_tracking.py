@@ -132,11 +132,12 @@ def test_compliance_is_independent_of_workers_and_structured():
     np.testing.assert_equal(
         [dataclasses.astuple(r) for r in a.rows], [dataclasses.astuple(r) for r in b.rows]
     )  # NaN == NaN here
-    assert len(a.rows) == 2 * 2 * 4
+    assert len(a.rows) == 2 * 2 * 5
     out = a.to_json()
     assert out["requirements"]["position_rms_m"] == 0.7
     assert set(out["worst_case"]) == {
         "free 2-D EKF (CV)",
+        "CMKF (2-D, no Doppler)",
         "road EKF (CV)",
         "road EKF (CA)",
         "road EKF (M2)",

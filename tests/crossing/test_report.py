@@ -18,7 +18,7 @@ def report_html():
     site = load_site("lx_default")
     res = evaluate_site(site, 2, 0, cases=DEFAULT_CASES[2:4], classes={"car": VEHICLES["car"]})
     data = build_report(res, site, samples=sample_tracks(site, 0))
-    assert len(data.rows) == 2 * 4 and len(data.samples) == 2  # plain data first
+    assert len(data.rows) == 2 * 5 and len(data.samples) == 2  # plain data first
     return render_html(data)
 
 

@@ -78,7 +78,9 @@ def test_braking_matches_the_spec_stand_in():
 
 
 @pytest.mark.parametrize(
-    "case", [c for c in DEFAULT_CASES if c.kind != "pass"], ids=lambda c: c.name
+    "case",
+    [c for c in DEFAULT_CASES if c.kind in ("stop", "emergency") and c.dwell_s == 0],
+    ids=lambda c: c.name,
 )
 def test_stops_end_at_the_stop_line(case):
     veh = VEHICLES["car"]
@@ -95,3 +97,33 @@ def test_bad_case_kind():
         along_road_profile(
             Case("x", "drift", 50.0, "B"), VEHICLES["car"], 200.0, 15.0, np.arange(10.0)
         )
+
+
+def test_stop_and_go_dwells_then_pulls_away():
+    case = next(c for c in DEFAULT_CASES if c.dwell_s > 0)
+    veh = VEHICLES["car"]
+    t = 0.05 * np.arange(int(case_duration(case, veh, 200.0, 15.0) / 0.05) + 1)
+    s, v, a = along_road_profile(case, veh, 200.0, 15.0, t)
+    stopped = v == 0
+    assert 0.05 * stopped.sum() == pytest.approx(case.dwell_s, abs=0.1)
+    assert s[-1] < 0 and a.max() == pytest.approx(veh.accel_mps2)
+    assert np.all(np.diff(s) <= 1e-12)
+
+
+def test_random_approaches_respect_the_class_limits():
+    from adaptrack.crossing.traffic import random_profiles
+
+    case = next(c for c in DEFAULT_CASES if c.kind == "random")
+    veh = VEHICLES["truck"]
+    t = 0.05 * np.arange(400)
+    s, v, a = random_profiles(case, veh, 200.0, t, 50, np.random.default_rng(0))
+    assert s.shape == v.shape == (50, 400)
+    assert np.all(v >= 0) and np.all(v <= veh.max_speed_kmh / 3.6 + 1e-9)
+    assert np.all(a >= -veh.emergency_decel_mps2 - 1e-9)
+    assert np.all(a <= veh.accel_mps2 + 1e-9)
+    assert np.std(v[:, -1]) > 1.0  # runs differ
+    np.testing.assert_allclose(
+        np.diff(s, axis=1), -0.5 * (v[:, 1:] + v[:, :-1]) * 0.05, rtol=1e-12, atol=1e-12
+    )
+    with pytest.raises(ValueError, match="random cases need an rng"):
+        along_road_profile(case, veh, 200.0, 15.0, t)

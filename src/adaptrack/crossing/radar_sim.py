@@ -19,7 +19,7 @@ import numpy as np
 from .._typing import BoolArray, FloatArray
 from .road import Road
 from .site import RadarSpec, Site
-from .traffic import Case, VehicleClass, along_road_profile, case_duration
+from .traffic import Case, VehicleClass, along_road_profile, case_duration, random_profiles
 
 
 @dataclass(frozen=True, eq=False)
@@ -66,8 +66,11 @@ def simulate_case(
     duration = case_duration(case, vehicle, start_m, stop_line_m)
     n = int(duration / radar.period_s) + 1
     t_true = radar.period_s * np.arange(n)
-    s, v, _ = along_road_profile(case, vehicle, start_m, stop_line_m, t_true)
-    s, v = np.broadcast_to(s, (n_runs, n)), np.broadcast_to(v, (n_runs, n))
+    if case.kind == "random":
+        s, v, _ = random_profiles(case, vehicle, start_m, t_true, n_runs, rng)
+    else:
+        s, v, _ = along_road_profile(case, vehicle, start_m, stop_line_m, t_true)
+        s, v = np.broadcast_to(s, (n_runs, n)), np.broadcast_to(v, (n_runs, n))
     half = 0.5 * road.lane_width_m - 0.5 * 2.0  # keep a 2 m wide vehicle inside its lane
     offset = np.clip(rng.normal(0.0, lateral_offset_std_m, n_runs), -half, half)
     pos = road.lane_point(s, offset[:, None])

@@ -8,6 +8,8 @@ through missed detections:
 * :func:`track_on_road`: the along-road coordinate as the generalised coordinate of seed 001
   (any one-axis motion model: constant acceleration, M1, M2, ...) plus the vehicle's lateral
   offset in its lane (a slow random walk), mapped to the plane with the known road geometry.
+  Approaching vehicles do not reverse: a predicted along-road speed of the wrong sign (a track
+  coasting through a stop hidden by the Doppler gate) is held at standstill.
 
 The measurement noise knows the class-dependent wander of the reflection point along the body
 (a rank-one term ``sigma_b^2 J u u^T J^T``, ``u`` the direction of travel). A track starts at
@@ -93,6 +95,7 @@ def _run(
     transition: Callable[[FloatArray], tuple[FloatArray, FloatArray]],
     measure: Callable[[FloatArray], tuple[FloatArray, FloatArray, FloatArray]],
     initial: Callable[[FloatArray], tuple[FloatArray, FloatArray]],
+    constrain: Callable[[FloatArray], FloatArray] | None = None,
 ) -> tuple[FloatArray, FloatArray, BoolArray]:
     """Run the batched EKF loop; each run starts at its first detection."""
     n_runs, n_steps = detected.shape
@@ -108,6 +111,8 @@ def _run(
         t = times[:, k]
         phi, qd = phis[:, k], qds[:, k]
         state = predict(_trusted(GaussianState, mean=mean, cov=cov, time=t_prev), phi, qd, time=t)
+        if constrain is not None:
+            state = _trusted(GaussianState, mean=constrain(state.mean), cov=state.cov, time=t)
         zpred, h, r = measure(state.mean)
         upd = detected[:, k] & started
         z_eff = z[:, k].copy()
@@ -277,7 +282,15 @@ def track_on_road(
         cov[:, k, k] = lateral_std_m**2
         return mean, cov
 
-    means, covs, _ = _run(times, z, detected, n, transition, measure, initial)
+    def no_reversal(x: FloatArray) -> FloatArray:
+        # an approaching vehicle does not reverse: a track whose predicted speed changes sign
+        # (coasting through a stop hidden by the Doppler gate) is held at standstill
+        out = np.array(x)
+        rev = out[:, 1] > 0
+        out[rev, 1:k] = 0.0
+        return out
+
+    means, covs, _ = _run(times, z, detected, n, transition, measure, initial, no_reversal)
     s, vs, d = means[..., 0], means[..., 1], means[..., k]
     pos = road.lane_point(np.nan_to_num(s), np.nan_to_num(d))
     pos[np.isnan(s)] = np.nan

@@ -48,12 +48,19 @@ JERK_EMERGENCY = 12.0
 
 @dataclass(frozen=True)
 class Case:
-    """An approach script: ``kind`` "pass", "stop" or "emergency" at ``speed_kmh`` on ``road``."""
+    """An approach script on ``road`` starting at ``speed_kmh``.
+
+    ``kind``: "pass" (constant speed), "stop" or "emergency" (to the stop line; with
+    ``dwell_s > 0`` the vehicle then waits and pulls away at its class acceleration, jerk
+    2 m/s^3, up to the initial speed), or "random" (Singer acceleration, DOMAIN 7(a): time
+    constant 3 s, RMS 4.35 m/s^2, clipped to the class limits, speed >= 0).
+    """
 
     name: str
     kind: str
     speed_kmh: float
     road: str
+    dwell_s: float = 0.0
 
 
 DEFAULT_CASES = (
@@ -66,7 +73,11 @@ DEFAULT_CASES = (
     Case("emergency_90", "emergency", 90.0, "B"),
     Case("curve_60", "pass", 60.0, "A"),
     Case("curve_stop_60", "stop", 60.0, "A"),
+    Case("stop_go_60", "stop", 60.0, "B", dwell_s=5.0),
+    Case("random_60", "random", 60.0, "B"),
 )
+RANDOM_TIME_CONSTANT_S = 3.0
+RANDOM_ACCEL_STD_MPS2 = 4.35
 
 
 def applicable(case: Case, vehicle: VehicleClass) -> bool:
@@ -96,6 +107,8 @@ def case_duration(case: Case, vehicle: VehicleClass, start_m: float, stop_line_m
     v0 = case.speed_kmh * KMH
     if case.kind == "pass":
         return start_m / v0
+    if case.kind == "random":
+        return 1.2 * start_m / v0
     decel, jerk = _braking(case, vehicle)
     t_brake = (start_m - stop_line_m - _braking_distance(v0, decel, jerk)) / v0
     t_j = decel / jerk
@@ -104,6 +117,16 @@ def case_duration(case: Case, vehicle: VehicleClass, start_m: float, stop_line_m
         if v0 > decel * t_j / 2
         else float(np.sqrt(2 * v0 / jerk))
     )
+    if case.dwell_s > 0:  # dwell, then pull away over the stop line to the crossing
+        t_up = vehicle.accel_mps2 / JERK_NORMAL
+        return (
+            t_brake
+            + t_stop
+            + case.dwell_s
+            + t_up
+            + float(np.sqrt(2 * stop_line_m / vehicle.accel_mps2))
+            + 1.0
+        )
     return t_brake + t_stop + 2.0
 
 
@@ -119,6 +142,8 @@ def along_road_profile(
     v0 = case.speed_kmh * KMH
     if case.kind == "pass":
         return start_m - v0 * times, np.full(times.shape, v0), np.zeros(times.shape)
+    if case.kind == "random":
+        raise ValueError("random cases need an rng: use random_profiles()")
     decel, jerk = _braking(case, vehicle)
     brake_at = stop_line_m + _braking_distance(v0, decel, jerk)
     t_brake = (start_m - brake_at) / v0
@@ -134,7 +159,17 @@ def along_road_profile(
     stopped_at = None
     for i, t in enumerate(tf):
         s[i], v[i], a[i] = s_c, v_c, a_c
-        if stopped_at is not None:
+        pulling = stopped_at is not None and case.dwell_s > 0 and t >= stopped_at + case.dwell_s
+        if stopped_at is not None and not pulling:
+            continue
+        if pulling:  # jerk-limited pull-away up to the class acceleration, then to v0
+            j = JERK_NORMAL if (a_c < vehicle.accel_mps2 and v_c < v0) else 0.0
+            j_eff = min(j, (vehicle.accel_mps2 - a_c) / dt)
+            if v_c >= v0:
+                a_c, j_eff = 0.0, 0.0
+            dv = a_c * dt + j_eff * dt**2 / 2
+            ds = v_c * dt + a_c * dt**2 / 2 + j_eff * dt**3 / 6
+            s_c, v_c, a_c = s_c - ds, v_c + dv, a_c + j_eff * dt
             continue
         j = 0.0 if t < t_brake else (-jerk if a_c > -decel else 0.0)
         j_eff = (-decel - a_c) / dt if j < 0 and a_c + j * dt < -decel else j
@@ -149,6 +184,40 @@ def along_road_profile(
     return (np.interp(times, tf, s), np.interp(times, tf, v), np.interp(times, tf, a))
 
 
+def random_profiles(
+    case: Case,
+    vehicle: VehicleClass,
+    start_m: float,
+    times: FloatArray,
+    n_runs: int,
+    rng: np.random.Generator,
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Per-run along-road position, speed, acceleration (n_runs, T) of a random approach.
+
+    The acceleration is sampled exactly as a Singer (Gauss-Markov) process on the sample grid,
+    clipped to ``[-emergency decel, class accel]``; the speed is kept in ``[0, class top
+    speed]`` and the position integrated with the trapezoidal rule.
+    """
+    v0 = case.speed_kmh * KMH
+    n = times.size
+    dt = np.diff(times, prepend=times[0])
+    rho = np.exp(-dt / RANDOM_TIME_CONSTANT_S)
+    a = np.zeros((n_runs, n))
+    xi = rng.standard_normal((n_runs, n))
+    for k in range(1, n):
+        a[:, k] = rho[k] * a[:, k - 1] + np.sqrt(1 - rho[k] ** 2) * RANDOM_ACCEL_STD_MPS2 * xi[:, k]
+    a = np.clip(a, -vehicle.emergency_decel_mps2, vehicle.accel_mps2)
+    v = np.empty((n_runs, n))
+    v[:, 0] = v0
+    for k in range(1, n):
+        v[:, k] = np.clip(v[:, k - 1] + a[:, k - 1] * dt[k], 0.0, vehicle.max_speed_kmh * KMH)
+    a_eff = np.diff(v, axis=1, prepend=v[:, :1]) / np.where(dt > 0, dt, 1.0)
+    s = start_m - np.concatenate(
+        [np.zeros((n_runs, 1)), np.cumsum(0.5 * (v[:, 1:] + v[:, :-1]) * dt[1:], axis=1)], 1
+    )
+    return s, v, a_eff
+
+
 __all__ = [
     "DEFAULT_CASES",
     "VEHICLES",
@@ -157,4 +226,5 @@ __all__ = [
     "along_road_profile",
     "applicable",
     "case_duration",
+    "random_profiles",
 ]
