@@ -25,7 +25,7 @@ from .crossing.report import build_report, render_html, sample_tracks
 from .crossing.site import load_site
 from .crossing.tracking import track_on_road
 from .crossing.traffic import DEFAULT_CASES, VEHICLES, applicable
-from .crossing.tuning import load_tuning, tune_road_model
+from .crossing.tuning import load_tuning, tune_road_model, tune_road_shaping
 from .io.navigation import read_navigation_measurements
 from .io.tables import DataFormatError, read_flight_csv, write_table_atomic
 from .models.continuous import ConstantAcceleration, Singer
@@ -197,8 +197,11 @@ def tune(
     runs: int = typer.Option(3, "--runs", min=1, help="Training runs per approach."),
     seed: int = typer.Option(0, "--seed", help="Random seed of the training runs."),
     workers: int = typer.Option(0, "--workers", min=0, help="Processes (0: one per core)."),
+    model: str = typer.Option("m1", "--model", help="m1, or m2 (also tunes M2; slower)."),
 ) -> None:
     """Tune the road-constrained model (M1: lambda, accel_psd) to a site's training runs."""
+    if model not in ("m1", "m2"):
+        raise typer.BadParameter("--model must be 'm1' or 'm2'")
     try:
         st = load_site(site)
     except ValueError as exc:
@@ -212,6 +215,9 @@ def tune(
             workers=workers or (os.cpu_count() or 1),
             progress=lambda m: progress.update(task, advance=1, description=m),
         )
+    if model == "m2":
+        tuning = tune_road_shaping(st, tuning, n_runs=runs, seed=seed)
+        Console().print(f"M2: {tuning.shaping}")
     _write_text(out, tuning.to_toml())
     Console().print(
         f"lambda = {tuning.lambda_per_s2:g} 1/s^2, accel_psd = "

@@ -35,3 +35,22 @@ def test_parallel_tuning_gives_the_same_result():
     a = tune_road_model(site, n_runs=1, seed=5, lambdas=(0.1,), workers=1)
     b = tune_road_model(site, n_runs=1, seed=5, lambdas=(0.1,), workers=2)
     assert a == b
+
+
+def test_m2_tuning_round_trips_and_selects_the_better_model(tmp_path):
+    from adaptrack.crossing.tuning import tune_road_shaping
+    from adaptrack.models import ShapingFilter
+
+    site = load_site("lx_default")
+    m1 = tune_road_model(site, n_runs=1, seed=3, lambdas=(0.1,))
+    both = tune_road_shaping(site, m1, n_runs=1, seed=3, max_evaluations=6)
+    assert set(both.shaping) == {"lambda_per_s2", "alpha_per_s", "shaping_std", "criterion"}
+    assert both.shaping["lambda_per_s2"] >= 1e-4 * (1 - 1e-9)
+    chosen = both.model()
+    if both.shaping["criterion"] < both.criterion:
+        assert isinstance(chosen, ShapingFilter)
+    else:
+        assert isinstance(chosen, InverseDynamics)
+    path = tmp_path / "t.toml"
+    path.write_text(both.to_toml())
+    assert load_tuning(path) == both

@@ -10,6 +10,7 @@ come from their own seed stream, never from the evaluation runs.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
@@ -18,10 +19,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy.optimize import minimize_scalar
+from scipy.optimize import minimize, minimize_scalar
 
 from .._toml import load_toml
-from ..models.adaptive import InverseDynamics
+from .._typing import FloatArray
+from ..models.adaptive import InverseDynamics, ShapingFilter, singer_accel_std
 from .compliance import POSITION_LIMIT_M, SPEED_LIMIT_KMH
 from .radar_sim import CrossingRuns, simulate_site_case
 from .site import Site
@@ -47,9 +49,16 @@ class RoadTuning:
     criterion: float
     baseline_criterion: float
     profile: dict[str, list[float]] = field(default_factory=dict)
+    shaping: dict[str, float] = field(default_factory=dict)
 
-    def model(self) -> InverseDynamics:
-        """Build the tuned along-road model."""
+    def model(self) -> InverseDynamics | ShapingFilter:
+        """Build the tuned along-road model: M2 when tuned and better than M1, else M1."""
+        if self.shaping and self.shaping["criterion"] < self.criterion:
+            return ShapingFilter(
+                lambda_per_s2=self.shaping["lambda_per_s2"],
+                alpha_per_s=self.shaping["alpha_per_s"],
+                shaping_std=self.shaping["shaping_std"],
+            )
         return InverseDynamics(lambda_per_s2=self.lambda_per_s2, accel_psd=self.accel_psd)
 
     def to_toml(self) -> str:
@@ -66,6 +75,11 @@ class RoadTuning:
             f"lambda_per_s2 = {arr(self.profile['lambda_per_s2'])}\n"
             f"criterion = {arr(self.profile['criterion'])}\n"
             f"accel_psd = {arr(self.profile['accel_psd'])}\n"
+            + (
+                "\n[shaping_filter]\n" + "".join(f"{k} = {v!r}\n" for k, v in self.shaping.items())
+                if self.shaping
+                else ""
+            )
         )
 
 
@@ -83,6 +97,7 @@ def load_tuning(path: str | Path) -> RoadTuning:
             float(m["criterion"]),
             float(m["baseline_criterion"]),
             {k: [float(x) for x in v] for k, v in data.get("profile", {}).items()},
+            {k: float(v) for k, v in data.get("shaping_filter", {}).items()},
         )
     except (KeyError, TypeError) as exc:
         raise ValueError(f"{path}: not a tuned configuration ({exc})") from None
@@ -195,6 +210,47 @@ def tune_road_model(
     )
 
 
+def tune_road_shaping(
+    site: Site, tuning: RoadTuning, *, n_runs: int = 3, seed: int = 0, max_evaluations: int = 40
+) -> RoadTuning:
+    """Add M2 ``(lambda, alpha, sigma_M)`` tuned by bounded Nelder-Mead on the same training runs.
+
+    Starts from ``max(lambda*_M1, 1e-3)``, ``alpha = 1/3`` and Singer's rule (spec B.7 step 4).
+    """
+    training = training_runs(site, n_runs, seed)
+    lam0 = max(tuning.lambda_per_s2, 1e-3)
+    x0 = np.log([lam0, 1.0 / 3.0, singer_accel_std(9.0, 0.05, 0.5) / math.sqrt(lam0)])
+    bounds = [
+        (math.log(1e-4), math.log(10.0)),
+        (math.log(1e-2), math.log(10.0)),
+        (math.log(0.01), math.log(1e3)),
+    ]
+
+    def f(u: FloatArray) -> float:
+        lam, al, sm = (float(v) for v in np.exp(u))
+        return road_criterion(
+            ShapingFilter(lambda_per_s2=lam, alpha_per_s=al, shaping_std=sm), site, training
+        )
+
+    res = minimize(
+        f,
+        np.clip(x0, [b[0] for b in bounds], [b[1] for b in bounds]),
+        method="Nelder-Mead",
+        bounds=bounds,
+        options={"maxfev": max_evaluations, "xatol": 1e-2, "fatol": 1e-3},
+    )
+    lam, al, sm = (float(v) for v in np.exp(res.x))
+    return dataclasses.replace(
+        tuning,
+        shaping={
+            "lambda_per_s2": lam,
+            "alpha_per_s": al,
+            "shaping_std": sm,
+            "criterion": float(res.fun),
+        },
+    )
+
+
 __all__ = [
     "TRAINING",
     "RoadTuning",
@@ -202,4 +258,5 @@ __all__ = [
     "road_criterion",
     "training_runs",
     "tune_road_model",
+    "tune_road_shaping",
 ]
