@@ -167,14 +167,14 @@ def case_bound(
         model=BOUND_MODEL,
         scatter_std_m=veh.scatter_std_m,
     )
-    zone = _zone(np.isfinite(pos_var), runs, site.zone_m)
+    zone = scored_epochs(np.isfinite(pos_var), runs, site.zone_m)
     slow = zone & (3.6 * runs.speed <= SPEED_SPLIT_KMH)
     pos = math.sqrt(float(np.mean(pos_var[zone]))) if zone.any() else math.nan
     spd = 3.6 * math.sqrt(float(np.mean(spd_var[slow]))) if slow.any() else math.nan
     return pos, spd
 
 
-def _zone(started: BoolArray, runs: CrossingRuns, zone_m: float) -> BoolArray:
+def scored_epochs(started: BoolArray, runs: CrossingRuns, zone_m: float) -> BoolArray:
     """Scored epochs: in the zone, 1 s after the track start, while moving."""
     first = np.argmax(started, axis=1)
     t0 = np.take_along_axis(runs.true_times, first[:, None], axis=1)
@@ -191,7 +191,7 @@ def score(
     est: TrackEstimates, runs: CrossingRuns, zone_m: float
 ) -> tuple[float, float, float, int]:
     """Position RMS [m], speed RMS [km/h] (<= 100 km/h), relative speed RMS (> 100), epochs."""
-    zone = _zone(np.isfinite(est.speed), runs, zone_m)
+    zone = scored_epochs(np.isfinite(est.speed), runs, zone_m)
     ep = np.sum((est.position - runs.position) ** 2, axis=-1)[zone]
     ev = (est.speed - runs.speed)[zone]
     true_kmh = 3.6 * runs.speed[zone]
@@ -310,4 +310,5 @@ __all__ = [
     "evaluate_pair",
     "evaluate_site",
     "score",
+    "scored_epochs",
 ]

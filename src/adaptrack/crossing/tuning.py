@@ -24,7 +24,7 @@ from scipy.optimize import minimize, minimize_scalar
 from .._toml import load_toml
 from .._typing import FloatArray
 from ..models.adaptive import InverseDynamics, ShapingFilter, singer_accel_std
-from .compliance import POSITION_LIMIT_M, SPEED_LIMIT_KMH
+from .compliance import POSITION_LIMIT_M, SPEED_LIMIT_KMH, scored_epochs
 from .radar_sim import CrossingRuns, simulate_site_case
 from .site import Site
 from .tracking import track_on_road
@@ -132,16 +132,7 @@ def road_criterion(
             model=model,
             scatter_std_m=veh.scatter_std_m,
         )
-        started = np.isfinite(est.speed)
-        first = np.argmax(started, axis=1)
-        t0 = np.take_along_axis(runs.true_times, first[:, None], axis=1)
-        zone = (
-            started
-            & (runs.along_road_m >= 0)
-            & (runs.along_road_m <= site.zone_m)
-            & (runs.speed > 0.2)
-            & (runs.true_times >= t0 + 1.0)
-        )
+        zone = scored_epochs(np.isfinite(est.speed), runs, site.zone_m)
         ep.append(np.sum((est.position - runs.position) ** 2, axis=-1)[zone])
         es.append(((est.speed - runs.speed) * 3.6)[zone] ** 2)
     j_pos = math.sqrt(float(np.mean(np.concatenate(ep))))
