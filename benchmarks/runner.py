@@ -62,6 +62,7 @@ def machine() -> dict[str, object]:
 
 
 def best_time(fn: Callable[[], object], repeats: int) -> tuple[float, object]:
+    """Best wall time of ``repeats`` calls (after the caller's warm-up)."""
     best, out = float("inf"), None
     for _ in range(repeats):
         t0 = time.perf_counter()
@@ -80,17 +81,19 @@ def data(n_tracks: int, n_steps: int, seed: int = 0) -> tuple[np.ndarray, np.nda
     return t, z
 
 
-def adaptrack_filter(t: np.ndarray, z: np.ndarray) -> np.ndarray:
+def adaptrack_filter(t: np.ndarray, z: np.ndarray, backend: str = "auto") -> np.ndarray:
     prior = at.GaussianState(np.zeros(3), P0, t[0])
-    return at.kalman_filter(t, z, MODEL, H, R, prior).filtered.mean
+    return at.kalman_filter(t, z, MODEL, H, R, prior, backend=backend).filtered.mean
 
 
-def adaptrack_filter_per_track_cov(t: np.ndarray, z: np.ndarray) -> np.ndarray:
+def adaptrack_filter_per_track_cov(
+    t: np.ndarray, z: np.ndarray, backend: str = "auto"
+) -> np.ndarray:
     """The general path: every track carries its own covariance recursion."""
     prior = at.GaussianState(
         np.zeros(z.shape[:-2] + (3,)), np.broadcast_to(P0, z.shape[:-2] + (3, 3)), t[0]
     )
-    return at.kalman_filter(t, z, MODEL, H, R, prior).filtered.mean
+    return at.kalman_filter(t, z, MODEL, H, R, prior, backend=backend).filtered.mean
 
 
 def filterpy_filter(t: np.ndarray, z: np.ndarray) -> np.ndarray:
@@ -148,14 +151,16 @@ def run(quick: bool) -> list[Result]:
     # --- single sequence ------------------------------------------------------------------
     t, z = data(1, n_single)
     impls: dict[str, Callable[[np.ndarray, np.ndarray], np.ndarray]] = {
-        "adaptrack": lambda t, z: adaptrack_filter(t, z[0])[None],
+        "adaptrack": lambda t, z: adaptrack_filter(t, z[0], "numba")[None],
+        "adaptrack (numpy reference)": lambda t, z: adaptrack_filter(t, z[0], "numpy")[None],
         "filterpy": filterpy_filter,
         "pykalman": pykalman_filter,
         "simdkalman": simdkalman_filter,
     }
     ref = None
     for name, fn in impls.items():
-        n = n_single if name in ("adaptrack", "simdkalman") or quick else n_single // 10
+        fn(t[:20], z[:, :20])  # warm-up: JIT compilation and imports are not timed
+        n = n_single if name.startswith(("adaptrack", "simdkalman")) or quick else n_single // 10
         secs, out = best_time(lambda fn=fn, n=n: fn(t[:n], z[:, :n]), repeats)
         ref = out if ref is None else ref
         _check(name, out, ref)
@@ -166,13 +171,21 @@ def run(quick: bool) -> list[Result]:
     t, z = data(n_tracks, n_steps, seed=1)
     batch_impls: dict[str, tuple[Callable[[np.ndarray, np.ndarray], np.ndarray], int]] = {
         "adaptrack": (adaptrack_filter, n_tracks),
-        "adaptrack (per-track covariances)": (adaptrack_filter_per_track_cov, n_tracks),
+        "adaptrack (per-track covariances, numba)": (
+            lambda t, z: adaptrack_filter_per_track_cov(t, z, "numba"),
+            n_tracks,
+        ),
+        "adaptrack (per-track covariances, numpy)": (
+            lambda t, z: adaptrack_filter_per_track_cov(t, z, "numpy"),
+            n_tracks,
+        ),
         "simdkalman": (simdkalman_filter, n_tracks),
         "filterpy": (filterpy_filter, subset),
         "pykalman": (pykalman_filter, subset),
     }
     ref = None
     for name, (fn, n) in batch_impls.items():
+        fn(t[:20], z[:2, :20])  # warm-up
         secs, out = best_time(lambda fn=fn, n=n: fn(t, z[:n]), repeats if n > subset else 1)
         ref = out if ref is None else ref
         _check(name, out, ref[:n])
