@@ -77,3 +77,15 @@ def test_report_renders_in_headless_chromium(report_html, tmp_path):
         [chromium, *flags, "--dump-dom", page.as_uri()], capture_output=True, text=True, timeout=120
     ).stdout
     assert "Pass/fail per estimator, class and case" in dom and "<svg" in dom
+
+
+def test_profile_figure_shows_the_cv_member():
+    site = load_site("lx_default")
+    res = evaluate_site(site, 1, 0, cases=DEFAULT_CASES[3:4], classes={"car": VEHICLES["car"]})
+    profile = {
+        "lambda_per_s2": [0.0, 0.01, 0.1],
+        "criterion": [0.2, 0.21, 0.25],
+        "accel_psd": [0.4, 0.5, 1.0],
+    }
+    html = render_html(build_report(res, site, samples=[], profile=profile))
+    assert "id='profile'" in html and "lambda = 0 (constant velocity)" in html

@@ -240,7 +240,12 @@ def _profile_figure(data: ReportData) -> str:
     lam = np.asarray(data.profile["lambda_per_s2"])
     j = np.asarray(data.profile["criterion"])
     pos = lam > 0
-    ax.semilogx(lam[pos], j[pos], "o-", ms=3)
+    ax.semilogx(lam[pos], j[pos], "o-", ms=3, label="M1, best accel_psd per lambda")
+    if np.any(~pos):  # lambda = 0 is the constant-velocity member: no place on a log axis
+        ax.axhline(
+            float(j[~pos][0]), color="k", ls="--", lw=0.8, label="lambda = 0 (constant velocity)"
+        )
+    ax.legend(fontsize=7)
     ax.set_xlabel("lambda [1/s^2]")
     ax.set_ylabel("J (training criterion)")
     ax.set_title("design-time adaptation: J(lambda) of M1")
