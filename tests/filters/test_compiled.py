@@ -83,3 +83,21 @@ def test_compiled_three_state_models_and_rts_on_top():
     a = at.kalman_filter(t, z, model, [[1.0, 0, 0]], [[0.5]], prior, backend="numpy")
     b = at.kalman_filter(t, z, model, [[1.0, 0, 0]], [[0.5]], prior, backend="numba")
     assert rel(at.rts_smooth(b).mean, at.rts_smooth(a).mean) <= 1e-10
+
+
+@pytest.mark.parametrize("per_track_times", [False, True])
+def test_compiled_rts_equals_numpy(per_track_times):
+    rng = np.random.default_rng(11 + per_track_times)
+    model = Singer(time_constant_s=4.0, accel_std_mps2=2.0)
+    shape = (3, 70) if per_track_times else 70
+    t = np.cumsum(rng.uniform(0.05, 0.3, shape), axis=-1)
+    z = rng.normal(size=(3, 70, 1))
+    prior = at.GaussianState(np.zeros((3, 3)), np.broadcast_to(20 * np.eye(3), (3, 3, 3)), 0.0)
+    res = at.kalman_filter(
+        t, z, model, [[1.0, 0, 0]], [[0.3]], prior, mask=rng.uniform(size=(3, 70)) > 0.2
+    )
+    a = at.rts_smooth(res, backend="numpy")
+    b = at.rts_smooth(res, backend="numba")
+    assert rel(b.mean, a.mean) <= 1e-10 and rel(b.cov, a.cov) <= 1e-10
+    with pytest.raises(ValueError, match="backend must be"):
+        at.rts_smooth(res, backend="gpu")

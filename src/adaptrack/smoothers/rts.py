@@ -26,13 +26,19 @@ def _gains(pf: FloatArray, pp_next: FloatArray, phi_next: FloatArray) -> FloatAr
     return mT(np.linalg.solve(pp_next, phi_next @ pf))
 
 
-def rts_smooth(result: FilterResult) -> GaussianState:
+COMPILED_MIN_TRACK_STEPS = 20_000
+
+
+def rts_smooth(result: FilterResult, *, backend: str = "auto") -> GaussianState:
     """Smooth a Kalman filter result (fixed interval, all tracks at once).
 
     Parameters
     ----------
     result : FilterResult
         Output of :func:`adaptrack.kalman_filter`, shapes (..., T, n).
+    backend : {"auto", "numpy", "numba"}
+        NumPy reference or the compiled kernel (same results to rounding); ``"auto"`` uses the
+        kernel from 20,000 track-steps on unless the covariances are shared by all tracks.
 
     Returns
     -------
@@ -52,14 +58,20 @@ def rts_smooth(result: FilterResult) -> GaussianState:
     """
     if not isinstance(result, FilterResult):
         raise TypeError(f"result must be a FilterResult; got {type(result).__name__}")
+    if backend not in ("auto", "numpy", "numba"):
+        raise ValueError(f"backend must be 'auto', 'numpy' or 'numba'; got {backend!r}")
     pred, filt = result.predicted, result.filtered
     b = pred.mean.ndim - 2
     n_steps = pred.mean.shape[-2]
-    sm = np.array(filt.mean)
     sh = [_shared(a, b) for a in (filt.cov, pred.cov, result.transition)]
     shared = [a for a in sh if a is not None]
     if len(shared) < 3:
         shared = []
+    if backend == "numba" or (
+        backend == "auto" and not shared and filt.mean.size // filt.dim >= COMPILED_MIN_TRACK_STEPS
+    ):
+        return _rts_compiled(result)
+    sm = np.array(filt.mean)
     sc = np.array(shared[0]) if shared else np.array(filt.cov)
     tail = (slice(None),) * b
     for k in range(n_steps - 2, -1, -1):
@@ -78,6 +90,30 @@ def rts_smooth(result: FilterResult) -> GaussianState:
     if cov.flags.writeable:
         cov.flags.writeable = False
     return _trusted(GaussianState, mean=sm, cov=cov, time=filt.time)
+
+
+def _rts_compiled(result: FilterResult) -> GaussianState:
+    """Run the RTS recursion through the compiled kernel."""
+    from ._kernels import rts_kernel
+
+    pred, filt = result.predicted, result.filtered
+    n = filt.dim
+    n_steps = filt.mean.shape[-2]
+    lead = filt.mean.shape[:-2]
+    flat = (-1, n_steps)
+    c = np.ascontiguousarray
+    sm, sc = rts_kernel(
+        c(filt.mean.reshape(flat + (n,))),
+        c(filt.cov.reshape(flat + (n, n))),
+        c(pred.mean.reshape(flat + (n,))),
+        c(pred.cov.reshape(flat + (n, n))),
+        c(result.transition.reshape(flat + (n, n))),
+    )
+    sm = sm.reshape(lead + (n_steps, n))
+    sc = sc.reshape(lead + (n_steps, n, n))
+    sm.flags.writeable = False
+    sc.flags.writeable = False
+    return _trusted(GaussianState, mean=sm, cov=sc, time=filt.time)
 
 
 __all__ = ["rts_smooth"]
