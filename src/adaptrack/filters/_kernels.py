@@ -13,6 +13,8 @@ import math
 import numba
 import numpy as np
 
+from .._kernel_linalg import cholesky_into, cholesky_solve_into
+
 _LOG_2PI = math.log(2.0 * math.pi)
 
 
@@ -115,32 +117,13 @@ def kalman_kernel(x0, p0, phi, qd, u, z, mask, h, r, off, joseph):  # type: igno
                     v = 0.5 * (s[a, b] + s[b, a])
                     s[a, b] = v
                     s[b, a] = v
-            # Cholesky S = L L^T
+            # Cholesky S = L L^T; K^T = S^-1 (H P)
+            if not cholesky_into(s, lo):
+                raise ValueError("innovation covariance is not positive definite")
             logdet = 0.0
             for a in range(m):
-                for b in range(a + 1):
-                    acc = s[a, b]
-                    for c in range(b):
-                        acc -= lo[a, c] * lo[b, c]
-                    if a == b:
-                        if acc <= 0.0:
-                            raise ValueError("innovation covariance is not positive definite")
-                        lo[a, a] = math.sqrt(acc)
-                        logdet += 2.0 * math.log(lo[a, a])
-                    else:
-                        lo[a, b] = acc / lo[b, b]
-            # K^T = S^-1 (H P): forward then backward substitution, column by column
-            for col in range(n):
-                for a in range(m):
-                    acc = hp[a, col]
-                    for c in range(a):
-                        acc -= lo[a, c] * kt[c, col]
-                    kt[a, col] = acc / lo[a, a]
-                for a in range(m - 1, -1, -1):
-                    acc = kt[a, col]
-                    for c in range(a + 1, m):
-                        acc -= lo[c, a] * kt[c, col]
-                    kt[a, col] = acc / lo[a, a]
+                logdet += 2.0 * math.log(lo[a, a])
+            cholesky_solve_into(lo, hp, kt)
             # NIS = nu^T S^-1 nu
             for a in range(m):
                 acc = nu[a]

@@ -5,10 +5,10 @@ The NumPy version in ``rts.py`` is the reference; tests check agreement to 1e-10
 
 from __future__ import annotations
 
-import math
-
 import numba
 import numpy as np
+
+from .._kernel_linalg import cholesky_into, cholesky_solve_into
 
 
 @numba.njit(cache=True)
@@ -30,17 +30,8 @@ def rts_kernel(fm, fc, pm, pc, phi):  # type: ignore[no-untyped-def]
         ip = min(i, phi.shape[0] - 1)
         for k in range(n_st - 2, -1, -1):
             # Cholesky of P_{k+1|k}
-            for a in range(n):
-                for q in range(a + 1):
-                    acc = pc[i, k + 1, a, q]
-                    for r in range(q):
-                        acc -= lo[a, r] * lo[q, r]
-                    if a == q:
-                        if acc <= 0.0:
-                            raise ValueError("predicted covariance is not positive definite")
-                        lo[a, a] = math.sqrt(acc)
-                    else:
-                        lo[a, q] = acc / lo[q, q]
+            if not cholesky_into(pc[i, k + 1], lo):
+                raise ValueError("predicted covariance is not positive definite")
             # B = Phi P_k|k  (n x n); solve P_{k+1|k} C^T = B for C^T column by column
             for a in range(n):
                 for q in range(n):
@@ -48,17 +39,7 @@ def rts_kernel(fm, fc, pm, pc, phi):  # type: ignore[no-untyped-def]
                     for r in range(n):
                         acc += phi[ip, k + 1, a, r] * fc[i, k, r, q]
                     b[a, q] = acc
-            for col in range(n):
-                for a in range(n):
-                    acc = b[a, col]
-                    for r in range(a):
-                        acc -= lo[a, r] * d[r, col]
-                    d[a, col] = acc / lo[a, a]
-                for a in range(n - 1, -1, -1):
-                    acc = d[a, col]
-                    for r in range(a + 1, n):
-                        acc -= lo[r, a] * d[r, col]
-                    d[a, col] = acc / lo[a, a]
+            cholesky_solve_into(lo, b, d)
             for a in range(n):  # C = D^T
                 for q in range(n):
                     c[a, q] = d[q, a]
