@@ -6,6 +6,8 @@ import dataclasses
 import json
 import math
 import os
+from collections.abc import Iterator
+from contextlib import ExitStack, contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -29,9 +31,20 @@ from .crossing.tuning import load_tuning, tune_road_model, tune_road_shaping
 from .io.navigation import read_navigation_measurements
 from .io.tables import DataFormatError, read_flight_csv, write_table_atomic
 from .models.continuous import ConstantAcceleration, Singer
+from .parallel import TaskPool, task_pool
 from .simulation.scenario import load_scenario
 
 DEMO_LAMBDAS = (1e-3, 3e-2, 1.0)  # coarse M1 profile of the demo (lambda = 0 is always in)
+
+WORKERS = typer.Option(
+    None,
+    "--workers",
+    min=1,
+    help="Local worker processes (a Dask LocalCluster; default one per CPU core, 1: in-process).",
+)
+SCHEDULER = typer.Option(
+    None, "--scheduler", help="Address of an existing Dask scheduler, e.g. tcp://host:8786."
+)
 
 app = typer.Typer(
     help="adaptrack: adaptive motion estimation.", no_args_is_help=True, add_completion=False
@@ -52,9 +65,8 @@ def demo(
         Path("out"), "--out", help="Directory for summary.json and report.html."
     ),
     site: str = typer.Option("lx_default", "--site", help="Built-in site name or a .toml."),
-    workers: int = typer.Option(
-        0, "--workers", min=0, help="Worker processes (0: one per CPU core)."
-    ),
+    workers: int | None = WORKERS,
+    scheduler: str | None = SCHEDULER,
 ) -> None:
     """Level-crossing compliance demo: simulate a site, track, check the requirements."""
     try:
@@ -63,24 +75,23 @@ def demo(
         _fail(str(exc))
     console = Console()
     n_pairs = sum(1 for v in VEHICLES.values() for c in DEFAULT_CASES if applicable(c, v))
-    n_workers = workers or (os.cpu_count() or 1)
     train_seed, eval_seed = (
         int(x.generate_state(1)[0]) for x in np.random.SeedSequence(seed).spawn(2)
     )
-    with Progress(console=console, transient=True) as progress:
+    with _pool(workers, scheduler) as pool, Progress(console=console, transient=True) as progress:
         task = progress.add_task("tuning", total=n_pairs + len(DEMO_LAMBDAS) + 1)
 
         def step(msg: str) -> None:
             progress.update(task, advance=1, description=msg)
 
         tuning = tune_road_model(
-            st, n_runs=3, seed=train_seed, workers=n_workers, lambdas=DEMO_LAMBDAS, progress=step
+            st, n_runs=3, seed=train_seed, pool=pool, lambdas=DEMO_LAMBDAS, progress=step
         )
         result = evaluate_site(
             st,
             runs,
             eval_seed,
-            workers=n_workers,
+            pool=pool,
             progress=step,
             tuned_m1=(tuning.lambda_per_s2, tuning.accel_psd),
         )
@@ -196,7 +207,8 @@ def tune(
     out: Path = typer.Option(..., "--out", help="Tuned configuration (TOML)."),
     runs: int = typer.Option(3, "--runs", min=1, help="Training runs per approach."),
     seed: int = typer.Option(0, "--seed", help="Random seed of the training runs."),
-    workers: int = typer.Option(0, "--workers", min=0, help="Processes (0: one per core)."),
+    workers: int | None = WORKERS,
+    scheduler: str | None = SCHEDULER,
     model: str = typer.Option("m1", "--model", help="m1, or m2 (also tunes M2; slower)."),
 ) -> None:
     """Tune the road-constrained model (M1: lambda, accel_psd) to a site's training runs."""
@@ -206,13 +218,13 @@ def tune(
         st = load_site(site)
     except ValueError as exc:
         _fail(str(exc))
-    with Progress(transient=True) as progress:
+    with _pool(workers, scheduler) as pool, Progress(transient=True) as progress:
         task = progress.add_task("tuning", total=7)
         tuning = tune_road_model(
             st,
             n_runs=runs,
             seed=seed,
-            workers=workers or (os.cpu_count() or 1),
+            pool=pool,
             progress=lambda m: progress.update(task, advance=1, description=m),
         )
     if model == "m2":
@@ -280,6 +292,21 @@ def track(
     Console().print(f"wrote {out} ({len(objects)} objects)")
 
 
+@contextmanager
+def _pool(workers: int | None, scheduler: str | None) -> Iterator[TaskPool]:
+    """Task pool of the --workers/--scheduler options (errors reported, not raised)."""
+    if scheduler is not None and workers is not None:
+        raise typer.BadParameter("give --workers or --scheduler, not both")
+    n = workers if workers is not None else (1 if scheduler else os.cpu_count() or 1)
+    stack = ExitStack()
+    try:
+        pool = stack.enter_context(task_pool(n, scheduler))
+    except OSError as exc:
+        _fail(f"cannot start the task pool ({exc})")
+    with stack:
+        yield pool
+
+
 def _fail(message: str) -> None:
     _err.print(f"error: {message}", markup=False, highlight=False)
     raise typer.Exit(code=1)
@@ -311,6 +338,8 @@ def evaluate(
         41, "--profile-points", min=3, help="Grid points of the M1 profile J(lambda)."
     ),
     json_path: Path | None = typer.Option(None, "--json", help="Write the table as JSON."),
+    workers: int | None = WORKERS,
+    scheduler: str | None = SCHEDULER,
 ) -> None:
     """Compare the CV-KF, the seed-002 adaptive filters, IMM and tuned M1/M2 on a scenario.
 
@@ -325,14 +354,20 @@ def evaluate(
     except ValueError as exc:
         _fail(str(exc))
     console = Console()
-    with Progress(console=console, transient=True) as progress:
+    with _pool(workers, scheduler) as pool, Progress(console=console, transient=True) as progress:
         task = progress.add_task("evaluating", total=None)
 
         def step(msg: str) -> None:
             progress.update(task, description=msg)
 
         result = evaluate_scenario(
-            sc, runs, seed, train_runs=train_runs, profile_points=profile_points, progress=step
+            sc,
+            runs,
+            seed,
+            train_runs=train_runs,
+            profile_points=profile_points,
+            pool=pool,
+            progress=step,
         )
     console.print(_evaluation_table(result, sc.settings.get("published_table1")))
     if json_path is not None:

@@ -124,11 +124,12 @@ def test_tracks_start_at_first_detection_and_coast():
     assert np.all(np.isfinite(est.position[:, -1]))
 
 
-def test_compliance_is_independent_of_workers_and_structured():
+@pytest.mark.distributed
+def test_compliance_on_a_dask_cluster_is_bit_identical_and_structured(dask_pool):
     cases = (CASE["pass_60"], CASE["curve_60"])
     classes = {"car": VEHICLES["car"], "bus": VEHICLES["bus"]}
-    a = evaluate_site(SITE, 3, 7, cases=cases, classes=classes, workers=1)
-    b = evaluate_site(SITE, 3, 7, cases=cases, classes=classes, workers=2)
+    a = evaluate_site(SITE, 3, 7, cases=cases, classes=classes)
+    b = evaluate_site(SITE, 3, 7, cases=cases, classes=classes, pool=dask_pool)
     np.testing.assert_equal(
         [dataclasses.astuple(r) for r in a.rows], [dataclasses.astuple(r) for r in b.rows]
     )  # NaN == NaN here
@@ -142,9 +143,22 @@ def test_compliance_is_independent_of_workers_and_structured():
         "road EKF (CA)",
         "road EKF (M2)",
     }
-    with pytest.raises(ValueError, match="custom trackers run in-process only"):
-        evaluate_site(SITE, 1, 0, cases=cases, trackers={}, workers=2)
     _ = Case
+
+
+@pytest.mark.distributed
+def test_custom_trackers_run_on_the_cluster_too(dask_pool):
+    from adaptrack.crossing.compliance import RoadTracker
+
+    mine = {"road EKF (CA, q = 1)": RoadTracker(ConstantAcceleration(jerk_psd=1.0))}
+    cases = (CASE["pass_60"],)
+    classes = {"car": VEHICLES["car"]}
+    a = evaluate_site(SITE, 2, 3, cases=cases, classes=classes, trackers=mine)
+    b = evaluate_site(SITE, 2, 3, cases=cases, classes=classes, trackers=mine, pool=dask_pool)
+    assert [r.filter for r in a.rows] == ["road EKF (CA, q = 1)"]
+    np.testing.assert_equal(
+        [dataclasses.astuple(r) for r in a.rows], [dataclasses.astuple(r) for r in b.rows]
+    )
 
 
 def test_road_pcrlb_matches_the_filter_covariance_on_point_targets():

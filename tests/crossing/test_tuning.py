@@ -1,6 +1,7 @@
 """Design-time adaptation to a site."""
 
 import numpy as np
+import pytest
 
 from adaptrack.crossing.site import load_site
 from adaptrack.crossing.tuning import (
@@ -30,10 +31,11 @@ def test_tuning_is_never_worse_than_cv_and_round_trips(tmp_path):
     assert isinstance(back.model(), InverseDynamics)
 
 
-def test_parallel_tuning_gives_the_same_result():
+@pytest.mark.distributed
+def test_tuning_on_a_dask_cluster_is_bit_identical(dask_pool):
     site = load_site("lx_default")
-    a = tune_road_model(site, n_runs=1, seed=5, lambdas=(0.1,), workers=1)
-    b = tune_road_model(site, n_runs=1, seed=5, lambdas=(0.1,), workers=2)
+    a = tune_road_model(site, n_runs=1, seed=5, lambdas=(0.1,))
+    b = tune_road_model(site, n_runs=1, seed=5, lambdas=(0.1,), pool=dask_pool)
     assert a == b
 
 

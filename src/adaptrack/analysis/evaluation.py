@@ -19,6 +19,7 @@ from .._typing import FloatArray
 from ..filters.adaptive import Identification, innovation_adaptive_filter
 from ..filters.imm import imm_filter
 from ..models.continuous import ConstantVelocity, MotionModel
+from ..parallel import TaskPool
 from ..simulation.scenario import Scenario, simulate_scenario
 from ..tuning.optimize import (
     TrackingData,
@@ -128,9 +129,14 @@ def evaluate_scenario(
     *,
     train_runs: int = 50,
     profile_points: int = 41,
+    pool: TaskPool | None = None,
     progress: Callable[[str], None] | None = None,
 ) -> Evaluation:
-    """Tune the adaptive models on training runs, then score every filter on fresh runs."""
+    """Tune the adaptive models on training runs, then score every filter on fresh runs.
+
+    The M1 profile's grid points are tasks of ``pool`` (in-process when None); the result
+    does not depend on the pool.
+    """
     say = progress or (lambda _msg: None)
     train_seed, eval_seed = (
         int(s.generate_state(1)[0]) for s in np.random.SeedSequence(seed).spawn(2)
@@ -190,7 +196,9 @@ def evaluate_scenario(
     jerk_bounds = tuple(float(v) for v in scenario.settings.get("jerk_psd_bounds", (1e-3, 1e4)))
     cv = tune_constant_velocity(train, bounds=(psd_bounds[0], psd_bounds[1]))
     say("tuning M1 (profile over lambda)")
-    m1 = tune_inverse_dynamics(train, cv=cv, lambdas=np.geomspace(1e-4, 1.0, profile_points))
+    m1 = tune_inverse_dynamics(
+        train, cv=cv, lambdas=np.geomspace(1e-4, 1.0, profile_points), pool=pool
+    )
     say("tuning M2")
     m2 = tune_shaping_filter(train, m1=m1)
     say("tuning CA")

@@ -13,7 +13,6 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -21,7 +20,8 @@ import numpy as np
 
 from .._typing import BoolArray
 from ..models.adaptive import InverseDynamics, ShapingFilter, singer_accel_std
-from ..models.continuous import ConstantAcceleration, ConstantVelocity
+from ..models.continuous import ConstantAcceleration, ConstantVelocity, MotionModel
+from ..parallel import TaskPool
 from .radar_sim import CrossingRuns, simulate_site_case
 from .site import Site
 from .tracking import (
@@ -88,14 +88,14 @@ class ComplianceResult:
 Tracker = Callable[[CrossingRuns, Site, Case, VehicleClass], TrackEstimates]
 
 
-def default_trackers(tuned_m1: tuple[float, float] | None = None) -> dict[str, Tracker]:
-    """Free 2-D EKF and CMKF, road-constrained CV (the rectilinear baseline), CA, M2.
+@dataclass(frozen=True)
+class FreeTracker:
+    """The free planar EKF (nearly constant velocity) on a case's radar."""
 
-    ``tuned_m1 = (lambda_per_s2, accel_psd)`` adds the road EKF with the site-tuned M1.
-    """
-    sig_a = singer_accel_std(9.0, 0.05, 0.5)
-
-    def free(runs: CrossingRuns, site: Site, case: Case, veh: VehicleClass) -> TrackEstimates:
+    def __call__(
+        self, runs: CrossingRuns, site: Site, case: Case, veh: VehicleClass
+    ) -> TrackEstimates:
+        """Track the runs of one class x case."""
         return track_free_2d(
             runs.times,
             runs.measurements,
@@ -104,7 +104,15 @@ def default_trackers(tuned_m1: tuple[float, float] | None = None) -> dict[str, T
             scatter_std_m=veh.scatter_std_m,
         )
 
-    def converted(runs: CrossingRuns, site: Site, case: Case, veh: VehicleClass) -> TrackEstimates:
+
+@dataclass(frozen=True)
+class ConvertedTracker:
+    """The converted-measurement KF (position only, no Doppler) on a case's radar."""
+
+    def __call__(
+        self, runs: CrossingRuns, site: Site, case: Case, veh: VehicleClass
+    ) -> TrackEstimates:
+        """Track the runs of one class x case."""
         return track_converted(
             runs.times,
             runs.measurements,
@@ -113,32 +121,46 @@ def default_trackers(tuned_m1: tuple[float, float] | None = None) -> dict[str, T
             scatter_std_m=veh.scatter_std_m,
         )
 
-    def road(model: Any) -> Tracker:
-        def run(runs: CrossingRuns, site: Site, case: Case, veh: VehicleClass) -> TrackEstimates:
-            return track_on_road(
-                runs.times,
-                runs.measurements,
-                runs.detected,
-                site.radar_for(case.road),
-                site.roads[case.road],
-                model=model,
-                scatter_std_m=veh.scatter_std_m,
-            )
 
-        return run
+@dataclass(frozen=True)
+class RoadTracker:
+    """The road-constrained EKF with ``model`` along the case's road."""
 
-    tuned = {}
+    model: MotionModel
+
+    def __call__(
+        self, runs: CrossingRuns, site: Site, case: Case, veh: VehicleClass
+    ) -> TrackEstimates:
+        """Track the runs of one class x case."""
+        return track_on_road(
+            runs.times,
+            runs.measurements,
+            runs.detected,
+            site.radar_for(case.road),
+            site.roads[case.road],
+            model=self.model,
+            scatter_std_m=veh.scatter_std_m,
+        )
+
+
+def default_trackers(tuned_m1: tuple[float, float] | None = None) -> dict[str, Tracker]:
+    """Free 2-D EKF and CMKF, road-constrained CV (the rectilinear baseline), CA, M2.
+
+    ``tuned_m1 = (lambda_per_s2, accel_psd)`` adds the road EKF with the site-tuned M1.
+    """
+    sig_a = singer_accel_std(9.0, 0.05, 0.5)
+    tuned: dict[str, Tracker] = {}
     if tuned_m1 is not None:
-        tuned["road EKF (M1, tuned)"] = road(
+        tuned["road EKF (M1, tuned)"] = RoadTracker(
             InverseDynamics(lambda_per_s2=tuned_m1[0], accel_psd=tuned_m1[1])
         )
     return {
         **tuned,
-        "free 2-D EKF (CV)": free,
-        "CMKF (2-D, no Doppler)": converted,
-        "road EKF (CV)": road(ConstantVelocity(accel_psd=3.0)),
-        "road EKF (CA)": road(ConstantAcceleration(jerk_psd=3.0)),
-        "road EKF (M2)": road(
+        "free 2-D EKF (CV)": FreeTracker(),
+        "CMKF (2-D, no Doppler)": ConvertedTracker(),
+        "road EKF (CV)": RoadTracker(ConstantVelocity(accel_psd=3.0)),
+        "road EKF (CA)": RoadTracker(ConstantAcceleration(jerk_psd=3.0)),
+        "road EKF (M2)": RoadTracker(
             ShapingFilter(
                 lambda_per_s2=0.05, alpha_per_s=1 / 3, shaping_std=sig_a / math.sqrt(0.05)
             )
@@ -241,41 +263,33 @@ def evaluate_site(
     cases: tuple[Case, ...] = DEFAULT_CASES,
     classes: dict[str, VehicleClass] | None = None,
     trackers: dict[str, Tracker] | None = None,
-    workers: int = 1,
+    pool: TaskPool | None = None,
     tuned_m1: tuple[float, float] | None = None,
     progress: Callable[[str], None] | None = None,
 ) -> ComplianceResult:
     """Simulate every applicable class x case ``n_runs`` times and score every tracker.
 
-    ``workers > 1`` evaluates (class, case) pairs in that many processes (default trackers
-    only); every pair has its own seed stream, so the result does not depend on ``workers``.
+    The (class, case) pairs are tasks of ``pool`` (in-process when None, e.g. a Dask cluster
+    from :func:`adaptrack.parallel.task_pool`); every pair has its own seed stream, so the
+    result does not depend on the pool.
     """
     start = time.perf_counter()
     classes = VEHICLES if classes is None else classes
     pairs = [(c, v) for v in classes.values() for c in cases if applicable(c, v)]
     seeds = np.random.SeedSequence(seed).spawn(len(pairs))
-    if workers > 1 and trackers is not None:
-        raise ValueError("custom trackers run in-process only (workers=1)")
-    names = list(default_trackers(tuned_m1) if trackers is None else trackers)
-    rows: list[ComplianceRow] = []
-    if workers > 1:
-        with ProcessPoolExecutor(max_workers=workers) as pool:
-            futures = [
-                pool.submit(evaluate_pair, site, c, v, n_runs, ss, None, tuned_m1)
-                for (c, v), ss in zip(pairs, seeds, strict=True)
-            ]
-            for (c, v), fut in zip(pairs, futures, strict=True):
-                rows += fut.result()
-                if progress:
-                    progress(f"{v.name} / {c.name}")
-    else:
-        for (c, v), ss in zip(pairs, seeds, strict=True):
-            rows += evaluate_pair(site, c, v, n_runs, ss, trackers, tuned_m1)
-            if progress:
-                progress(f"{v.name} / {c.name}")
-    trackers_names = names
+    trackers = default_trackers(tuned_m1) if trackers is None else trackers
+    pool = TaskPool() if pool is None else pool
+    per_pair = pool.map(
+        evaluate_pair,
+        [(site, c, v, n_runs, ss, trackers) for (c, v), ss in zip(pairs, seeds, strict=True)],
+        progress=(lambda i: progress(f"{pairs[i][1].name} / {pairs[i][0].name}"))
+        if progress
+        else None,
+    )
+    rows = [row for pair_rows in per_pair for row in pair_rows]
+    names = list(trackers)
     worst = {}
-    for name in trackers_names:
+    for name in names:
         mine = [r for r in rows if r.filter == name]
         worst[name] = {
             "position_rms_m": max(r.position_rms_m for r in mine),
@@ -286,7 +300,7 @@ def evaluate_site(
         }
     gain = {}
     base = {(r.vehicle_class, r.case): r for r in rows if r.filter == "road EKF (CV)"}
-    for name in trackers_names:
+    for name in names:
         if name == "road EKF (CV)" or not base:
             continue
         mine = [r for r in rows if r.filter == name]
@@ -306,6 +320,9 @@ def evaluate_site(
 __all__ = [
     "ComplianceResult",
     "ComplianceRow",
+    "ConvertedTracker",
+    "FreeTracker",
+    "RoadTracker",
     "default_trackers",
     "evaluate_pair",
     "evaluate_site",

@@ -13,7 +13,6 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -24,10 +23,10 @@ from scipy.optimize import minimize, minimize_scalar
 from .._toml import load_toml
 from .._typing import FloatArray
 from ..models.adaptive import InverseDynamics, ShapingFilter, singer_accel_std
-from .compliance import POSITION_LIMIT_M, SPEED_LIMIT_KMH, scored_epochs
+from ..parallel import TaskPool
+from .compliance import POSITION_LIMIT_M, SPEED_LIMIT_KMH, RoadTracker, scored_epochs
 from .radar_sim import CrossingRuns, simulate_site_case
 from .site import Site
-from .tracking import track_on_road
 from .traffic import DEFAULT_CASES, VEHICLES, Case, VehicleClass
 
 TRAINING = (
@@ -122,16 +121,9 @@ def road_criterion(
 ) -> float:
     """``J_req`` of the road-constrained EKF with ``model`` over the training runs."""
     ep, es = [], []
+    tracker = RoadTracker(model)
     for case, veh, runs in training:
-        est = track_on_road(
-            runs.times,
-            runs.measurements,
-            runs.detected,
-            site.radar_for(case.road),
-            site.roads[case.road],
-            model=model,
-            scatter_std_m=veh.scatter_std_m,
-        )
+        est = tracker(runs, site, case, veh)
         zone = scored_epochs(np.isfinite(est.speed), runs, site.zone_m)
         ep.append(np.sum((est.position - runs.position) ** 2, axis=-1)[zone])
         es.append(((est.speed - runs.speed) * 3.6)[zone] ** 2)
@@ -166,29 +158,23 @@ def tune_road_model(
     seed: int = 0,
     lambdas: tuple[float, ...] = (1e-3, 1e-2, 3e-2, 0.1, 0.3, 1.0),
     q_bounds: tuple[float, float] = (0.01, 100.0),
-    workers: int = 1,
+    pool: TaskPool | None = None,
     progress: Callable[[str], None] | None = None,
 ) -> RoadTuning:
     """Profile ``J(lambda) = min_q J(lambda, q)`` including ``lambda = 0`` (CV).
 
-    ``workers > 1`` evaluates the grid points in parallel processes (same result).
+    The grid points are tasks of ``pool`` (in-process when None); the result does not depend
+    on the pool.
     """
     training = training_runs(site, n_runs, seed)
     lam_all = [0.0, *lambdas]
-    if workers > 1:
-        with ProcessPoolExecutor(max_workers=workers) as pool:
-            futures = [pool.submit(_best_q, lam, site, training, q_bounds) for lam in lam_all]
-            fits = []
-            for lam, fut in zip(lam_all, futures, strict=True):
-                fits.append(fut.result())
-                if progress:
-                    progress(f"tuning: lambda = {lam:g}")
-    else:
-        fits = []
-        for lam in lam_all:
-            fits.append(_best_q(lam, site, training, q_bounds))
-            if progress:
-                progress(f"tuning: lambda = {lam:g}")
+    pool = TaskPool() if pool is None else pool
+    shared = pool.share(training)
+    fits = pool.map(
+        _best_q,
+        [(lam, site, shared, q_bounds) for lam in lam_all],
+        progress=(lambda i: progress(f"tuning: lambda = {lam_all[i]:g}")) if progress else None,
+    )
     j_all = [f[1] for f in fits]
     best = int(np.argmin(j_all))
     return RoadTuning(

@@ -26,6 +26,7 @@ from ..filters.run import kalman_filter
 from ..models.adaptive import InverseDynamics, ShapingFilter, singer_accel_std
 from ..models.continuous import ConstantAcceleration, ConstantVelocity, MotionModel, Singer
 from ..models.discretize import Noise
+from ..parallel import TaskPool
 from ..types import GaussianState
 
 Objective = Literal["position", "velocity", "requirement"]
@@ -281,31 +282,43 @@ def tune_singer(
     )
 
 
+def _profile_point(
+    lam: float, data: TrackingData, objective: Objective, q_lo: float, q_hi: float
+) -> tuple[float, float, int]:
+    """``(q*, J(lambda, q*), evaluations)``: bounded Brent on ``log q_a`` at one ``lambda``."""
+    sc = _Scorer(data, objective, 0.0)
+    q, j = _brent_log(
+        lambda q: sc(InverseDynamics(lambda_per_s2=lam, accel_psd=q, n_axes=data.n_axes)),
+        q_lo,
+        q_hi,
+    )
+    return q, j, sc.count
+
+
 def tune_inverse_dynamics(
     data: TrackingData,
     objective: Objective = "position",
     *,
     cv: TuningResult | None = None,
     lambdas: FloatArray | None = None,
+    pool: TaskPool | None = None,
 ) -> TuningResult:
     """M1: profile ``J(lambda) = min_q J(lambda, q)`` on a log grid, then refine (B.7 2-3).
 
     ``lambda = 0`` with the CV optimum is part of the profile, so the result is never worse
-    than the CV baseline on the training data (the nesting oracle).
+    than the CV baseline on the training data (the nesting oracle). The grid points are tasks
+    of ``pool`` (in-process when None); the result does not depend on the pool.
     """
     cv = tune_constant_velocity(data, objective) if cv is None else cv
     q_cv = float(cv.params["accel_psd"])
     grid = np.geomspace(1e-4, 1.0, 41) if lambdas is None else np.asarray(lambdas, float)
-    sc = _Scorer(data, objective, 0.0)
-
-    def inner(lam: float) -> tuple[float, float]:
-        return _brent_log(
-            lambda q: sc(InverseDynamics(lambda_per_s2=lam, accel_psd=q, n_axes=data.n_axes)),
-            q_cv / 100,
-            q_cv * 100,
-        )
-
-    prof = [inner(float(lam)) for lam in grid]
+    pool = TaskPool() if pool is None else pool
+    shared = pool.share(data)
+    prof = pool.map(
+        _profile_point,
+        [(float(lam), shared, objective, q_cv / 100, q_cv * 100) for lam in grid],
+    )
+    count = cv.n_evaluations + sum(p[2] for p in prof)
     lam_all = [0.0] + [float(v) for v in grid]
     j_all = [cv.criterion] + [p[1] for p in prof]
     q_all = [q_cv] + [p[0] for p in prof]
@@ -314,6 +327,13 @@ def tune_inverse_dynamics(
     if best > 0:
         lo = lam_all[best - 1] if best > 1 else grid[0] / 10
         hi = lam_all[best + 1] if best + 1 < len(lam_all) else grid[-1]
+
+        def inner(lam: float) -> tuple[float, float]:
+            nonlocal count
+            q, j, n = _profile_point(lam, data, objective, q_cv / 100, q_cv * 100)
+            count += n
+            return q, j
+
         res = minimize_scalar(
             lambda u: inner(math.exp(u))[1],
             bounds=(math.log(lo), math.log(hi)),
@@ -328,7 +348,7 @@ def tune_inverse_dynamics(
         {"lambda_per_s2": lam_opt, "accel_psd": q_opt},
         j_opt,
         objective,
-        sc.count + cv.n_evaluations,
+        count,
         {"lambda_per_s2": lam_all, "criterion": j_all, "accel_psd": q_all},
     )
 

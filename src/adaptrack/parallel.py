@@ -1,0 +1,112 @@
+"""Independent tasks (Monte-Carlo partitions, tuning grid points) in-process or on Dask.
+
+:func:`task_pool` yields a :class:`TaskPool` that runs tasks
+
+* in this process, in order (``workers <= 1`` and no scheduler);
+* on a ``dask.distributed`` LocalCluster of ``workers`` single-threaded processes;
+* on an existing Dask cluster (``scheduler="tcp://host:8786"``).
+
+A task is a pure function of its arguments (random tasks carry their own seed stream), so the
+results are bit-identical whichever pool runs them; they come back in submission order.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from typing import Any, TypeVar
+
+R = TypeVar("R")
+
+
+class TaskPool:
+    """Runs independent tasks; ``client`` is a ``distributed.Client`` or None (in-process)."""
+
+    def __init__(self, client: Any | None = None) -> None:
+        self.client = client
+
+    @property
+    def n_workers(self) -> int:
+        """Worker processes (1 in-process)."""
+        if self.client is None:
+            return 1
+        return max(1, len(self.client.scheduler_info().get("workers", {})))
+
+    def share(self, obj: Any) -> Any:
+        """Send ``obj`` to every worker once; pass the returned handle as a task argument."""
+        if self.client is None:
+            return obj
+        return self.client.scatter(obj, broadcast=True, hash=False)
+
+    def map(
+        self,
+        fn: Callable[..., R],
+        tasks: Sequence[tuple[Any, ...]],
+        progress: Callable[[int], None] | None = None,
+    ) -> list[R]:
+        """Return ``[fn(*args) for args in tasks]``; ``progress(i)`` as task ``i`` finishes.
+
+        A failing task raises its own exception here (the remaining tasks are cancelled).
+        """
+        if self.client is None:
+            out = []
+            for i, args in enumerate(tasks):
+                out.append(fn(*args))
+                if progress:
+                    progress(i)
+            return out
+        from distributed import as_completed
+
+        futures = [self.client.submit(fn, *args, pure=False) for args in tasks]
+        index = {f.key: i for i, f in enumerate(futures)}
+        results: list[Any] = [None] * len(futures)
+        try:
+            for fut in as_completed(futures):
+                i = index[fut.key]
+                results[i] = fut.result()
+                if progress:
+                    progress(i)
+        finally:
+            self.client.cancel([f for f in futures if not f.done()])
+        return results
+
+
+@contextmanager
+def task_pool(workers: int = 1, scheduler: str | None = None) -> Iterator[TaskPool]:
+    """Open a task pool: in-process, a LocalCluster of ``workers`` processes, or ``scheduler``.
+
+    Raises
+    ------
+    ValueError
+        If both ``workers > 1`` and ``scheduler`` are given, or ``workers < 0``.
+    """
+    if workers < 0:
+        raise ValueError(f"workers must be >= 0; got {workers}")
+    if scheduler is not None and workers > 1:
+        raise ValueError("give either workers (a local cluster) or scheduler (an existing one)")
+    if scheduler is None and workers <= 1:
+        yield TaskPool()
+        return
+    try:
+        from distributed import Client, LocalCluster
+    except ImportError as exc:  # pragma: no cover - distributed is a runtime dependency
+        raise RuntimeError("parallel runs need dask.distributed: pip install distributed") from exc
+    if scheduler is not None:
+        with Client(scheduler) as client:
+            yield TaskPool(client)
+        return
+    with (
+        LocalCluster(
+            n_workers=workers,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=None,
+            silence_logs=logging.ERROR,
+        ) as cluster,
+        Client(cluster) as client,
+    ):
+        yield TaskPool(client)
+
+
+__all__ = ["TaskPool", "task_pool"]
