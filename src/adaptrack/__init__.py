@@ -15,6 +15,7 @@ from .analysis.observability import (
 from .filters.dead_reckoning import DeadReckoningResult, dead_reckoning_filter
 from .filters.kalman import CovarianceError, kalman_step, predict, update
 from .filters.run import kalman_filter
+from .filters.shared_gain import SharedGainResult, shared_gain_filter
 from .models.discretize import Discretization, control_offset, discretize
 from .smoothers.rts import rts_smooth
 from .types import FilterResult, GaussianState, StepInfo
@@ -27,6 +28,7 @@ __all__ = [
     "Discretization",
     "FilterResult",
     "GaussianState",
+    "SharedGainResult",
     "StepInfo",
     "__version__",
     "control_offset",
@@ -40,6 +42,7 @@ __all__ = [
     "observability_rank",
     "predict",
     "rts_smooth",
+    "shared_gain_filter",
     "simulation",
     "unobservable_directions",
     "update",

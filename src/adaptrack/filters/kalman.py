@@ -101,6 +101,49 @@ def _covariance_update(
     return symmetrize(ikh @ cov)
 
 
+def covariance_recursion(
+    phi: FloatArray,
+    qd: FloatArray,
+    h: FloatArray,
+    r: FloatArray,
+    mask: BoolArray,
+    cov0: FloatArray,
+    form: str,
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Run the covariance recursion shared by tracks with common times, prior, R and mask.
+
+    ``phi``, ``qd`` (T, n, n), ``mask`` (T, m), ``cov0`` (n, n). Returns predicted and filtered
+    covariances (T, n, n), innovation covariances (T, m, m), gains (T, n, m), log det S (T,)
+    and the masked measurement matrices (T, m, n).
+
+    Raises
+    ------
+    CovarianceError
+        When an innovation covariance is not positive definite (naming the step).
+    """
+    n_steps, n = phi.shape[0], phi.shape[-1]
+    m = h.shape[0]
+    pc, fc = np.empty((n_steps, n, n)), np.empty((n_steps, n, n))
+    s_a, k_a = np.empty((n_steps, m, m)), np.empty((n_steps, n, m))
+    logdet = np.empty(n_steps)
+    hm_a = np.empty((n_steps, m, n))
+    cov = cov0
+    for k in range(n_steps):
+        p = phi[k] @ cov @ phi[k].T + qd[k]
+        pc[k] = p = 0.5 * (p + p.T)
+        hm, rm = _masked_model(h, r, None if bool(mask[k].all()) else mask[k])
+        try:
+            kg, s, ld = _gain(p, hm, rm)
+        except np.linalg.LinAlgError:
+            raise CovarianceError(
+                f"innovation covariance is not positive definite at step {k}; check the "
+                "model, measurement_cov and the prior"
+            ) from None
+        fc[k] = cov = _covariance_update(p, kg, hm, rm, form)
+        s_a[k], k_a[k], logdet[k], hm_a[k] = s, kg, ld, hm
+    return pc, fc, s_a, k_a, logdet, hm_a
+
+
 def _innovation_stats(
     nu: FloatArray, s: FloatArray, logdet: FloatArray, n_obs: FloatArray
 ) -> tuple[FloatArray, FloatArray]:

@@ -28,11 +28,10 @@ from .kalman import (
     UpdateForm,
     _check_form,
     _component_mask,
-    _covariance_update,
-    _gain,
     _innovation_stats,
     _masked_model,
     _update,
+    covariance_recursion,
     predict,
 )
 
@@ -490,22 +489,7 @@ def _run_shared(
     n_steps, m = z.shape[-2:]
     n = phi.shape[-1]
     mask0 = mask.reshape(-1, n_steps, m)[0]
-    pc, fc = np.empty((n_steps, n, n)), np.empty((n_steps, n, n))
-    s_a, k_a = np.empty((n_steps, m, m)), np.empty((n_steps, n, m))
-    logdet = np.empty(n_steps)
-    hm_a = np.empty((n_steps, m, n))
-    cov = initial.cov
-    for k in range(n_steps):
-        p = phi[k] @ cov @ phi[k].T + qd[k]
-        pc[k] = p = 0.5 * (p + p.T)
-        full = bool(mask0[k].all())
-        hm, rm = _masked_model(h, r, None if full else mask0[k])
-        try:
-            kg, s, ld = _gain(p, hm, rm)
-        except np.linalg.LinAlgError:
-            _raise_not_pd("innovation covariance", k, None)
-        fc[k] = cov = _covariance_update(p, kg, hm, rm, form)
-        s_a[k], k_a[k], logdet[k], hm_a[k] = s, kg, ld, hm
+    pc, fc, s_a, k_a, logdet, hm_a = covariance_recursion(phi, qd, h, r, mask0, initial.cov, form)
     # means, all tracks at once (same arithmetic as the general path)
     pm, fm = _alloc(batch, n_steps, n), _alloc(batch, n_steps, n)
     nu_a = _alloc(batch, n_steps, m)
