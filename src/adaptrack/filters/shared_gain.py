@@ -156,8 +156,8 @@ def shared_gain_filter(
     if compiled:
         from ._codegen import forward_kernel
 
-        c = np.ascontiguousarray
-        forward_kernel(n, m)(c(a), c(b), c(kg), present, c(z), x0, out)
+        contiguous = np.ascontiguousarray
+        forward_kernel(n, m)(a, contiguous(b), contiguous(kg), present, contiguous(z), x0, out)
     else:
         _forward_numpy(a, b, kg, present, z, x0, out)
     if not np.isfinite(out[:, -1]).all():  # a non-finite input reaches the last state
@@ -165,17 +165,16 @@ def shared_gain_filter(
         raise FloatingPointError("the filtered means overflowed; check the scale of the input")
     if not smooth:
         return SharedGainResult(t, out, fc, smoothed=False)
-    c = mT(np.linalg.solve(pc[1:], phi[1:] @ fc[:-1]))  # C_k, k = 0 .. T-2
+    c = np.ascontiguousarray(mT(np.linalg.solve(pc[1:], phi[1:] @ fc[:-1])))  # C_0 .. C_T-2
     d = np.eye(n) - c @ phi[1:]
-    e = -np.einsum("kij,kj->ki", c, u[1:])
+    e = np.ascontiguousarray(-np.einsum("kij,kj->ki", c, u[1:]))
     ps = fc.copy()
     for k in range(n_steps - 2, -1, -1):
         ps[k] = symmetrize(fc[k] + c[k] @ (ps[k + 1] - pc[k + 1]) @ c[k].T)
     if compiled:
         from ._codegen import backward_kernel
 
-        cc = np.ascontiguousarray
-        backward_kernel(n)(cc(d), cc(c), cc(e), out)
+        backward_kernel(n)(d, c, e, out)
     else:
         _backward_numpy(d, c, e, out)
     return SharedGainResult(t, out, ps, smoothed=True)
