@@ -14,6 +14,7 @@ from .analysis.observability import (
 )
 from .filters.dead_reckoning import DeadReckoningResult, dead_reckoning_filter
 from .filters.kalman import CovarianceError, kalman_step, predict, update
+from .filters.online import OnlineFilter
 from .filters.run import kalman_filter
 from .filters.shared_gain import SharedGainResult, shared_gain_filter
 from .models.discretize import Discretization, control_offset, discretize
@@ -28,6 +29,7 @@ __all__ = [
     "Discretization",
     "FilterResult",
     "GaussianState",
+    "OnlineFilter",
     "SharedGainResult",
     "StepInfo",
     "__version__",

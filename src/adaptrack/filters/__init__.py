@@ -2,14 +2,19 @@
 
 from .dead_reckoning import DeadReckoningResult, dead_reckoning_filter
 from .kalman import CovarianceError, kalman_step, predict, update
+from .online import OnlineFilter
 from .run import kalman_filter
+from .shared_gain import SharedGainResult, shared_gain_filter
 
 __all__ = [
     "CovarianceError",
     "DeadReckoningResult",
+    "OnlineFilter",
+    "SharedGainResult",
     "dead_reckoning_filter",
     "kalman_filter",
     "kalman_step",
     "predict",
+    "shared_gain_filter",
     "update",
 ]

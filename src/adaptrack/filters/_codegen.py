@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import hashlib
 import importlib.util
+import math
 import os
 import sys
 import tempfile
@@ -24,6 +25,7 @@ from typing import Any
 
 LANES = 4
 _VERSION = 1
+DT_TOLERANCE_S = 1e-9  # online steps this close share one discretisation (clock round-off)
 
 
 def _step(lane: str, n: int, m: int) -> list[str]:
@@ -156,3 +158,187 @@ def forward_kernel(n: int, m: int) -> Any:
 def backward_kernel(n: int) -> Any:
     """``backward(d, cg, e, out)`` (in place) for state size ``n``."""
     return _load(f"backward_v{_VERSION}_n{n}", _backward_source(n)).backward
+
+
+def _sym(i: int, j: int) -> tuple[int, int]:
+    return (i, j) if i <= j else (j, i)
+
+
+def kf_step_lines(n: int, m: int) -> list[str]:
+    """Straight-line predict + Joseph update on scalar locals, every component present.
+
+    Reads ``x{i}``, ``P{i}_{j}`` (i <= j), ``F{i}_{j}``, ``Q{i}_{j}``, ``u{i}``, ``H{a}_{j}``,
+    ``R{a}_{b}``, ``o{a}`` (noise mean) and ``z{a}``; leaves the predicted moments in
+    ``xp{i}``, ``pp{i}_{j}``, the filtered ones back in ``x{i}``, ``P{i}_{j}``, the innovation in
+    ``nu{a}``, ``S{a}_{b}``, the transposed gain in ``kt{a}_{i}`` and ``nis``, ``logdet``.
+    A non-positive pivot of ``S`` executes ``return 2`` (the inputs are unchanged).
+    """
+
+    def p(i: int, j: int) -> str:
+        a, b = _sym(i, j)
+        return f"P{a}_{b}"
+
+    def pp(i: int, j: int) -> str:
+        a, b = _sym(i, j)
+        return f"pp{a}_{b}"
+
+    def s_(a: int, b: int) -> str:
+        i, j = _sym(a, b)
+        return f"S{i}_{j}"
+
+    def dot(terms: list[str]) -> str:
+        return " + ".join(terms) if terms else "0.0"
+
+    out = [f"xp{i} = " + dot([f"F{i}_{k} * x{k}" for k in range(n)] + [f"u{i}"]) for i in range(n)]
+    out += [
+        f"tf{i}_{j} = " + dot([f"F{i}_{k} * {p(k, j)}" for k in range(n)])
+        for i in range(n)
+        for j in range(n)
+    ]
+    out += [
+        f"pp{i}_{j} = 0.5 * ("
+        + dot([f"tf{i}_{k} * F{j}_{k}" for k in range(n)])
+        + " + "
+        + dot([f"tf{j}_{k} * F{i}_{k}" for k in range(n)])
+        + f") + Q{i}_{j}"
+        for i in range(n)
+        for j in range(i, n)
+    ]
+    out += [
+        f"nu{a} = z{a} - o{a} - (" + dot([f"H{a}_{k} * xp{k}" for k in range(n)]) + ")"
+        for a in range(m)
+    ]
+    out += [
+        f"hp{a}_{j} = " + dot([f"H{a}_{k} * {pp(k, j)}" for k in range(n)])
+        for a in range(m)
+        for j in range(n)
+    ]
+    out += [
+        f"S{a}_{b} = 0.5 * ("
+        + dot([f"hp{a}_{k} * H{b}_{k}" for k in range(n)])
+        + " + "
+        + dot([f"hp{b}_{k} * H{a}_{k}" for k in range(n)])
+        + f") + R{a}_{b}"
+        for a in range(m)
+        for b in range(a, m)
+    ]
+    # Cholesky S = L L^T
+    for a in range(m):
+        for b in range(a + 1):
+            acc = s_(a, b) + "".join(f" - L{a}_{c} * L{b}_{c}" for c in range(b))
+            if a == b:
+                out += [f"d{a} = {acc}", f"if not d{a} > 0.0:", "    return 2"]
+                out.append(f"L{a}_{a} = math.sqrt(d{a})")
+            else:
+                out.append(f"L{a}_{b} = ({acc}) / L{b}_{b}")
+    out.append("logdet = " + dot([f"2.0 * math.log(L{a}_{a})" for a in range(m)]))
+    # K^T = S^-1 (H P): forward then backward substitution, column by column
+    for j in range(n):
+        for a in range(m):
+            acc = f"hp{a}_{j}" + "".join(f" - L{a}_{c} * y{c}_{j}" for c in range(a))
+            out.append(f"y{a}_{j} = ({acc}) / L{a}_{a}")
+        for a in range(m - 1, -1, -1):
+            acc = f"y{a}_{j}" + "".join(f" - L{c}_{a} * kt{c}_{j}" for c in range(a + 1, m))
+            out.append(f"kt{a}_{j} = ({acc}) / L{a}_{a}")
+    for a in range(m):
+        acc = f"nu{a}" + "".join(f" - L{a}_{c} * w{c}" for c in range(a))
+        out.append(f"w{a} = ({acc}) / L{a}_{a}")
+    out.append("nis = " + dot([f"w{a} * w{a}" for a in range(m)]))
+    out += [f"x{i} = xp{i} + " + dot([f"kt{a}_{i} * nu{a}" for a in range(m)]) for i in range(n)]
+    out += [
+        f"ikh{i}_{j} = {1.0 if i == j else 0.0} - ("
+        + dot([f"kt{a}_{i} * H{a}_{j}" for a in range(m)])
+        + ")"
+        for i in range(n)
+        for j in range(n)
+    ]
+    out += [
+        f"ta{i}_{j} = " + dot([f"ikh{i}_{k} * {pp(k, j)}" for k in range(n)])
+        for i in range(n)
+        for j in range(n)
+    ]
+    out += [
+        f"kr{i}_{b} = " + dot([f"kt{a}_{i} * R{_sym(a, b)[0]}_{_sym(a, b)[1]}" for a in range(m)])
+        for i in range(n)
+        for b in range(m)
+    ]
+    out += [
+        f"P{i}_{j} = 0.5 * ("
+        + dot([f"ta{i}_{k} * ikh{j}_{k}" for k in range(n)])
+        + " + "
+        + dot([f"ta{j}_{k} * ikh{i}_{k}" for k in range(n)])
+        + ") + "
+        + dot([f"kr{i}_{b} * kt{b}_{j}" for b in range(m)])
+        for i in range(n)
+        for j in range(i, n)
+    ]
+    return out
+
+
+def _online_source(n: int, m: int, layout: tuple[int, int, int, int, int, int]) -> str:
+    """``online_step(ws, bank, t, z) -> status`` on the work buffer of ``OnlineFilter``."""
+    hdr_time, xo, po, ho, ro, oo = layout
+    body = [
+        f"if z.shape[0] != {m}:",
+        "    return 4",
+        f"dt = t - ws[{hdr_time}]",
+        "if not (dt >= 0.0 and math.isfinite(t)):",
+        "    return 5",
+        "row = -1",
+        "for j in range(bank.shape[0]):",
+        f"    if abs(bank[j, 0] - dt) <= {DT_TOLERANCE_S!r}:",
+        "        row = j",
+        "        break",
+        "if row < 0:",
+        "    return 3",
+    ]
+    body += [f"z{a} = z[{a}]" for a in range(m)]
+    body += [
+        "if not (" + " and ".join(f"math.isfinite(z{a})" for a in range(m)) + "):",
+        "    return 1",
+    ]
+    body += [f"x{i} = ws[{xo + i}]" for i in range(n)]
+    body += [f"P{i}_{j} = ws[{po + i * n + j}]" for i in range(n) for j in range(i, n)]
+    body += [f"F{i}_{j} = bank[row, {1 + i * n + j}]" for i in range(n) for j in range(n)]
+    body += [f"Q{i}_{j} = bank[row, {1 + n * n + i * n + j}]" for i in range(n) for j in range(n)]
+    body += [f"u{i} = bank[row, {1 + 2 * n * n + i}]" for i in range(n)]
+    body += [f"H{a}_{j} = ws[{ho + a * n + j}]" for a in range(m) for j in range(n)]
+    body += [f"R{a}_{b} = ws[{ro + a * m + b}]" for a in range(m) for b in range(a, m)]
+    body += [f"o{a} = ws[{oo + a}]" for a in range(m)]
+    body += kf_step_lines(n, m)
+    body += [f"ws[{xo + i}] = x{i}" for i in range(n)]
+    for i in range(n):
+        for j in range(i, n):
+            body.append(f"ws[{po + i * n + j}] = P{i}_{j}")
+            if j != i:
+                body.append(f"ws[{po + j * n + i}] = P{i}_{j}")
+    body += [
+        f"ws[{hdr_time - 3}] = nis",
+        f"ws[{hdr_time - 2}] = -0.5 * (logdet + nis + {m} * {math.log(2 * math.pi)!r})",
+        f"ws[{hdr_time - 1}] = {float(m)}",
+        f"ws[{hdr_time}] = t",
+        "return 0",
+    ]
+    src = [
+        "import math",
+        "",
+        "import numba",
+        "",
+        "",
+        "@numba.njit(cache=True, boundscheck=False, fastmath=False)",
+        "def online_step(ws, bank, t, z):",
+        f'    """One online Joseph-form step, every component present; n = {n}, m = {m}."""',
+        *("    " + s for s in body),
+        "",
+    ]
+    return "\n".join(src)
+
+
+@cache
+def online_kernel(n: int, m: int, layout: tuple[int, int, int, int, int, int]) -> Any:
+    """``online_step(ws, bank, t, z)`` for ``OnlineFilter``.
+
+    ``layout``: the header's time index and the offsets of x, P, H, R and the noise mean in the
+    work buffer.
+    """
+    return _load(f"online_v{_VERSION}_n{n}_m{m}", _online_source(n, m, layout)).online_step

@@ -18,6 +18,134 @@ from .._kernel_linalg import cholesky_into, cholesky_solve_into
 _LOG_2PI = math.log(2.0 * math.pi)
 
 
+@numba.njit(cache=True, inline="always")
+def kf_step(  # type: ignore[no-untyped-def]
+    x, p, phi, qd, u, z, mask, h, r, off, joseph, xp, pp, tmp, hm, rm, hp, s, lo, kt, nu, w, ikh
+):
+    """One predict + update in place: ``x``, ``p`` (n), (n, n) become the filtered moments.
+
+    ``phi``, ``qd`` (n, n), ``u`` (n,), ``z``, ``mask``, ``off`` (m,), ``h`` (m, n), ``r``
+    (m, m); the rest are scratch buffers that hold the predicted moments (``xp``, ``pp``),
+    innovation ``nu``, its covariance ``s`` and the transposed gain ``kt`` afterwards.
+    Returns ``(ok, nis, log det S, observed components)``; ``ok`` is False (and ``x``, ``p``
+    untouched) when ``S`` is not positive definite.
+    """
+    n = x.shape[0]
+    m = z.shape[0]
+    # predict: xp = F x + u, Pp = F P F^T + Q
+    for a in range(n):
+        acc = 0.0
+        for b in range(n):
+            acc += phi[a, b] * x[b]
+        xp[a] = acc + u[a]
+    for a in range(n):
+        for b in range(n):
+            acc = 0.0
+            for c in range(n):
+                acc += phi[a, c] * p[c, b]
+            tmp[a, b] = acc
+    for a in range(n):
+        for b in range(n):
+            acc = 0.0
+            for c in range(n):
+                acc += tmp[a, c] * phi[b, c]
+            pp[a, b] = acc + qd[a, b]
+    for a in range(n):
+        for b in range(a + 1, n):
+            v = 0.5 * (pp[a, b] + pp[b, a])
+            pp[a, b] = v
+            pp[b, a] = v
+    # masked measurement model
+    nobs = 0.0
+    for a in range(m):
+        on = mask[a]
+        nobs += 1.0 if on else 0.0
+        for b in range(n):
+            hm[a, b] = h[a, b] if on else 0.0
+        for b in range(m):
+            if on and mask[b]:
+                rm[a, b] = r[a, b]
+            else:
+                rm[a, b] = 1.0 if a == b and not on else 0.0
+    # innovation and its covariance
+    for a in range(m):
+        acc = 0.0
+        for b in range(n):
+            acc += hm[a, b] * xp[b]
+        nu[a] = (z[a] - off[a] - acc) if mask[a] else -acc
+        for b in range(n):
+            acc2 = 0.0
+            for c in range(n):
+                acc2 += hm[a, c] * pp[c, b]
+            hp[a, b] = acc2
+    for a in range(m):
+        for b in range(m):
+            acc = 0.0
+            for c in range(n):
+                acc += hp[a, c] * hm[b, c]
+            s[a, b] = acc + rm[a, b]
+    for a in range(m):
+        for b in range(a + 1, m):
+            v = 0.5 * (s[a, b] + s[b, a])
+            s[a, b] = v
+            s[b, a] = v
+    # Cholesky S = L L^T; K^T = S^-1 (H P)
+    if not cholesky_into(s, lo):
+        return False, 0.0, 0.0, 0.0
+    logdet = 0.0
+    for a in range(m):
+        logdet += 2.0 * math.log(lo[a, a])
+    cholesky_solve_into(lo, hp, kt)
+    # NIS = nu^T S^-1 nu
+    for a in range(m):
+        acc = nu[a]
+        for c in range(a):
+            acc -= lo[a, c] * w[c]
+        w[a] = acc / lo[a, a]
+    nis = 0.0
+    for a in range(m):
+        nis += w[a] * w[a]
+    # update
+    for a in range(n):
+        acc = 0.0
+        for b in range(m):
+            acc += kt[b, a] * nu[b]
+        x[a] = xp[a] + acc
+    for a in range(n):
+        for b in range(n):
+            acc = 0.0
+            for c in range(m):
+                acc += kt[c, a] * hm[c, b]
+            ikh[a, b] = (1.0 if a == b else 0.0) - acc
+    for a in range(n):
+        for b in range(n):
+            acc = 0.0
+            for c in range(n):
+                acc += ikh[a, c] * pp[c, b]
+            tmp[a, b] = acc
+    if joseph:
+        for a in range(n):
+            for b in range(n):
+                acc = 0.0
+                for c in range(n):
+                    acc += tmp[a, c] * ikh[b, c]
+                krk = 0.0
+                for c in range(m):
+                    for d in range(m):
+                        krk += kt[c, a] * rm[c, d] * kt[d, b]
+                p[a, b] = acc + krk
+    else:
+        for a in range(n):
+            for b in range(n):
+                p[a, b] = tmp[a, b]
+    for a in range(n):
+        for b in range(a + 1, n):
+            v = 0.5 * (p[a, b] + p[b, a])
+            p[a, b] = v
+            p[b, a] = v
+    return True, nis, logdet, nobs
+
+
 @numba.njit(cache=True, fastmath=False)
 def kalman_kernel(x0, p0, phi, qd, u, z, mask, h, r, off, joseph):  # type: ignore[no-untyped-def]
     """Filter every track of the batch.
@@ -60,117 +188,33 @@ def kalman_kernel(x0, p0, phi, qd, u, z, mask, h, r, off, joseph):  # type: igno
                 p[a, b] = p0[ix, a, b]
         for k in range(n_st):
             kr = min(k, r.shape[1] - 1)
-            # predict: xp = F x + u, Pp = F P F^T + Q
-            for a in range(n):
-                acc = 0.0
-                for b in range(n):
-                    acc += phi[ip, k, a, b] * x[b]
-                xp[a] = acc + u[iu, k, a]
-            for a in range(n):
-                for b in range(n):
-                    acc = 0.0
-                    for c in range(n):
-                        acc += phi[ip, k, a, c] * p[c, b]
-                    tmp[a, b] = acc
-            for a in range(n):
-                for b in range(n):
-                    acc = 0.0
-                    for c in range(n):
-                        acc += tmp[a, c] * phi[ip, k, b, c]
-                    pp[a, b] = acc + qd[ip, k, a, b]
-            for a in range(n):
-                for b in range(a + 1, n):
-                    v = 0.5 * (pp[a, b] + pp[b, a])
-                    pp[a, b] = v
-                    pp[b, a] = v
-            # masked measurement model
-            nobs = 0.0
-            for a in range(m):
-                on = mask[i, k, a]
-                nobs += 1.0 if on else 0.0
-                for b in range(n):
-                    hm[a, b] = h[a, b] if on else 0.0
-                for b in range(m):
-                    if on and mask[i, k, b]:
-                        rm[a, b] = r[ir, kr, a, b]
-                    else:
-                        rm[a, b] = 1.0 if a == b and not on else 0.0
-            # innovation and its covariance
-            for a in range(m):
-                acc = 0.0
-                for b in range(n):
-                    acc += hm[a, b] * xp[b]
-                nu[a] = (z[i, k, a] - off[a] - acc) if mask[i, k, a] else -acc
-                for b in range(n):
-                    acc2 = 0.0
-                    for c in range(n):
-                        acc2 += hm[a, c] * pp[c, b]
-                    hp[a, b] = acc2
-            for a in range(m):
-                for b in range(m):
-                    acc = 0.0
-                    for c in range(n):
-                        acc += hp[a, c] * hm[b, c]
-                    s[a, b] = acc + rm[a, b]
-            for a in range(m):
-                for b in range(a + 1, m):
-                    v = 0.5 * (s[a, b] + s[b, a])
-                    s[a, b] = v
-                    s[b, a] = v
-            # Cholesky S = L L^T; K^T = S^-1 (H P)
-            if not cholesky_into(s, lo):
+            ok, nis, logdet, nobs = kf_step(
+                x,
+                p,
+                phi[ip, k],
+                qd[ip, k],
+                u[iu, k],
+                z[i, k],
+                mask[i, k],
+                h,
+                r[ir, kr],
+                off,
+                joseph,
+                xp,
+                pp,
+                tmp,
+                hm,
+                rm,
+                hp,
+                s,
+                lo,
+                kt,
+                nu,
+                w,
+                ikh,
+            )
+            if not ok:
                 raise ValueError("innovation covariance is not positive definite")
-            logdet = 0.0
-            for a in range(m):
-                logdet += 2.0 * math.log(lo[a, a])
-            cholesky_solve_into(lo, hp, kt)
-            # NIS = nu^T S^-1 nu
-            for a in range(m):
-                acc = nu[a]
-                for c in range(a):
-                    acc -= lo[a, c] * w[c]
-                w[a] = acc / lo[a, a]
-            nis = 0.0
-            for a in range(m):
-                nis += w[a] * w[a]
-            # update
-            for a in range(n):
-                acc = 0.0
-                for b in range(m):
-                    acc += kt[b, a] * nu[b]
-                x[a] = xp[a] + acc
-            for a in range(n):
-                for b in range(n):
-                    acc = 0.0
-                    for c in range(m):
-                        acc += kt[c, a] * hm[c, b]
-                    ikh[a, b] = (1.0 if a == b else 0.0) - acc
-            for a in range(n):
-                for b in range(n):
-                    acc = 0.0
-                    for c in range(n):
-                        acc += ikh[a, c] * pp[c, b]
-                    tmp[a, b] = acc
-            if joseph:
-                for a in range(n):
-                    for b in range(n):
-                        acc = 0.0
-                        for c in range(n):
-                            acc += tmp[a, c] * ikh[b, c]
-                        krk = 0.0
-                        for c in range(m):
-                            for d in range(m):
-                                krk += kt[c, a] * rm[c, d] * kt[d, b]
-                        p[a, b] = acc + krk
-            else:
-                for a in range(n):
-                    for b in range(n):
-                        p[a, b] = tmp[a, b]
-            for a in range(n):
-                for b in range(a + 1, n):
-                    v = 0.5 * (p[a, b] + p[b, a])
-                    p[a, b] = v
-                    p[b, a] = v
             # store
             for a in range(n):
                 pm[i, k, a] = xp[a]

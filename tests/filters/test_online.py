@@ -1,0 +1,103 @@
+"""OnlineFilter: the stream filter equals the sequence API; bad input loses nothing."""
+
+import numpy as np
+import pytest
+
+import adaptrack as at
+from adaptrack.filters.online import OnlineFilter
+from adaptrack.models import ConstantAcceleration, ConstantVelocity, Singer
+
+CASES = [
+    (ConstantVelocity(accel_psd=0.5), 1),
+    (Singer(time_constant_s=5.0, accel_std_mps2=2.0), 1),
+    (ConstantAcceleration(jerk_psd=0.3, n_axes=2), 2),
+    (Singer(time_constant_s=8.0, accel_std_mps2=1.0, n_axes=3), 3),
+]
+
+
+def _stream(model, m, rng, n_steps=60):
+    n = model.state_dim
+    t = np.cumsum(rng.choice([0.05, 0.1, 0.25], n_steps))  # a few distinct step lengths
+    h = np.zeros((m, n))
+    h[np.arange(m), np.arange(m)] = 1.0
+    a = rng.standard_normal((m, m))
+    r = a @ a.T + 0.5 * np.eye(m)
+    z = 10.0 * rng.standard_normal((n_steps, m)) + 3.0 * t[:, None]
+    prior = at.GaussianState(rng.standard_normal(n), np.diag(rng.uniform(1, 50, n)), t[0] - 0.1)
+    return t, z, h, r, prior
+
+
+@pytest.mark.parametrize("form", ["joseph", "standard"])
+@pytest.mark.parametrize(("model", "m"), CASES)
+def test_stream_equals_the_sequence_filter(model, m, form, rng):
+    t, z, h, r, prior = _stream(model, m, rng)
+    mu = 0.2 * rng.standard_normal(m)
+    mask = rng.random(z.shape) > 0.2
+    mask[::7] = True
+    ref = at.kalman_filter(
+        t, z, model, h, r, prior, form=form, measurement_noise_mean=mu, backend="numpy"
+    )
+    ref_masked = at.kalman_filter(
+        t, z, model, h, r, prior, mask=mask, form=form, measurement_noise_mean=mu, backend="numpy"
+    )
+    for masked, expected in ((False, ref), (True, ref_masked)):
+        f = OnlineFilter(
+            model, h, r, prior, form=form, measurement_noise_mean=mu, cache_size=2
+        )  # 3 step lengths in a 2-row cache: rows are replaced and rebuilt
+        for k in range(t.size):
+            nis = f.update(t[k], z[k], mask=mask[k] if masked else None)
+            scale = np.abs(expected.filtered.mean[k]).max()
+            assert np.abs(f.mean - expected.filtered.mean[k]).max() <= 1e-10 * scale
+            assert np.abs(f.cov - expected.filtered.cov[k]).max() <= 1e-10 * np.abs(f.cov).max()
+            assert nis == pytest.approx(expected.info.nis[k], rel=1e-9, abs=1e-12)
+            assert f.log_likelihood == pytest.approx(expected.info.log_likelihood[k], rel=1e-9)
+        assert f.time == t[-1]
+        assert f.state.mean.shape == (model.state_dim,)
+
+
+def test_clock_round_off_shares_one_discretisation(rng):
+    model, m = CASES[1]
+    _, _, h, r, prior = _stream(model, m, rng)
+    t = prior.time + 0.1 + 0.1 * np.arange(50)  # steps differ from 0.1 by round-off only
+    assert np.unique(np.diff(t)).size > 1
+    f = OnlineFilter(model, h, r, prior)
+    for k in range(t.size):
+        f.update(t[k], [float(k)])
+    assert np.isfinite(f._bank[:, 0]).sum() == 1  # one step length cached
+
+
+def test_bad_input_raises_and_leaves_the_filter_unchanged(rng):
+    model, m = CASES[2]
+    t, z, h, r, prior = _stream(model, m, rng)
+    f = OnlineFilter(model, h, r, prior)
+    f.update(t[0], z[0])
+    before = (f.mean, f.cov, f.time)
+
+    def unchanged():
+        np.testing.assert_array_equal(f.mean, before[0])
+        np.testing.assert_array_equal(f.cov, before[1])
+        assert f.time == before[2]
+
+    with pytest.raises(ValueError, match="not before the filter time"):
+        f.update(t[0] - 1.0, z[1])
+    unchanged()
+    with pytest.raises(ValueError, match="not finite where present"):
+        f.update(t[1], [np.nan, 1.0])
+    unchanged()
+    with pytest.raises(ValueError, match=r"measurement must have shape \(2,\)"):
+        f.update(t[1], [1.0, 2.0, 3.0])
+    unchanged()
+    with pytest.raises(ValueError, match="mask must be boolean"):
+        f.update(t[1], z[1], mask=[1, 0])
+    unchanged()
+    f.update(t[1], [np.nan, 1.0], mask=np.array([False, True]))  # NaN where missing is fine
+    assert f.time == t[1]
+    with pytest.raises(ValueError, match="one track"):
+        OnlineFilter(
+            model,
+            h,
+            r,
+            at.GaussianState(np.zeros((2, 6)), np.broadcast_to(np.eye(6), (2, 6, 6)), 0.0),
+        )
+    with pytest.raises(ValueError, match="measurement_cov must be positive definite"):
+        OnlineFilter(model, h, -r, prior)
