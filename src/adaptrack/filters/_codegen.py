@@ -342,3 +342,76 @@ def online_kernel(n: int, m: int, layout: tuple[int, int, int, int, int, int]) -
     work buffer.
     """
     return _load(f"online_v{_VERSION}_n{n}_m{m}", _online_source(n, m, layout)).online_step
+
+
+def _sequence_source(n: int, m: int) -> str:
+    """``sequence(x0, p0, phi, qd, u, z, h, r, off, pm, pc, fm, fc, nu, s, nis, ll, kg, status)``.
+
+    ``status[i]`` becomes ``k + 1`` if track ``i`` stops at step ``k`` (S not positive definite).
+    """
+    body = [
+        "n_tracks, n_steps = A_z.shape[0], A_z.shape[1]",
+        "for i in prange(n_tracks):",
+        "    ii = numba.int64(i)",  # prange's index may be unsigned: min() with it gives a float
+        "    ix = min(ii, A_x0.shape[0] - 1)",
+        "    ip = min(ii, A_phi.shape[0] - 1)",
+        "    iu = min(ii, A_u.shape[0] - 1)",
+    ]
+    inner = [f"x{j} = A_x0[ix, {j}]" for j in range(n)]
+    inner += [f"P{a}_{b} = A_p0[ix, {a}, {b}]" for a in range(n) for b in range(a, n)]
+    inner += [f"H{a}_{j} = A_h[{a}, {j}]" for a in range(m) for j in range(n)]
+    inner += [f"R{a}_{b} = A_r[{a}, {b}]" for a in range(m) for b in range(a, m)]
+    inner += [f"o{a} = A_off[{a}]" for a in range(m)]
+    inner.append("for k in range(n_steps):")
+    step = [f"F{a}_{b} = A_phi[ip, k, {a}, {b}]" for a in range(n) for b in range(n)]
+    step += [f"Q{a}_{b} = A_qd[ip, k, {a}, {b}]" for a in range(n) for b in range(n)]
+    step += [f"u{a} = A_u[iu, k, {a}]" for a in range(n)]
+    step += [f"z{a} = A_z[i, k, {a}]" for a in range(m)]
+    for line in kf_step_lines(n, m):
+        if line.strip() == "return 2":  # not positive definite: flag the track, stop it
+            step += [line.replace("return 2", "A_status[i] = k + 1"), "    break"]
+        else:
+            step.append(line)
+    for a in range(n):
+        step += [f"A_pm[i, k, {a}] = xp{a}", f"A_fm[i, k, {a}] = x{a}"]
+        for b in range(n):
+            lo, hi = _sym(a, b)
+            step += [f"A_pc[i, k, {a}, {b}] = pp{lo}_{hi}", f"A_fc[i, k, {a}, {b}] = P{lo}_{hi}"]
+        step += [f"A_kg[i, k, {a}, {b}] = kt{b}_{a}" for b in range(m)]
+    for a in range(m):
+        step.append(f"A_nu[i, k, {a}] = nu{a}")
+        for b in range(m):
+            lo, hi = _sym(a, b)
+            step.append(f"A_s[i, k, {a}, {b}] = S{lo}_{hi}")
+    step += [
+        "A_nis[i, k] = nis",
+        f"A_ll[i, k] = -0.5 * (logdet + nis + {m} * {math.log(2 * math.pi)!r})",
+    ]
+    inner += ["    " + s for s in step]
+    body += ["    " + s for s in inner]
+    src = [
+        "import math",
+        "",
+        "import numba",
+        "from numba import prange",
+        "",
+        "",
+        "@numba.njit(cache=True, parallel=True, boundscheck=False, fastmath=False)",
+        "def sequence(A_x0, A_p0, A_phi, A_qd, A_u, A_z, A_h, A_r, A_off, A_pm, A_pc, A_fm, A_fc, "
+        "A_nu, A_s, A_nis, A_ll, A_kg, A_status):",
+        f'    """Joseph-form filter of every track, all components present; n = {n}, m = {m}."""',
+        *("    " + s for s in body),
+        "",
+    ]
+    return "\n".join(src)
+
+
+@cache
+def sequence_kernel(n: int, m: int) -> Any:
+    """Straight-line Kalman filter over (N, T) for state size ``n``, measurement size ``m``.
+
+    Arguments as :func:`adaptrack.filters._kernels.kalman_kernel` (one ``R`` (m, m), every
+    component present, Joseph form) followed by the output arrays it fills and a status (N,)
+    of zeros.
+    """
+    return _load(f"sequence_v{_VERSION}_n{n}_m{m}", _sequence_source(n, m)).sequence

@@ -285,19 +285,36 @@ def _run_compiled(
         else np.broadcast_to(as_float_array(offset, "measurement_noise_mean"), (m,))
     )
     c = np.ascontiguousarray
-    out = kalman_kernel(
-        c(x0),
-        c(p0),
-        c(phi),
-        c(qd),
-        c(u),
-        c(z.reshape(n_tr, n_steps, m)),
-        c(mask.reshape(n_tr, n_steps, m)),
-        c(h),
-        c(r4),
-        c(off),
-        form == "joseph",
-    )
+    zc = c(z.reshape(n_tr, n_steps, m))
+    if form == "joseph" and r.shape == (m, m) and bool(mask.all()):
+        # the common case: straight-line code generated for this (n, m)
+        from ._codegen import sequence_kernel
+
+        out = tuple(
+            np.empty((n_tr, n_steps) + tail)
+            for tail in ((n,), (n, n), (n,), (n, n), (m,), (m, m), (), (), (n, m))
+        )
+        status = np.zeros(n_tr, dtype=np.int64)
+        sequence_kernel(n, m)(
+            c(x0), c(p0), c(phi), c(qd), c(u), zc, c(h), c(r), c(off), *out, status
+        )
+        if status.any():
+            raise ValueError("innovation covariance is not positive definite")
+        out = (*out, np.full((n_tr, n_steps), float(m)))
+    else:
+        out = kalman_kernel(
+            c(x0),
+            c(p0),
+            c(phi),
+            c(qd),
+            c(u),
+            zc,
+            c(mask.reshape(n_tr, n_steps, m)),
+            c(h),
+            c(r4),
+            c(off),
+            form == "joseph",
+        )
     pm, pc, fm, fc, nu, s_a, nis, ll, k_a, nobs = (a.reshape(batch + a.shape[1:]) for a in out)
     tb = np.broadcast_to(t, batch + (n_steps,))
 
@@ -327,25 +344,12 @@ def _run_compiled(
     )
 
 
-_DISCRETIZE_CHUNK = 65536
-
-
 def _transitions(
     model: MotionModel, t: FloatArray, t_init: FloatArray, method: Method, noise: Noise, order: int
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Phi, Qd and control offsets per step (entry k maps step k-1 -> k), cached by dt."""
     prev = np.concatenate([np.broadcast_to(t_init, t.shape[:-1])[..., None], t[..., :-1]], axis=-1)
-    dt = t - prev
-    uniq, inv = np.unique(dt, return_inverse=True)
-    parts = [
-        discretize_with_input(
-            model, uniq[i : i + _DISCRETIZE_CHUNK], method, noise=noise, order=order
-        )
-        for i in range(0, uniq.size, _DISCRETIZE_CHUNK)
-    ]
-    phi_u, qd_u, u_u = (np.concatenate([p[j] for p in parts]) for j in range(3))
-    inv = inv.reshape(dt.shape)
-    return phi_u[inv], qd_u[inv], u_u[inv]
+    return discretize_with_input(model, t - prev, method, noise=noise, order=order)
 
 
 def _run(

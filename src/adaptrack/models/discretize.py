@@ -131,9 +131,14 @@ def discretize_with_input(
         _discretize_model(model, uniq[i : i + _CHUNK], method, noise, order)
         for i in range(0, uniq.size, _CHUNK)
     ]
-    inv = inv.reshape(dt_arr.shape)
-    phi_u, qd_u, off_u = (np.concatenate([p[j] for p in parts]) for j in range(3))
-    return phi_u[inv], qd_u[inv], off_u[inv]
+    inv = inv.reshape(-1)
+
+    def per_step(j: int) -> FloatArray:
+        """Gather the table of distinct steps (contiguous: layout decides BLAS rounding)."""
+        table = np.ascontiguousarray(np.concatenate([p[j] for p in parts]))
+        return np.take(table, inv, axis=0).reshape(dt_arr.shape + table.shape[1:])
+
+    return per_step(0), per_step(1), per_step(2)
 
 
 def _discretize_model(
