@@ -232,3 +232,32 @@ def kalman_kernel(x0, p0, phi, qd, u, z, mask, h, r, off, joseph):  # type: igno
             ll_o[i, k] = -0.5 * (logdet + nis + nobs * _LOG_2PI) if nobs > 0 else 0.0
             nobs_o[i, k] = nobs
     return pm, pc, fm, fc, nu_o, s_o, nis_o, ll_o, k_o, nobs_o
+
+
+def run_kernels(x0, p0, phi, qd, u, z, mask, h, r, off, joseph):  # type: ignore[no-untyped-def]
+    """Filter with the fastest compiled kernel for the case (arguments of :func:`kalman_kernel`).
+
+    Joseph form, every component present and one ``R`` run straight-line code generated for
+    the (n, m) at hand (:func:`adaptrack.filters._codegen.sequence_kernel`); anything else the
+    generic kernel. Raises ValueError if an innovation covariance is not positive definite.
+    """
+    c = np.ascontiguousarray
+    n_tr, n_steps, m = z.shape
+    n = h.shape[1]
+    if joseph and r.shape[:2] == (1, 1) and bool(mask.all()):
+        from ._codegen import sequence_kernel
+
+        out = tuple(
+            np.empty((n_tr, n_steps) + tail)
+            for tail in ((n,), (n, n), (n,), (n, n), (m,), (m, m), (), (), (n, m))
+        )
+        status = np.zeros(n_tr, dtype=np.int64)
+        sequence_kernel(n, m)(
+            c(x0), c(p0), c(phi), c(qd), c(u), c(z), c(h), c(r[0, 0]), c(off), *out, status
+        )
+        if status.any():
+            raise ValueError("innovation covariance is not positive definite")
+        return (*out, np.full((n_tr, n_steps), float(m)))
+    return kalman_kernel(
+        c(x0), c(p0), c(phi), c(qd), c(u), c(z), c(mask), c(h), c(r), c(off), joseph
+    )

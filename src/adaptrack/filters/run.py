@@ -256,7 +256,7 @@ def _run_compiled(
     offset: ArrayLike | None,
 ) -> FilterResult:
     """Run the same filter through the compiled kernel (:mod:`adaptrack.filters._kernels`)."""
-    from ._kernels import kalman_kernel
+    from ._kernels import run_kernels
 
     batch = z.shape[:-2]
     n_steps, m = z.shape[-2:]
@@ -284,37 +284,19 @@ def _run_compiled(
         if offset is None
         else np.broadcast_to(as_float_array(offset, "measurement_noise_mean"), (m,))
     )
-    c = np.ascontiguousarray
-    zc = c(z.reshape(n_tr, n_steps, m))
-    if form == "joseph" and r.shape == (m, m) and bool(mask.all()):
-        # the common case: straight-line code generated for this (n, m)
-        from ._codegen import sequence_kernel
-
-        out = tuple(
-            np.empty((n_tr, n_steps) + tail)
-            for tail in ((n,), (n, n), (n,), (n, n), (m,), (m, m), (), (), (n, m))
-        )
-        status = np.zeros(n_tr, dtype=np.int64)
-        sequence_kernel(n, m)(
-            c(x0), c(p0), c(phi), c(qd), c(u), zc, c(h), c(r), c(off), *out, status
-        )
-        if status.any():
-            raise ValueError("innovation covariance is not positive definite")
-        out = (*out, np.full((n_tr, n_steps), float(m)))
-    else:
-        out = kalman_kernel(
-            c(x0),
-            c(p0),
-            c(phi),
-            c(qd),
-            c(u),
-            zc,
-            c(mask.reshape(n_tr, n_steps, m)),
-            c(h),
-            c(r4),
-            c(off),
-            form == "joseph",
-        )
+    out = run_kernels(
+        x0,
+        p0,
+        phi,
+        qd,
+        u,
+        z.reshape(n_tr, n_steps, m),
+        mask.reshape(n_tr, n_steps, m),
+        h,
+        r4,
+        off,
+        form == "joseph",
+    )
     pm, pc, fm, fc, nu, s_a, nis, ll, k_a, nobs = (a.reshape(batch + a.shape[1:]) for a in out)
     tb = np.broadcast_to(t, batch + (n_steps,))
 

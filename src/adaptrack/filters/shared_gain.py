@@ -191,21 +191,21 @@ def _covariances_compiled(
     form: str,
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Predicted/filtered covariances and gains from the compiled filter run on one track."""
-    from ._kernels import kalman_kernel
+    from ._kernels import run_kernels
 
     n_steps, n = phi.shape[0], phi.shape[-1]
     m = h.shape[0]
     try:
-        res = kalman_kernel(
+        res = run_kernels(
             np.zeros((1, n)),
-            np.ascontiguousarray(cov0[None]),
-            np.ascontiguousarray(phi[None]),
-            np.ascontiguousarray(qd[None]),
-            np.ascontiguousarray(u[None]),
+            cov0[None],
+            phi[None],
+            qd[None],
+            u[None],
             np.zeros((1, n_steps, m)),
             present[None],
-            np.ascontiguousarray(h),
-            np.ascontiguousarray(r[None, None]),
+            h,
+            r[None, None],
             np.zeros(m),
             form == "joseph",
         )
