@@ -12,7 +12,12 @@ def test_benchmarks_quick_run_writes_json(tmp_path, capsys):
     assert out["machine"]["cores"] >= 1
     impls = {(r["workload"], r["impl"]) for r in out["results"]}
     for workload in ("single", "batch"):
-        for impl in ("adaptrack", "filterpy", "pykalman", "simdkalman"):
+        for impl in ("adaptrack", "filterpy", "pykalman", "simdkalman", "stonesoup"):
             assert (workload, impl) in impls
-    assert all(r["per_step_us"] > 0 and r["track_steps_per_s"] > 0 for r in out["results"])
-    assert "adaptrack is x faster" in capsys.readouterr().out
+    for workload in ("rts", "rts_batch", "stream", "lx_mc", "memory"):
+        assert (workload, "adaptrack") in impls
+    timed = [r for r in out["results"] if r["workload"] not in ("lx_mc", "memory")]
+    assert all(r["per_step_us"] > 0 and r["track_steps_per_s"] > 0 for r in timed)
+    memory = [r for r in out["results"] if r["workload"] == "memory"]
+    assert all(r["peak_memory_ratio"] >= 1.0 for r in memory)
+    assert "adaptrack x faster" in capsys.readouterr().out

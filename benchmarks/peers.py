@@ -1,0 +1,214 @@
+"""The same filter (3-state Singer, position measured) in adaptrack and in every peer library.
+
+Each function takes shared times ``t`` (T,) and measurements ``z`` (N, T, 1) and returns the
+filtered (or smoothed) means (N, T, 3), so results can be compared before timings are trusted.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+import adaptrack as at
+
+DT = 0.05
+MODEL = at.models.Singer(time_constant_s=5.0, accel_std_mps2=2.0)
+H = np.array([[1.0, 0.0, 0.0]])
+R = np.array([[0.25]])
+P0 = np.diag([1.0, 100.0, 10.0])
+
+
+def data(n_tracks: int, n_steps: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Shared times (T,) and simulated position measurements (N, T, 1)."""
+    rng = np.random.default_rng(seed)
+    t = DT * np.arange(n_steps)
+    truth = at.simulation.simulate_linear_trajectory(
+        MODEL, t, [0.0, 10.0, 0.0], P0, n_runs=n_tracks, rng=rng
+    )
+    z = at.simulation.simulate_linear_measurements(truth, H, R, rng=rng)
+    return t, z
+
+
+def _prior(t: np.ndarray, n_tracks: int | None = None) -> at.GaussianState:
+    if n_tracks is None:
+        return at.GaussianState(np.zeros(3), P0, t[0])
+    return at.GaussianState(np.zeros((n_tracks, 3)), np.broadcast_to(P0, (n_tracks, 3, 3)), t[0])
+
+
+def adaptrack_filter(t: np.ndarray, z: np.ndarray, backend: str = "auto") -> np.ndarray:
+    """``kalman_filter`` with its full result (per-step covariances, gains, innovations)."""
+    return at.kalman_filter(t, z, MODEL, H, R, _prior(t), backend=backend).filtered.mean
+
+
+def adaptrack_per_track_cov(t: np.ndarray, z: np.ndarray, backend: str = "auto") -> np.ndarray:
+    """``kalman_filter``'s general path: every track carries its own covariance recursion."""
+    prior = _prior(t, z.shape[0])
+    return at.kalman_filter(t, z, MODEL, H, R, prior, backend=backend).filtered.mean
+
+
+def adaptrack_fleet(
+    t: np.ndarray, z: np.ndarray, out: np.ndarray | None = None, smooth: bool = False
+) -> np.ndarray:
+    """``shared_gain_filter``: means per track, covariances once, optional output buffer."""
+    return at.shared_gain_filter(t, z, MODEL, H, R, _prior(t), out=out, smooth=smooth).mean
+
+
+def adaptrack_rts(t: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """``kalman_filter`` then ``rts_smooth`` (full results)."""
+    return at.rts_smooth(at.kalman_filter(t, z, MODEL, H, R, _prior(t))).mean
+
+
+def filterpy_filter(t: np.ndarray, z: np.ndarray) -> np.ndarray:
+    from filterpy.kalman import KalmanFilter
+
+    phi, qd = at.discretize(MODEL, DT)
+    out = np.empty(z.shape[:-1] + (3,))
+    for i in range(z.shape[0]):
+        kf = KalmanFilter(dim_x=3, dim_z=1)
+        kf.x, kf.P, kf.F, kf.Q, kf.H, kf.R = np.zeros(3), P0.copy(), phi, qd, H, R
+        for k in range(z.shape[1]):
+            if k:
+                kf.predict()
+            kf.update(z[i, k])
+            out[i, k] = kf.x
+    return out
+
+
+def filterpy_rts(t: np.ndarray, z: np.ndarray) -> np.ndarray:
+    from filterpy.kalman import rts_smoother
+
+    phi, qd = at.discretize(MODEL, DT)
+    res = at.kalman_filter(t, z[0], MODEL, H, R, _prior(t))
+    n = t.size
+    fs, qs = np.broadcast_to(phi, (n, 3, 3)), np.broadcast_to(qd, (n, 3, 3))
+    return rts_smoother(res.filtered.mean, res.filtered.cov, fs, qs)[0][None]
+
+
+def pykalman_filter(t: np.ndarray, z: np.ndarray) -> np.ndarray:
+    from pykalman import KalmanFilter
+
+    phi, qd = at.discretize(MODEL, DT)
+    out = np.empty(z.shape[:-1] + (3,))
+    for i in range(z.shape[0]):
+        kf = KalmanFilter(
+            transition_matrices=phi,
+            observation_matrices=H,
+            transition_covariance=qd,
+            observation_covariance=R,
+            initial_state_mean=np.zeros(3),
+            initial_state_covariance=P0,
+        )
+        out[i] = kf.filter(z[i])[0]
+    return out
+
+
+def _simdkalman(smoothed: bool):  # type: ignore[no-untyped-def]
+    import simdkalman
+
+    phi, qd = at.discretize(MODEL, DT)
+    kf = simdkalman.KalmanFilter(
+        state_transition=phi, process_noise=qd, observation_model=H, observation_noise=R
+    )
+
+    def run(t: np.ndarray, z: np.ndarray) -> np.ndarray:
+        res = kf.compute(
+            z[..., 0],
+            0,
+            initial_value=np.zeros(3),
+            initial_covariance=P0,
+            filtered=not smoothed,
+            smoothed=smoothed,
+            covariances=False,
+            observations=False,
+        )
+        return (res.smoothed if smoothed else res.filtered).states.mean
+
+    return run
+
+
+def simdkalman_filter(t: np.ndarray, z: np.ndarray) -> np.ndarray:
+    return _simdkalman(smoothed=False)(t, z)  # type: ignore[no-any-return]
+
+
+def simdkalman_smoother(t: np.ndarray, z: np.ndarray) -> np.ndarray:
+    return _simdkalman(smoothed=True)(t, z)  # type: ignore[no-any-return]
+
+
+def stonesoup_filter(t: np.ndarray, z: np.ndarray) -> np.ndarray:
+    from datetime import datetime, timedelta
+
+    from stonesoup.models.measurement.linear import LinearGaussian
+    from stonesoup.models.transition.linear import LinearGaussianTimeInvariantTransitionModel
+    from stonesoup.predictor.kalman import KalmanPredictor
+    from stonesoup.types.detection import Detection
+    from stonesoup.types.hypothesis import SingleHypothesis
+    from stonesoup.types.state import GaussianState
+    from stonesoup.updater.kalman import KalmanUpdater
+
+    phi, qd = at.discretize(MODEL, DT)
+    transition = LinearGaussianTimeInvariantTransitionModel(
+        transition_matrix=phi, covariance_matrix=qd
+    )
+    measurement = LinearGaussian(ndim_state=3, mapping=(0,), noise_covar=R)
+    predictor, updater = KalmanPredictor(transition), KalmanUpdater(measurement)
+    start = datetime(2026, 1, 1)
+    out = np.empty(z.shape[:-1] + (3,))
+    for i in range(z.shape[0]):
+        state = GaussianState(np.zeros((3, 1)), P0, timestamp=start)
+        for k in range(z.shape[1]):
+            when = start + timedelta(seconds=float(t[k] - t[0]))
+            prediction = predictor.predict(state, timestamp=when) if k else state
+            det = Detection(z[i, k].reshape(1, 1), timestamp=when, measurement_model=measurement)
+            state = updater.update(SingleHypothesis(prediction, det))
+            out[i, k] = np.asarray(state.state_vector).ravel()
+    return out
+
+
+def stream_adaptrack(t: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """``OnlineFilter.update`` once per measurement, from Python."""
+    f = at.OnlineFilter(MODEL, H, R, _prior(t))
+    out = np.empty((1, t.size, 3))
+    times = t.tolist()
+    meas = list(z[0])
+    update = f.update
+    for k in range(t.size):
+        update(times[k], meas[k])
+    out[0, -1] = f.mean
+    return out
+
+
+def stream_filterpy(t: np.ndarray, z: np.ndarray) -> np.ndarray:
+    from filterpy.kalman import KalmanFilter
+
+    phi, qd = at.discretize(MODEL, DT)
+    kf = KalmanFilter(dim_x=3, dim_z=1)
+    kf.x, kf.P, kf.F, kf.Q, kf.H, kf.R = np.zeros(3), P0.copy(), phi, qd, H, R
+    meas = list(z[0])
+    for k in range(t.size):
+        if k:
+            kf.predict()
+        kf.update(meas[k])
+    out = np.empty((1, t.size, 3))
+    out[0, -1] = kf.x
+    return out
+
+
+def stream_pykalman(t: np.ndarray, z: np.ndarray) -> np.ndarray:
+    from pykalman import KalmanFilter
+
+    phi, qd = at.discretize(MODEL, DT)
+    kf = KalmanFilter(
+        transition_matrices=phi,
+        observation_matrices=H,
+        transition_covariance=qd,
+        observation_covariance=R,
+    )
+    # pykalman's online step predicts first: start from the prior predicted back one step
+    mean, cov = (
+        np.linalg.solve(phi, np.zeros(3)),
+        np.linalg.solve(phi, np.linalg.solve(phi, (P0 - qd).T).T),
+    )
+    for k in range(t.size):
+        mean, cov = kf.filter_update(mean, cov, z[0, k])
+    out = np.empty((1, t.size, 3))
+    out[0, -1] = mean
+    return out

@@ -1,0 +1,261 @@
+"""Benchmark workloads; each returns rows for the table (adaptrack first, then peers).
+
+Every implementation filters the same measurements; results are compared with the first
+row's before its timing is kept, so a fast but wrong result cannot go unnoticed.
+"""
+
+from __future__ import annotations
+
+import time
+import tracemalloc
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import peers
+
+Impl = Callable[[np.ndarray, np.ndarray], np.ndarray]
+
+
+@dataclass
+class Result:
+    workload: str
+    impl: str
+    per_step_us: float | None
+    track_steps_per_s: float | None
+    note: str = ""
+    peak_memory_ratio: float | None = None
+
+
+def best_time(fn: Callable[[], object], repeats: int) -> tuple[float, object]:
+    """Best wall time of ``repeats`` calls (after the caller's warm-up)."""
+    best, out = float("inf"), None
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        out = fn()
+        best = min(best, time.perf_counter() - t0)
+    return best, out
+
+
+def _check(name: str, out: np.ndarray, ref: np.ndarray, last_only: bool = False) -> None:
+    n_tr, n = out.shape[:2]
+    a, b = (out[:, -1:], ref[:n_tr, n - 1 : n]) if last_only else (out, ref[:n_tr, :n])
+    err = np.max(np.abs(a - b)) / np.max(np.abs(b))
+    if not err <= 1e-6:
+        raise RuntimeError(f"{name} disagrees with the reference estimates (rel. {err:.1e})")
+
+
+def _compare(
+    workload: str,
+    t: np.ndarray,
+    z: np.ndarray,
+    impls: dict[str, tuple[Impl, int, int]],
+    repeats: int,
+    reference: np.ndarray | None = None,
+) -> list[Result]:
+    """Time ``impl(t[:steps], z[:tracks, :steps])`` for every ``(impl, tracks, steps)``.
+
+    Results are checked against ``reference`` (the final estimates only) or the first row's.
+    """
+    rows, ref = [], reference
+    n_tracks, n_steps = z.shape[:2]
+    for name, (fn, tracks, steps) in impls.items():
+        # warm-up (compilation, imports, page faults are not timed): adaptrack's kernels are
+        # generated and compiled per size class, so its warm-up is the timed call itself
+        if name.startswith("adaptrack"):
+            fn(t[:steps], z[:tracks, :steps])
+        else:
+            fn(t[:20], z[:2, :20])
+        reps = repeats if tracks * steps >= n_tracks * n_steps // 10 else 1
+        secs, out = best_time(lambda fn=fn, k=tracks, s=steps: fn(t[:s], z[:k, :s]), reps)
+        assert isinstance(out, np.ndarray)
+        ref = out if ref is None else ref
+        _check(name, out, ref, last_only=reference is not None)
+        note = [] if tracks == n_tracks else [f"{tracks} tracks"]
+        note += [] if steps == n_steps else [f"first {steps} steps"]
+        work = tracks * steps
+        rows.append(Result(workload, name, 1e6 * secs / work, work / secs, ", ".join(note)))
+    return rows
+
+
+def single(quick: bool, repeats: int) -> list[Result]:
+    """One track of 100,000 steps (2,000 with ``quick``)."""
+    n = 2_000 if quick else 100_000
+    few = n if quick else n // 10
+    t, z = peers.data(1, n)
+    return _compare(
+        "single",
+        t,
+        z,
+        {
+            "adaptrack": (peers.adaptrack_filter, 1, n),
+            "adaptrack (fleet path, means + shared cov)": (peers.adaptrack_fleet, 1, n),
+            "adaptrack (numpy reference)": (
+                lambda t, z: peers.adaptrack_filter(t, z, "numpy"),
+                1,
+                n,
+            ),
+            "filterpy": (peers.filterpy_filter, 1, few),
+            "pykalman": (peers.pykalman_filter, 1, few),
+            "simdkalman": (peers.simdkalman_filter, 1, n),
+            "stonesoup": (peers.stonesoup_filter, 1, min(few, 2_000)),
+        },
+        repeats,
+    )
+
+
+def batch(quick: bool, repeats: int) -> list[Result]:
+    """10,000 tracks x 1,000 steps sharing model, start and sampling (200 x 100 ``quick``)."""
+    n_tracks, n_steps = (200, 100) if quick else (10_000, 1_000)
+    subset = 2 if quick else 10
+    t, z = peers.data(n_tracks, n_steps, seed=1)
+    out = np.empty(z.shape[:-1] + (3,))
+    return _compare(
+        "batch",
+        t,
+        z,
+        {
+            "adaptrack": (
+                lambda t, z: peers.adaptrack_fleet(t, z, _buffer(out, z)),
+                n_tracks,
+                n_steps,
+            ),
+            "adaptrack (fleet path, new output)": (peers.adaptrack_fleet, n_tracks, n_steps),
+            "adaptrack (kalman_filter, full result)": (peers.adaptrack_filter, n_tracks, n_steps),
+            "adaptrack (per-track covariances, numba)": (
+                lambda t, z: peers.adaptrack_per_track_cov(t, z, "numba"),
+                n_tracks,
+                n_steps,
+            ),
+            "simdkalman": (peers.simdkalman_filter, n_tracks, n_steps),
+            "filterpy": (peers.filterpy_filter, subset, n_steps),
+            "pykalman": (peers.pykalman_filter, subset, n_steps),
+            "stonesoup": (peers.stonesoup_filter, min(subset, 2), n_steps),
+        },
+        repeats,
+    )
+
+
+def _buffer(out: np.ndarray, z: np.ndarray) -> np.ndarray | None:
+    """The reusable output buffer when the call covers the whole batch (warm-up does not)."""
+    return out if out.shape[:2] == z.shape[:2] else None
+
+
+def rts(quick: bool, repeats: int) -> list[Result]:
+    """Fixed-interval smoothing: one long track, and the batch."""
+    n = 2_000 if quick else 100_000
+    t, z = peers.data(1, n, seed=2)
+    rows = _compare(
+        "rts",
+        t,
+        z,
+        {
+            "adaptrack": (peers.adaptrack_rts, 1, n),
+            "adaptrack (fleet path)": (
+                lambda t, z: peers.adaptrack_fleet(t, z, smooth=True),
+                1,
+                n,
+            ),
+            "filterpy": (peers.filterpy_rts, 1, n if quick else n // 10),
+            "simdkalman": (peers.simdkalman_smoother, 1, n),
+        },
+        repeats,
+    )
+    n_tracks, n_steps = (200, 100) if quick else (10_000, 1_000)
+    t, z = peers.data(n_tracks, n_steps, seed=3)
+    out = np.empty(z.shape[:-1] + (3,))
+    rows += _compare(
+        "rts_batch",
+        t,
+        z,
+        {
+            "adaptrack": (
+                lambda t, z: peers.adaptrack_fleet(t, z, _buffer(out, z), smooth=True),
+                n_tracks,
+                n_steps,
+            ),
+            "simdkalman": (peers.simdkalman_smoother, n_tracks, n_steps),
+        },
+        repeats,
+    )
+    return rows
+
+
+def streaming(quick: bool, repeats: int) -> list[Result]:
+    """One measurement at a time from Python (online update), 20,000 steps."""
+    n = 1_000 if quick else 20_000
+    t, z = peers.data(1, n, seed=4)
+    return _compare(
+        "stream",
+        t,
+        z,
+        {
+            "adaptrack": (peers.stream_adaptrack, 1, n),
+            "filterpy": (peers.stream_filterpy, 1, n),
+            "pykalman": (peers.stream_pykalman, 1, n // 10),
+            "stonesoup": (peers.stonesoup_filter, 1, n // 10),
+        },
+        repeats,
+        reference=peers.adaptrack_filter(t, z),
+    )
+
+
+def crossing(quick: bool, workers: int) -> list[Result]:
+    """``lx_default`` compliance Monte Carlo (every class x case, 6 estimators)."""
+    from adaptrack.crossing.compliance import evaluate_site
+    from adaptrack.crossing.site import load_site
+    from adaptrack.crossing.traffic import DEFAULT_CASES, VEHICLES
+    from adaptrack.parallel import task_pool
+
+    runs = 1 if quick else 100
+    site = load_site("lx_default")
+    subset = {"cases": DEFAULT_CASES[:1], "classes": {"car": VEHICLES["car"]}} if quick else {}
+    with task_pool(workers if not quick else 1) as pool:
+        evaluate_site(site, 1, 0, pool=pool, **subset)  # warm-up (compilation in every worker)
+        t0 = time.perf_counter()
+        res = evaluate_site(site, runs, 0, pool=pool, **subset)
+        secs = time.perf_counter() - t0
+    run_steps = sum(r.n_epochs for r in res.rows)  # scored (run, epoch) pairs, all estimators
+    return [
+        Result(
+            "lx_mc",
+            "adaptrack",
+            None,
+            run_steps / secs,
+            f"{runs} runs per class x case ({'car, 1 case' if quick else 'all'}) in "
+            f"{secs:.1f} s on {pool.n_workers} worker(s); "
+            f"1,000 runs ~ {secs * 1000 / runs:.0f} s (linear); no peer has this workload",
+        )
+    ]
+
+
+def memory(quick: bool) -> list[Result]:
+    """Peak traced memory of the batch filter relative to its input + output arrays."""
+    n_tracks, n_steps = (200, 100) if quick else (10_000, 1_000)
+    t, z = peers.data(n_tracks, n_steps, seed=1)
+    rows = []
+    for name, fn in (
+        ("adaptrack", lambda: peers.adaptrack_fleet(t, z)),
+        ("simdkalman", lambda: peers.simdkalman_filter(t, z)),
+    ):
+        fn()  # warm-up
+        tracemalloc.start()
+        tracemalloc.reset_peak()
+        base = tracemalloc.get_traced_memory()[0]
+        out = fn()
+        peak = tracemalloc.get_traced_memory()[1] - base
+        tracemalloc.stop()
+        ratio = (peak + z.nbytes) / (z.nbytes + out.nbytes)
+        rows.append(
+            Result(
+                "memory",
+                name,
+                None,
+                None,
+                f"peak {(peak + z.nbytes) / 2**20:.0f} MiB for input + output "
+                f"{(z.nbytes + out.nbytes) / 2**20:.0f} MiB",
+                ratio,
+            )
+        )
+    return rows
