@@ -194,3 +194,36 @@ def test_bad_input():
         bad = zz.copy()
         bad[0, 7, 0] = np.nan
         innovation_adaptive_filter(t, bad, measurement_var=25.0, dwna_accel_var=22.0)
+
+
+@pytest.mark.parametrize(
+    ("averaging", "adapt", "n_steps"),
+    [("ewma", True, 600), ("ewma", False, 600), ("window", True, 150), ("window", False, 600)],
+)
+def test_compiled_published_filter_equals_the_numpy_reference(averaging, adapt, n_steps):
+    """Same numbers to rounding, same gain decisions. (The sliding-window form feeds rounding
+    differences back through the identified gain and they grow over hundreds of steps, as
+    between any two builds of NumPy, hence its shorter horizon.)"""
+    rng = np.random.default_rng(0)
+    t = 0.1 * np.arange(n_steps)
+    shape = (40, n_steps, 2)
+    z = 0.01 * np.cumsum(np.cumsum(0.5 * rng.normal(size=shape), axis=1), axis=1)
+    z += 2.0 * rng.normal(size=shape)
+    mask = rng.random(shape[:2]) > 0.05
+    mask[:, :2] = True
+    z[~mask] = np.nan
+    kw = {"measurement_var": 4.0, "dwna_accel_var": 1.0, "mask": mask, "memory": 20}
+    kw |= {"averaging": averaging, "adapt": adapt}
+    ref = innovation_adaptive_filter(t, z, backend="numpy", **kw)
+    got = innovation_adaptive_filter(t, z, backend="numba", **kw)
+    a, b = ref.filtered.mean, got.filtered.mean
+    np.testing.assert_array_equal(np.isnan(a), np.isnan(b))
+    scale = np.nanmax(np.abs(a), axis=-2, keepdims=True)  # per track and component
+    assert np.nanmax(np.abs(a - b) / scale) <= 1e-10
+    ca, cb = ref.filtered.cov, got.filtered.cov
+    assert np.nanmax(np.abs(ca - cb)) <= 1e-10 * np.nanmax(np.abs(ca))
+    np.testing.assert_array_equal(ref.identified, got.identified)
+    assert ref.fallback_fraction == got.fallback_fraction
+    assert (ref.identified.mean() > 0.5) == adapt
+    with pytest.raises(ValueError, match="backend must be"):
+        innovation_adaptive_filter(t, z, backend="gpu", **kw)

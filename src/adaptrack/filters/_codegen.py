@@ -18,13 +18,14 @@ import math
 import os
 import sys
 import tempfile
+from collections.abc import Callable
 from functools import cache
 from pathlib import Path
 from types import ModuleType
 from typing import Any
 
 LANES = 4
-_VERSION = 1
+_VERSION = 2
 DT_TOLERANCE_S = 1e-9  # online steps this close share one discretisation (clock round-off)
 
 
@@ -41,8 +42,43 @@ def _step(lane: str, n: int, m: int) -> list[str]:
     return lines
 
 
+def _module(signature: str, doc: str, body: list[str], parallel: bool) -> str:
+    """Source of a module holding one ``numba.njit`` function with ``body``."""
+    flags = "cache=True, parallel=True" if parallel else "cache=True"
+    return "\n".join(
+        [
+            "import math",
+            "",
+            "import numba",
+            "from numba import prange",
+            "",
+            "",
+            f"@numba.njit({flags}, boundscheck=False, fastmath=False)",
+            f"def {signature}:",
+            f'    """{doc}"""',
+            *("    " + line for line in body),
+            "",
+        ]
+    )
+
+
+def _lane_groups(n_tracks: str, group: Callable[[int], list[str]]) -> list[str]:
+    """Loops over groups of ``LANES`` tracks (``prange``), then the remaining tracks one by one.
+
+    ``group(lanes)`` returns the statements for tracks ``i0 .. i0 + lanes - 1``.
+    """
+    return [
+        f"n_groups = {n_tracks} // {LANES}",
+        "for grp in prange(n_groups):",
+        f"    i0 = grp * {LANES}",
+        *("    " + line for line in group(LANES)),
+        f"for i0 in prange(n_groups * {LANES}, {n_tracks}):",
+        *("    " + line for line in group(1)),
+    ]
+
+
 def _forward_source(n: int, m: int) -> str:
-    def group(lanes: int, indent: str) -> list[str]:
+    def group(lanes: int) -> list[str]:
         body = [f"i{g} = i0 + {g}" for g in range(lanes)]
         body += [f"x{g}_{c} = x0[i{g}, {c}]" for g in range(lanes) for c in range(n)]
         body.append("for k in range(n_steps):")
@@ -52,32 +88,18 @@ def _forward_source(n: int, m: int) -> str:
         inner += [f"o{c} = obs[k, {c}]" for c in range(m)]
         for g in range(lanes):
             inner += _step(str(g), n, m)
-        body += ["    " + s for s in inner]
-        return [indent + s for s in body]
+        return body + ["    " + s for s in inner]
 
-    src = [
-        "import numba",
-        "from numba import prange",
-        "",
-        "",
-        "@numba.njit(cache=True, parallel=True, boundscheck=False, fastmath=False)",
-        "def forward(a, b, kg, obs, z, x0, out):",
-        f'    """Filtered means of every track; n = {n}, m = {m}, {LANES} lanes."""',
-        "    n_tracks, n_steps = z.shape[0], z.shape[1]",
-        f"    n_groups = n_tracks // {LANES}",
-        "    for grp in prange(n_groups):",
-        f"        i0 = grp * {LANES}",
-        *group(LANES, "        "),
-        f"    for i0 in prange(n_groups * {LANES}, n_tracks):",
-        *group(1, "        "),
-        "    return out",
-        "",
-    ]
-    return "\n".join(src)
+    return _module(
+        "forward(a, b, kg, obs, z, x0, out)",
+        f"Filtered means of every track; n = {n}, m = {m}, {LANES} lanes.",
+        ["n_steps = z.shape[1]", *_lane_groups("z.shape[0]", group), "return out"],
+        parallel=True,
+    )
 
 
 def _backward_source(n: int) -> str:
-    def group(lanes: int, indent: str) -> list[str]:
+    def group(lanes: int) -> list[str]:
         body = [f"i{g} = i0 + {g}" for g in range(lanes)]
         body += [f"s{g}_{c} = out[i{g}, n_steps - 1, {c}]" for g in range(lanes) for c in range(n)]
         body.append("for k in range(n_steps - 2, -1, -1):")
@@ -93,28 +115,14 @@ def _backward_source(n: int) -> str:
                 inner.append(f"t{r} = " + " + ".join(terms))
             inner += [f"s{g}_{r} = t{r}" for r in range(n)]
             inner += [f"out[i{g}, k, {r}] = s{g}_{r}" for r in range(n)]
-        body += ["    " + s for s in inner]
-        return [indent + s for s in body]
+        return body + ["    " + s for s in inner]
 
-    src = [
-        "import numba",
-        "from numba import prange",
-        "",
-        "",
-        "@numba.njit(cache=True, parallel=True, boundscheck=False, fastmath=False)",
-        "def backward(d, cg, e, out):",
-        f'    """RTS-smoothed means in place of the filtered ones; n = {n}, {LANES} lanes."""',
-        "    n_tracks, n_steps = out.shape[0], out.shape[1]",
-        f"    n_groups = n_tracks // {LANES}",
-        "    for grp in prange(n_groups):",
-        f"        i0 = grp * {LANES}",
-        *group(LANES, "        "),
-        f"    for i0 in prange(n_groups * {LANES}, n_tracks):",
-        *group(1, "        "),
-        "    return out",
-        "",
-    ]
-    return "\n".join(src)
+    return _module(
+        "backward(d, cg, e, out)",
+        f"RTS-smoothed means in place of the filtered ones; n = {n}, {LANES} lanes.",
+        ["n_steps = out.shape[1]", *_lane_groups("out.shape[0]", group), "return out"],
+        parallel=True,
+    )
 
 
 def _kernel_dir() -> Path:
@@ -319,19 +327,12 @@ def _online_source(n: int, m: int, layout: tuple[int, int, int, int, int, int]) 
         f"ws[{hdr_time}] = t",
         "return 0",
     ]
-    src = [
-        "import math",
-        "",
-        "import numba",
-        "",
-        "",
-        "@numba.njit(cache=True, boundscheck=False, fastmath=False)",
-        "def online_step(ws, bank, t, z):",
-        f'    """One online Joseph-form step, every component present; n = {n}, m = {m}."""',
-        *("    " + s for s in body),
-        "",
-    ]
-    return "\n".join(src)
+    return _module(
+        "online_step(ws, bank, t, z)",
+        f"One online Joseph-form step, every component present; n = {n}, m = {m}.",
+        body,
+        parallel=False,
+    )
 
 
 @cache
@@ -389,21 +390,13 @@ def _sequence_source(n: int, m: int) -> str:
     ]
     inner += ["    " + s for s in step]
     body += ["    " + s for s in inner]
-    src = [
-        "import math",
-        "",
-        "import numba",
-        "from numba import prange",
-        "",
-        "",
-        "@numba.njit(cache=True, parallel=True, boundscheck=False, fastmath=False)",
-        "def sequence(A_x0, A_p0, A_phi, A_qd, A_u, A_z, A_h, A_r, A_off, A_pm, A_pc, A_fm, A_fc, "
-        "A_nu, A_s, A_nis, A_ll, A_kg, A_status):",
-        f'    """Joseph-form filter of every track, all components present; n = {n}, m = {m}."""',
-        *("    " + s for s in body),
-        "",
-    ]
-    return "\n".join(src)
+    return _module(
+        "sequence(A_x0, A_p0, A_phi, A_qd, A_u, A_z, A_h, A_r, A_off, A_pm, A_pc, A_fm, A_fc, "
+        "A_nu, A_s, A_nis, A_ll, A_kg, A_status)",
+        f"Joseph-form filter of every track, all components present; n = {n}, m = {m}.",
+        body,
+        parallel=True,
+    )
 
 
 @cache

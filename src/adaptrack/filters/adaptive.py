@@ -95,6 +95,7 @@ def innovation_adaptive_filter(
     relaxation: float = 0.5,
     warmup: int = 50,
     step_s: float | None = None,
+    backend: Literal["auto", "numpy", "numba"] = "auto",
 ) -> AdaptiveResult:
     """Run the seed-002 adaptive Kalman filter on position measurements.
 
@@ -124,6 +125,9 @@ def innovation_adaptive_filter(
         Mehra form: ``L_b`` (30), ``p`` (4), ``eta`` (0.5), ``n_w`` (50).
     step_s : float, optional
         Sampling step ``T`` (default ``t_1 - t_0``).
+    backend : {"auto", "numpy", "numba"}
+        Published form: the NumPy reference or the compiled kernel (same numbers to rounding);
+        ``"auto"`` compiles from 20,000 (track x axis)-steps on. The Mehra form runs in NumPy.
 
     Returns
     -------
@@ -191,9 +195,13 @@ def innovation_adaptive_filter(
     mr = np.repeat(mk.reshape(-1, n_steps), d, axis=0)
     r_rows = np.tile(r0, rows // d)
     q_rows = np.tile(q0, (rows // d, 1, 1))
+    if backend not in ("auto", "numpy", "numba"):
+        raise ValueError(f"backend must be 'auto', 'numpy' or 'numba'; got {backend!r}")
+    compiled = backend == "numba" or (backend == "auto" and rows * n_steps >= 20_000)
     if identification == "published":
         n_min = 2 * (difference_order + 2) if min_statistics is None else min_statistics
-        est, cov, used, frac = _published(
+        run = _published_compiled if compiled else _published
+        est, cov, used, frac = run(
             zr,
             mr,
             step,
@@ -293,8 +301,8 @@ def _published(
         full = present & (count == nb)
         # step 4: statistics
         ns = ns + full
-        dx = np.einsum("j,rjk->rk", c, bx[:, : order + 1])
-        dg = bg[:, : order + 1] @ c
+        dx = sum(c[j] * bx[:, j] for j in range(order + 1))  # fixed summation order (as the
+        dg = sum(bg[:, j] * c[j] for j in range(order + 1))  # compiled kernel)
         prod = np.concatenate([dx * v[:, None], v[:, None] * bv, (v * dg)[:, None]], axis=1)
         if hist is None:
             b = 1.0 / np.minimum(np.maximum(ns, 1), memory)
@@ -310,8 +318,8 @@ def _published(
         k = k0
         ready = present & (ns >= n_min) if n_min is not None else np.zeros(rows, dtype=bool)
         if ready.any():
-            s1 = hh[:, 1 : order + 1] @ c[1:]
-            s2 = (hh[:, 1 : order + 1] - hh[:, 2 : order + 2]) @ c[1:]
+            s1 = sum(hh[:, j] * c[j] for j in range(1, order + 1))
+            s2 = sum((hh[:, j] - hh[:, j + 1]) * c[j] for j in range(1, order + 1))
             pc = -sxv.copy()
             pc[:, 0] -= s1
             pc[:, 1] -= s2 / step
@@ -332,6 +340,44 @@ def _published(
         p_rep = np.where(present[:, None, None], _joseph(pa, k, r0), pa)
         est[:, n], cov[:, n] = xh, p_rep
     return est, cov, used, n_fallback / max(n_attempt, 1)
+
+
+def _published_compiled(
+    z: FloatArray,
+    mask: BoolArray,
+    step: float,
+    q0: FloatArray,
+    r0: FloatArray,
+    order: int,
+    memory: int,
+    averaging: str,
+    n_min: int | None,
+) -> tuple[FloatArray, FloatArray, BoolArray, float]:
+    """Run the recursion of :func:`_published` in the compiled kernel."""
+    from ._adaptive_kernels import published_kernel
+
+    rows, n_steps = z.shape
+    est, cov, _, _ = _init(z, step, r0, n_steps)
+    used = np.zeros((rows, n_steps), dtype=bool)
+    attempts = np.zeros(rows, dtype=np.int64)
+    fallbacks = np.zeros(rows, dtype=np.int64)
+    published_kernel(
+        np.ascontiguousarray(z),
+        np.ascontiguousarray(mask),
+        step,
+        np.ascontiguousarray(q0),
+        np.ascontiguousarray(r0),
+        binomial_difference(order),
+        memory,
+        averaging == "window",
+        -1 if n_min is None else n_min,
+        est,
+        cov,
+        used,
+        attempts,
+        fallbacks,
+    )
+    return est, cov, used, int(fallbacks.sum()) / max(int(attempts.sum()), 1)
 
 
 def _mehra(

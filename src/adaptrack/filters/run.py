@@ -9,6 +9,7 @@ computed once and shared (the result holds broadcast views), which is exact and 
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
@@ -202,7 +203,7 @@ def kalman_filter(
         and z.size // max(m, 1) >= COMPILED_MIN_TRACK_STEPS
         and not (batch and _covariance_shared(t, initial, r, mk))
     )
-    args = (
+    problem = _Problem(
         t,
         z,
         model,
@@ -219,10 +220,29 @@ def kalman_filter(
     )
     if compiled:
         try:
-            return _run_compiled(*args)
+            return _run_compiled(problem)
         except ValueError:
             pass  # a covariance stopped being positive definite: the reference path names it
-    return _run(*args)
+    return _run(problem)
+
+
+@dataclass(frozen=True)
+class _Problem:
+    """A validated filtering problem: the arguments of :func:`kalman_filter` after checks."""
+
+    t: FloatArray
+    z: FloatArray
+    model: MotionModel
+    h: FloatArray
+    r: FloatArray
+    r_per_step: bool
+    initial: GaussianState
+    mask: BoolArray
+    method: Method
+    noise: Noise
+    order: int
+    form: str
+    offset: ArrayLike | None
 
 
 def _covariance_shared(
@@ -240,23 +260,12 @@ def _covariance_shared(
     )
 
 
-def _run_compiled(
-    t: FloatArray,
-    z: FloatArray,
-    model: MotionModel,
-    h: FloatArray,
-    r: FloatArray,
-    r_per_step: bool,
-    initial: GaussianState,
-    mask: BoolArray,
-    method: Method,
-    noise: Noise,
-    order: int,
-    form: str,
-    offset: ArrayLike | None,
-) -> FilterResult:
+def _run_compiled(p: _Problem) -> FilterResult:
     """Run the same filter through the compiled kernel (:mod:`adaptrack.filters._kernels`)."""
     from ._kernels import run_kernels
+
+    t, z, model, h, r, initial, mask = p.t, p.z, p.model, p.h, p.r, p.initial, p.mask
+    method, noise, order, r_per_step = p.method, p.noise, p.order, p.r_per_step
 
     batch = z.shape[:-2]
     n_steps, m = z.shape[-2:]
@@ -281,8 +290,8 @@ def _run_compiled(
     p0 = initial.cov.reshape(-1, n, n)
     off = (
         np.zeros(m)
-        if offset is None
-        else np.broadcast_to(as_float_array(offset, "measurement_noise_mean"), (m,))
+        if p.offset is None
+        else np.broadcast_to(as_float_array(p.offset, "measurement_noise_mean"), (m,))
     )
     out = run_kernels(
         x0,
@@ -295,7 +304,7 @@ def _run_compiled(
         h,
         r4,
         off,
-        form == "joseph",
+        p.form == "joseph",
     )
     pm, pc, fm, fc, nu, s_a, nis, ll, k_a, nobs = (a.reshape(batch + a.shape[1:]) for a in out)
     tb = np.broadcast_to(t, batch + (n_steps,))
@@ -334,21 +343,10 @@ def _transitions(
     return discretize_with_input(model, t - prev, method, noise=noise, order=order)
 
 
-def _run(
-    t: FloatArray,
-    z: FloatArray,
-    model: MotionModel,
-    h: FloatArray,
-    r: FloatArray,
-    r_per_step: bool,
-    initial: GaussianState,
-    mask: BoolArray,
-    method: Method,
-    noise: Noise,
-    order: int,
-    form: str,
-    offset: ArrayLike | None,
-) -> FilterResult:
+def _run(p: _Problem) -> FilterResult:
+    """Run the NumPy reference filter (shared-covariance path when every track shares it)."""
+    t, z, model, h, r, initial, mask = p.t, p.z, p.model, p.h, p.r, p.initial, p.mask
+    method, noise, order, form, offset = p.method, p.noise, p.order, p.form, p.offset
     batch = z.shape[:-2]
     n_steps = z.shape[-2]
     t_init = np.broadcast_to(initial.time, batch)
@@ -363,7 +361,7 @@ def _run(
     if times_shared and _covariance_shared(t, initial, r, mask):
         return _run_shared(t, z, h, r, initial, mask, phi, qd, u, form, off)
     return _run_general(
-        t, z, h, r, r_per_step, initial, mask, phi, qd, u, form, off, model.state_dim
+        t, z, h, r, p.r_per_step, initial, mask, phi, qd, u, form, off, model.state_dim
     )
 
 
