@@ -101,3 +101,48 @@ def test_imm_bad_input(rng):
         imm_filter(t, z, [m], ("x",), [[1.0]], [p], [[1.0]], [0.5])
     with pytest.raises(ValueError, match="initial must hold one GaussianState per model"):
         imm_filter(t, z, [m, m], ("x",), [[1.0]], [p], np.eye(2), [0.5, 0.5])
+
+
+@pytest.mark.parametrize("per_track_times", [False, True])
+def test_compiled_imm_equals_the_numpy_reference(rng, per_track_times):
+    """Models of different sizes, 2-D measurements with missing components, per-step R."""
+    n_tracks, n_steps = 5, 60
+    shape = (n_tracks, n_steps) if per_track_times else (n_steps,)
+    t = np.cumsum(rng.choice([0.05, 0.1, 0.2], shape), axis=-1)
+    tt = np.broadcast_to(t, (n_tracks, n_steps))
+    z = rng.normal(size=(n_tracks, n_steps, 2)) * 2 + np.stack([5 * tt, 3 * tt**2], -1)
+    mask = rng.random(z.shape) > 0.15
+    z[~mask] = np.nan
+    models = [
+        ConstantVelocity(accel_psd=0.1, n_axes=2),
+        ConstantAcceleration(jerk_psd=1.0, n_axes=2),
+        ShapingFilter(lambda_per_s2=0.05, alpha_per_s=0.3, shaping_std=5.0, n_axes=2),
+    ]
+    priors = [
+        at.GaussianState(
+            rng.normal(size=(n_tracks, m.state_dim)),
+            np.broadcast_to(50 * np.eye(m.state_dim), (n_tracks, m.state_dim, m.state_dim)),
+            float(np.min(t)) - 0.1,
+        )
+        for m in models
+    ]
+    a = rng.normal(size=(n_tracks, n_steps, 2, 2))
+    r = a @ np.swapaxes(a, -1, -2) + np.eye(2)
+    pi = np.full((3, 3), 0.025) + 0.925 * np.eye(3)
+    args = (t, z, models, ("x", "y"), r, priors, pi, [0.5, 0.3, 0.2])
+    ref = imm_filter(*args, mask=mask, backend="numpy")
+    got = imm_filter(*args, mask=mask, backend="numba")
+    assert got.state_names == ref.state_names == ("x", "y", "vx", "vy")
+
+    def close(x, y):
+        assert np.abs(x - y).max() <= 1e-10 * np.abs(y).max()
+
+    close(got.filtered.mean, ref.filtered.mean)
+    close(got.filtered.cov, ref.filtered.cov)
+    close(got.mode_probabilities, ref.mode_probabilities)
+    close(got.log_likelihood, ref.log_likelihood)
+    for c_got, c_ref in zip(got.components, ref.components, strict=True):
+        close(c_got.mean, c_ref.mean)
+        close(c_got.cov, c_ref.cov)
+    with pytest.raises(ValueError, match="backend must be"):
+        imm_filter(*args, mask=mask, backend="gpu")

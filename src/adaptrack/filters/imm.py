@@ -73,6 +73,7 @@ def imm_filter(
     method: Method = "expm",
     noise: Noise = "white",
     form: str = "joseph",
+    backend: str = "auto",
 ) -> IMMResult:
     """Run an IMM estimator over one track or a batch of tracks.
 
@@ -98,6 +99,9 @@ def imm_filter(
         True where a measurement (component) is present.
     method, noise : discretisation options.
     form : {"joseph", "standard"}
+    backend : {"auto", "numpy", "numba"}
+        The NumPy reference or the compiled kernel (same numbers to rounding); ``"auto"``
+        compiles from 20,000 track-steps on.
 
     Returns
     -------
@@ -160,6 +164,12 @@ def imm_filter(
     dt = tb - t_prev
     if np.any(dt < 0):
         raise ValueError("initial times must not be after the first measurement time")
+    if backend not in ("auto", "numpy", "numba"):
+        raise ValueError(f"backend must be 'auto', 'numpy' or 'numba'; got {backend!r}")
+    if backend == "numba" or (backend == "auto" and z.size // m >= 20_000):
+        return _imm_compiled(
+            tb, dt, z, mk, models, measured, r, initial, pi, mu0, method, noise, form
+        )
     disc = [discretize_with_input(mdl, dt, method, noise=noise) for mdl in models]
     hs = [
         np.eye(mdl.state_dim)[[nm.index(s) for s in measured]]
@@ -224,6 +234,125 @@ def imm_filter(
     )
     filtered = _trusted(GaussianState, mean=comb_mean, cov=comb_cov, time=tb)
     return IMMResult(filtered, out_names, probs, comps, ll_mix)
+
+
+def _imm_compiled(
+    tb: FloatArray,
+    dt: FloatArray,
+    z: FloatArray,
+    mask: np.ndarray,
+    models: list[MotionModel],
+    measured: tuple[str, ...],
+    r: FloatArray,
+    initial: Sequence[GaussianState],
+    pi: FloatArray,
+    mu0: FloatArray,
+    method: Method,
+    noise: Noise,
+    form: str,
+) -> IMMResult:
+    """Run :func:`imm_filter` in the compiled kernel (:mod:`adaptrack.filters._imm_kernel`)."""
+    from ._imm_kernel import imm_kernel
+
+    batch, (n_steps, m) = z.shape[:-2], z.shape[-2:]
+    n_tr = int(np.prod(batch, dtype=int))
+    n_models = len(models)
+    names = [mdl.state_names for mdl in models]
+    sizes = np.array([mdl.state_dim for mdl in models], dtype=np.int64)
+    nmax = int(sizes.max())
+    uniq, inv = np.unique(dt, return_inverse=True)
+    phi = np.zeros((n_models, uniq.size, nmax, nmax))
+    qd = np.zeros_like(phi)
+    u = np.zeros((n_models, uniq.size, nmax))
+    h = np.zeros((n_models, m, nmax))
+    x0 = np.zeros((n_models, n_tr, nmax))
+    p0 = np.zeros((n_models, n_tr, nmax, nmax))
+    emb_dst = np.zeros((n_models, n_models, nmax), dtype=np.int64)
+    emb_src = np.zeros_like(emb_dst)
+    emb_cnt = np.zeros((n_models, n_models), dtype=np.int64)
+    out_names = tuple(s for s in names[0] if all(s in nm for nm in names))
+    out_idx = np.array([[nm.index(s) for s in out_names] for nm in names], dtype=np.int64)
+    for j, mdl in enumerate(models):
+        nj = mdl.state_dim
+        phi[j, :, :nj, :nj], qd[j, :, :nj, :nj], u[j, :, :nj] = discretize_with_input(
+            mdl, uniq, method, noise=noise
+        )
+        h[j, np.arange(m), [names[j].index(s_) for s_ in measured]] = 1.0
+        x0[j, :, :nj] = np.broadcast_to(initial[j].mean, batch + (nj,)).reshape(-1, nj)
+        p0[j, :, :nj, :nj] = np.broadcast_to(initial[j].cov, batch + (nj, nj)).reshape(-1, nj, nj)
+        for i in range(n_models):
+            dst, src = _embed(names[i], names[j])
+            emb_cnt[i, j] = dst.size
+            emb_dst[i, j, : dst.size], emb_src[i, j, : dst.size] = dst, src
+    r4 = r[None, None] if r.ndim == 2 else r.reshape(n_tr, n_steps, m, m)
+    with np.errstate(divide="ignore"):
+        log_pi = np.log(pi)
+    n_out = len(out_names)
+    comp_mean = np.zeros((n_models, n_tr, n_steps, nmax))
+    comp_cov = np.zeros((n_models, n_tr, n_steps, nmax, nmax))
+    probs = np.empty((n_tr, n_steps, n_models))
+    ll_mix = np.empty((n_tr, n_steps))
+    comb_mean = np.empty((n_tr, n_steps, n_out))
+    comb_cov = np.empty((n_tr, n_steps, n_out, n_out))
+    status = np.zeros(n_tr, dtype=np.int64)
+    c = np.ascontiguousarray
+    imm_kernel(
+        sizes,
+        x0,
+        p0,
+        phi,
+        qd,
+        u,
+        c(inv.reshape(-1, n_steps).astype(np.int64)),
+        c(z.reshape(n_tr, n_steps, m)),
+        c(mask.reshape(n_tr, n_steps, m)),
+        h,
+        c(r4),
+        np.log(np.where(mu0 > 0, mu0, 1e-300)),
+        log_pi,
+        emb_dst,
+        emb_src,
+        emb_cnt,
+        out_idx,
+        form == "joseph",
+        comp_mean,
+        comp_cov,
+        probs,
+        ll_mix,
+        comb_mean,
+        comb_cov,
+        status,
+    )
+    if status.any():
+        i = int(np.flatnonzero(status)[0])
+        raise ValueError(
+            f"innovation covariance is not positive definite at step {int(status[i]) - 1}, "
+            f"track {i}"
+        )
+    comps = tuple(
+        _trusted(
+            GaussianState,
+            mean=comp_mean[j, ..., : mdl.state_dim].reshape(batch + (n_steps, mdl.state_dim)),
+            cov=comp_cov[j, ..., : mdl.state_dim, : mdl.state_dim].reshape(
+                batch + (n_steps, mdl.state_dim, mdl.state_dim)
+            ),
+            time=tb,
+        )
+        for j, mdl in enumerate(models)
+    )
+    filtered = _trusted(
+        GaussianState,
+        mean=comb_mean.reshape(batch + (n_steps, n_out)),
+        cov=comb_cov.reshape(batch + (n_steps, n_out, n_out)),
+        time=tb,
+    )
+    return IMMResult(
+        filtered,
+        out_names,
+        probs.reshape(batch + (n_steps, n_models)),
+        comps,
+        ll_mix.reshape(batch + (n_steps,)),
+    )
 
 
 def _mix(

@@ -1,0 +1,229 @@
+"""Compiled (numba) kernel of the IMM estimator (:func:`adaptrack.filters.imm.imm_filter`).
+
+Models of different sizes are padded to the largest; each model's block is used through
+views of its own size. Per track (tracks in parallel) and step: mixing with the shared-state
+embedding, predict + update with :func:`adaptrack.filters._kernels.kf_step`, mode
+probabilities by log-sum-exp, combination. Agrees with the NumPy reference to rounding.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+from numba import prange
+
+from ._kernels import _LOG_2PI, kf_step
+
+
+@numba.njit(cache=True, inline="always")
+def _logsumexp(a):  # type: ignore[no-untyped-def]
+    top = -np.inf
+    for v in a:
+        top = max(top, v)
+    if not math.isfinite(top):
+        return top
+    acc = 0.0
+    for v in a:
+        acc += math.exp(v - top)
+    return top + math.log(acc)
+
+
+@numba.njit(cache=True, parallel=True)
+def imm_kernel(  # type: ignore[no-untyped-def]
+    sizes,
+    x0,
+    p0,
+    phi,
+    qd,
+    u,
+    didx,
+    z,
+    mask,
+    h,
+    r,
+    log_mu0,
+    log_pi,
+    emb_dst,
+    emb_src,
+    emb_cnt,
+    out_idx,
+    joseph,
+    comp_mean,
+    comp_cov,
+    probs,
+    ll_mix,
+    comb_mean,
+    comb_cov,
+    status,
+):
+    """Run the IMM over every track; outputs are filled in place.
+
+    Shapes (M models padded to ``nmax`` states, m measured): ``x0`` (M, N|1, nmax), ``p0``
+    (M, N|1, nmax, nmax); ``phi``/``qd`` (M, U, nmax, nmax) and ``u`` (M, U, nmax) for the U
+    distinct step lengths, ``didx`` (N|1, T) the step length of every step;
+    ``z``/``mask`` (N, T, m), ``h`` (M, m, nmax), ``r`` (N|1, T|1, m, m), ``emb_*`` the
+    (dst, src, count) of the states model i shares with model j, ``out_idx`` (M, n_out).
+    ``status[i]`` becomes ``k + 1`` if track ``i`` stops at step ``k`` (S not positive
+    definite).
+    """
+    n_models, _, nmax = x0.shape
+    n_tracks, n_steps, m = z.shape
+    n_out = out_idx.shape[1]
+    off = np.zeros(m)
+    for i in prange(n_tracks):
+        ii = numba.int64(i)  # prange's index may be unsigned: min() with it gives a float
+        ix = min(ii, x0.shape[1] - 1)
+        ip = min(ii, didx.shape[0] - 1)
+        ir = min(ii, r.shape[0] - 1)
+        xs = np.zeros((n_models, nmax))
+        ps = np.zeros((n_models, nmax, nmax))
+        mx = np.zeros((n_models, nmax))
+        mp = np.zeros((n_models, nmax, nmax))
+        em = np.zeros(nmax)
+        ep = np.zeros((nmax, nmax))
+        log_mu = log_mu0.copy()
+        log_c = np.empty(n_models)
+        log_joint = np.empty((n_models, n_models))
+        w = np.empty((n_models, n_models))
+        ll = np.empty(n_models)
+        joint = np.empty(n_models)
+        xp = np.empty(nmax)
+        pp = np.empty((nmax, nmax))
+        tmp = np.empty((nmax, nmax))
+        hm = np.empty((m, nmax))
+        rm = np.empty((m, m))
+        hp = np.empty((m, nmax))
+        s = np.empty((m, m))
+        lo = np.empty((m, m))
+        kt = np.empty((m, nmax))
+        nu = np.empty(m)
+        wv = np.empty(m)
+        ikh = np.empty((nmax, nmax))
+        xm = np.empty(n_out)
+        for j in range(n_models):
+            for a in range(nmax):
+                xs[j, a] = x0[j, ix, a]
+                for b in range(nmax):
+                    ps[j, a, b] = p0[j, ix, a, b]
+        for k in range(n_steps):
+            kr = min(k, r.shape[1] - 1)
+            q = didx[ip, k]
+            if k == 0:
+                mx[:, :] = xs
+                mp[:, :, :] = ps
+                log_c[:] = log_mu
+            else:
+                for a in range(n_models):
+                    for b in range(n_models):
+                        log_joint[a, b] = log_mu[a] + log_pi[a, b]
+                for b in range(n_models):
+                    log_c[b] = _logsumexp(log_joint[:, b])
+                    for a in range(n_models):
+                        w[a, b] = math.exp(log_joint[a, b] - log_c[b])
+                for j in range(n_models):
+                    nj = sizes[j]
+                    mx[j, :] = 0.0
+                    mp[j, :, :] = 0.0
+                    for src_model in range(n_models):
+                        # embed model src_model's estimate into model j's states
+                        em[:nj] = xs[j, :nj]
+                        ep[:nj, :nj] = ps[j, :nj, :nj]
+                        cnt = emb_cnt[src_model, j]
+                        for a in range(cnt):
+                            da = emb_dst[src_model, j, a]
+                            em[da] = xs[src_model, emb_src[src_model, j, a]]
+                            for c in range(nj):
+                                ep[da, c] = 0.0
+                                ep[c, da] = 0.0
+                        for a in range(cnt):
+                            da, sa = emb_dst[src_model, j, a], emb_src[src_model, j, a]
+                            for b in range(cnt):
+                                db, sb = emb_dst[src_model, j, b], emb_src[src_model, j, b]
+                                ep[da, db] = ps[src_model, sa, sb]
+                        wij = w[src_model, j]
+                        for a in range(nj):
+                            mx[j, a] += wij * em[a]
+                        for a in range(nj):
+                            for b in range(nj):
+                                mp[j, a, b] += wij * ep[a, b]
+                    # spread of the embedded means around the mixed mean
+                    for src_model in range(n_models):
+                        em[:nj] = xs[j, :nj]
+                        for a in range(emb_cnt[src_model, j]):
+                            em[emb_dst[src_model, j, a]] = xs[src_model, emb_src[src_model, j, a]]
+                        wij = w[src_model, j]
+                        for a in range(nj):
+                            for b in range(nj):
+                                mp[j, a, b] += wij * (em[a] - mx[j, a]) * (em[b] - mx[j, b])
+                    for a in range(nj):
+                        for b in range(a + 1, nj):
+                            v = 0.5 * (mp[j, a, b] + mp[j, b, a])
+                            mp[j, a, b] = v
+                            mp[j, b, a] = v
+            for j in range(n_models):
+                nj = sizes[j]
+                xs[j, :nj] = mx[j, :nj]
+                ps[j, :nj, :nj] = mp[j, :nj, :nj]
+                ok, nis, logdet, nobs = kf_step(
+                    xs[j, :nj],
+                    ps[j, :nj, :nj],
+                    phi[j, q, :nj, :nj],
+                    qd[j, q, :nj, :nj],
+                    u[j, q, :nj],
+                    z[i, k],
+                    mask[i, k],
+                    h[j, :, :nj],
+                    r[ir, kr],
+                    off,
+                    joseph,
+                    xp[:nj],
+                    pp[:nj, :nj],
+                    tmp[:nj, :nj],
+                    hm[:, :nj],
+                    rm,
+                    hp[:, :nj],
+                    s,
+                    lo,
+                    kt[:, :nj],
+                    nu,
+                    wv,
+                    ikh[:nj, :nj],
+                )
+                if not ok:
+                    status[i] = k + 1
+                    break
+                ll[j] = -0.5 * (logdet + nis + nobs * _LOG_2PI) if nobs > 0 else 0.0
+                for a in range(nj):
+                    comp_mean[j, i, k, a] = xs[j, a]
+                    for b in range(nj):
+                        comp_cov[j, i, k, a, b] = ps[j, a, b]
+            if status[i] != 0:
+                break
+            for j in range(n_models):
+                joint[j] = ll[j] + log_c[j]
+            total = _logsumexp(joint)
+            ll_mix[i, k] = total
+            for j in range(n_models):
+                log_mu[j] = joint[j] - total
+                probs[i, k, j] = math.exp(log_mu[j])
+            for a in range(n_out):
+                acc = 0.0
+                for j in range(n_models):
+                    acc += probs[i, k, j] * xs[j, out_idx[j, a]]
+                xm[a] = acc
+                comb_mean[i, k, a] = acc
+            for a in range(n_out):
+                for b in range(n_out):
+                    acc = 0.0
+                    for j in range(n_models):
+                        ja, jb = out_idx[j, a], out_idx[j, b]
+                        d = (xs[j, ja] - xm[a]) * (xs[j, jb] - xm[b])
+                        acc += probs[i, k, j] * (ps[j, ja, jb] + d)
+                    comb_cov[i, k, a, b] = acc
+            for a in range(n_out):
+                for b in range(a + 1, n_out):
+                    v = 0.5 * (comb_cov[i, k, a, b] + comb_cov[i, k, b, a])
+                    comb_cov[i, k, a, b] = v
+                    comb_cov[i, k, b, a] = v
