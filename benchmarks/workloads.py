@@ -216,6 +216,7 @@ def crossing(quick: bool, workers: int) -> list[Result]:
         t0 = time.perf_counter()
         res = evaluate_site(site, runs, 0, pool=pool, **subset)
         secs = time.perf_counter() - t0
+        n_workers = pool.n_workers
     run_steps = sum(r.n_epochs for r in res.rows)  # scored (run, epoch) pairs, all estimators
     return [
         Result(
@@ -224,7 +225,7 @@ def crossing(quick: bool, workers: int) -> list[Result]:
             None,
             run_steps / secs,
             f"{runs} runs per class x case ({'car, 1 case' if quick else 'all'}) in "
-            f"{secs:.1f} s on {pool.n_workers} worker(s); "
+            f"{secs:.1f} s on {n_workers} worker(s); "
             f"1,000 runs ~ {secs * 1000 / runs:.0f} s (linear); no peer has this workload",
         )
     ]

@@ -152,7 +152,9 @@ def test_bad_options():
         run(nan_policy="drop")
     with pytest.raises(ValueError, match="form must be 'joseph' or 'standard'"):
         run(form="sqrt")
-    with pytest.raises(ValueError, match="method must be 'expm', 'analytic', 'taylor' or 'source'"):
+    with pytest.raises(
+        ValueError, match="method must be 'expm', 'analytic', 'taylor', 'source' or 'auto'"
+    ):
         run(method="euler")
 
 

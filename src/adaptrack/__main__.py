@@ -2,4 +2,5 @@
 
 from .cli import app
 
-app(prog_name="adaptrack")
+if __name__ == "__main__":  # worker processes re-import this module: they must not run the CLI
+    app(prog_name="adaptrack")

@@ -25,14 +25,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._typing import BoolArray, FloatArray
-from ..filters.kalman import _update, predict
+from ..filters.kalman import CovarianceError, _update, predict
 from ..models.continuous import ConstantVelocity, MotionModel
 from ..models.discretize import discretize
 from ..types import GaussianState, _trusted
+from ._ekf_kernels import FREE, ROAD
 from .road import Road
 from .site import RadarSpec
 
 CROSS_LOS_SPEED_STD_MPS = 10.0
+COMPILED_MIN_RUN_STEPS = 5_000  # "auto" runs the compiled EKF from this many run-steps on
 
 
 @dataclass(frozen=True, eq=False)
@@ -87,6 +89,36 @@ def _initial_point(z: FloatArray, radar: RadarSpec) -> tuple[FloatArray, FloatAr
     return np.asarray(radar.position_m) + rho[..., None] * los, los, rho
 
 
+@dataclass(frozen=True)
+class _Compiled:
+    """What the compiled EKF needs to evaluate a tracker's measurement model."""
+
+    kind: int  # _ekf_kernels.ROAD or FREE
+    k: int  # along-road model size (ROAD)
+    radar: FloatArray  # x, y, height, range / azimuth / radial-speed standard deviations
+    road: FloatArray  # (5, S) centreline s, x, y, heading, curvature (ROAD)
+    half_width_m: float
+    scatter_std_m: float
+
+
+def _compiled_spec(
+    kind: int, radar: RadarSpec, scatter_std_m: float, k: int = 0, road: Road | None = None
+) -> _Compiled:
+    radar_arr = np.array(
+        [
+            *radar.position_m,
+            radar.height_m,
+            radar.range_std_m,
+            radar.azimuth_std_rad,
+            radar.radial_speed_std_mps,
+        ]
+    )
+    if road is None:
+        return _Compiled(kind, k, radar_arr, np.zeros((5, 2)), 0.0, scatter_std_m)
+    table = np.stack([road.s, road.xy[:, 0], road.xy[:, 1], road.heading, road.curvature])
+    return _Compiled(kind, k, radar_arr, table, 0.5 * road.lane_width_m, scatter_std_m)
+
+
 def _run(
     times: FloatArray,
     z: FloatArray,
@@ -96,16 +128,22 @@ def _run(
     measure: Callable[[FloatArray], tuple[FloatArray, FloatArray, FloatArray]],
     initial: Callable[[FloatArray], tuple[FloatArray, FloatArray]],
     constrain: Callable[[FloatArray], FloatArray] | None = None,
+    compiled: _Compiled | None = None,
 ) -> tuple[FloatArray, FloatArray, BoolArray]:
-    """Run the batched EKF loop; each run starts at its first detection."""
+    """Run the batched EKF loop; each run starts at its first detection.
+
+    With ``compiled`` the same recursion runs in :func:`._ekf_kernels.ekf_kernel`.
+    """
     n_runs, n_steps = detected.shape
-    mean = np.zeros((n_runs, n))
-    cov = np.broadcast_to(np.eye(n), (n_runs, n, n)).copy()
-    started = np.zeros(n_runs, dtype=bool)
     means = np.full((n_runs, n_steps, n), np.nan)
     covs = np.full((n_runs, n_steps, n, n), np.nan)
     # all transitions at once (before a track starts its state is replaced at initialisation)
     phis, qds = transition(np.diff(times, axis=1, prepend=times[:, :1]))
+    if compiled is not None:
+        return _run_compiled(z, detected, phis, qds, initial, compiled, means, covs)
+    mean = np.zeros((n_runs, n))
+    cov = np.broadcast_to(np.eye(n), (n_runs, n, n)).copy()
+    started = np.zeros(n_runs, dtype=bool)
     t_prev = times[:, 0]
     for k in range(n_steps):
         t = times[:, k]
@@ -132,6 +170,59 @@ def _run(
     return means, covs, started
 
 
+def _run_compiled(
+    z: FloatArray,
+    detected: BoolArray,
+    phis: FloatArray,
+    qds: FloatArray,
+    initial: Callable[[FloatArray], tuple[FloatArray, FloatArray]],
+    spec: _Compiled,
+    means: FloatArray,
+    covs: FloatArray,
+) -> tuple[FloatArray, FloatArray, BoolArray]:
+    from ._ekf_kernels import ekf_kernel
+
+    n_runs, _ = detected.shape
+    n = means.shape[-1]
+    started = np.asarray(detected.any(axis=1), dtype=bool)
+    first = np.where(started, np.argmax(detected, axis=1), -1)
+    m0, p0 = np.zeros((n_runs, n)), np.zeros((n_runs, n, n))
+    if started.any():
+        m0[started], p0[started] = initial(z[started, first[started]])
+    status = np.zeros(n_runs, dtype=np.int64)
+    c = np.ascontiguousarray
+    ekf_kernel(
+        spec.kind,
+        c(phis),
+        c(qds),
+        c(z),
+        c(detected),
+        first,
+        m0,
+        p0,
+        spec.k,
+        spec.radar,
+        c(spec.road),
+        spec.half_width_m,
+        spec.scatter_std_m,
+        means,
+        covs,
+        status,
+    )
+    if status.any():
+        i = int(np.flatnonzero(status)[0])
+        raise CovarianceError(
+            f"innovation covariance is not positive definite at step {int(status[i]) - 1}, run {i}"
+        )
+    return means, covs, started
+
+
+def _use_kernel(backend: str, detected: BoolArray) -> bool:
+    if backend not in ("auto", "numpy", "numba"):
+        raise ValueError(f"backend must be 'auto', 'numpy' or 'numba'; got {backend!r}")
+    return backend == "numba" or (backend == "auto" and detected.size >= COMPILED_MIN_RUN_STEPS)
+
+
 def track_free_2d(
     times: FloatArray,
     z: FloatArray,
@@ -140,15 +231,20 @@ def track_free_2d(
     *,
     model: MotionModel | None = None,
     scatter_std_m: float = 0.0,
+    backend: str = "auto",
 ) -> TrackEstimates:
-    """Planar EKF ``[x, y, vx, vy]`` on (range, azimuth, radial speed) detections."""
+    """Planar EKF ``[x, y, vx, vy]`` on (range, azimuth, radial speed) detections.
+
+    ``backend``: ``"numpy"`` (reference), ``"numba"`` (compiled, same numbers to rounding) or
+    ``"auto"`` (compiled from 5,000 run-steps on).
+    """
     model = ConstantVelocity(accel_psd=10.0, n_axes=2) if model is None else model
     if model.state_names[:4] != ("x", "y", "vx", "vy"):
         raise ValueError("track_free_2d needs a 2-axis model whose first states are x, y, vx, vy")
     n = model.state_dim
 
     def transition(dt: FloatArray) -> tuple[FloatArray, FloatArray]:
-        return discretize(model, dt)
+        return discretize(model, dt, method="auto")
 
     def measure(x: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
         zp, jp, jv = _polar_jacobian(x[:, :2], x[:, 2:4], radar)
@@ -185,7 +281,8 @@ def track_free_2d(
             cov[:, i, i] = 9.0
         return mean, cov
 
-    means, covs, _ = _run(times, z, detected, n, transition, measure, initial)
+    spec = _compiled_spec(FREE, radar, scatter_std_m) if _use_kernel(backend, detected) else None
+    means, covs, _ = _run(times, z, detected, n, transition, measure, initial, compiled=spec)
     vel = means[..., 2:4]
     return TrackEstimates(means[..., :2], vel, np.linalg.norm(vel, axis=-1), covs[..., :2, :2])
 
@@ -198,7 +295,7 @@ def _road_transition(
     n = k + 1
 
     def transition(dt: FloatArray) -> tuple[FloatArray, FloatArray]:
-        phi_a, q_a = discretize(model, dt)
+        phi_a, q_a = discretize(model, dt, method="auto")
         phi = np.zeros(dt.shape + (n, n))
         qd = np.zeros(dt.shape + (n, n))
         phi[..., :k, :k], qd[..., :k, :k] = phi_a, q_a
@@ -247,11 +344,13 @@ def track_on_road(
     scatter_std_m: float = 0.0,
     lateral_psd: float = 0.01,
     lateral_std_m: float = 0.5,
+    backend: str = "auto",
 ) -> TrackEstimates:
     """Road-constrained EKF: one-axis ``model`` for the along-road coordinate + lateral offset.
 
     ``model`` states are ``[s, ds/dt, ...]`` (e.g. ``ConstantAcceleration()``,
-    ``ShapingFilter(...)``); ``ds/dt`` is negative while the vehicle approaches.
+    ``ShapingFilter(...)``); ``ds/dt`` is negative while the vehicle approaches. ``backend`` as
+    in :func:`track_free_2d`.
     """
     k = model.state_dim
     if model.state_names[:2] != ("x", "vx"):
@@ -290,7 +389,14 @@ def track_on_road(
         out[rev, 1:k] = 0.0
         return out
 
-    means, covs, _ = _run(times, z, detected, n, transition, measure, initial, no_reversal)
+    spec = (
+        _compiled_spec(ROAD, radar, scatter_std_m, k, road)
+        if _use_kernel(backend, detected)
+        else None
+    )
+    means, covs, _ = _run(
+        times, z, detected, n, transition, measure, initial, no_reversal, compiled=spec
+    )
     s, vs, d = means[..., 0], means[..., 1], means[..., k]
     pos = road.lane_point(np.nan_to_num(s), np.nan_to_num(d))
     pos[np.isnan(s)] = np.nan
@@ -347,7 +453,14 @@ def track_converted(
         np.zeros((times.shape[0], n)), np.broadcast_to(p0, (times.shape[0], n, n)), times[:, 0]
     )
     res = kalman_filter(
-        times, np.where(detected[..., None], pos, np.nan), model, h, cov, prior, mask=detected
+        times,
+        np.where(detected[..., None], pos, np.nan),
+        model,
+        h,
+        cov,
+        prior,
+        mask=detected,
+        method="auto",
     )
     started = np.cumsum(detected, axis=1) > 0
     mean = np.where(started[..., None], res.filtered.mean, np.nan)
@@ -373,6 +486,7 @@ def road_pcrlb(
     scatter_std_m: float = 0.0,
     lateral_psd: float = 0.01,
     lateral_std_m: float = 0.5,
+    backend: str = "auto",
 ) -> tuple[FloatArray, FloatArray]:
     """Posterior Cramer-Rao bound of the road-constrained model along true trajectories.
 
@@ -381,7 +495,7 @@ def road_pcrlb(
     Returns the bound variance of the planar position [m^2] and of the speed [m^2/s^2],
     shapes (N, T) (NaN before the first detection). The truth here is deterministic, so a
     filter can beat this bound: it is the design reference of a target that really moves
-    like ``model``.
+    like ``model``. ``backend`` as in :func:`track_free_2d`.
     """
     k = model.state_dim
     n = k + 1
@@ -393,10 +507,30 @@ def road_pcrlb(
     truth[..., k] = lateral_offset_m[:, None]
     phis, qds = transition(np.diff(runs_times, axis=1, prepend=runs_times[:, :1]))
     p0 = np.diag([1.0 + scatter_std_m**2, 1.0] + [9.0] * (k - 2) + [lateral_std_m**2])
-    cov = np.broadcast_to(p0, (n_runs, n, n)).copy()
-    started = np.zeros(n_runs, dtype=bool)
     pos_var = np.full((n_runs, n_steps), np.nan)
     spd_var = np.full((n_runs, n_steps), np.nan)
+    if _use_kernel(backend, detected):
+        from ._ekf_kernels import pcrlb_kernel
+
+        spec = _compiled_spec(ROAD, radar, scatter_std_m, k, road)
+        c = np.ascontiguousarray
+        pcrlb_kernel(
+            c(phis),
+            c(qds),
+            truth,
+            c(detected),
+            p0,
+            k,
+            spec.radar,
+            c(spec.road),
+            spec.half_width_m,
+            spec.scatter_std_m,
+            pos_var,
+            spd_var,
+        )
+        return pos_var, spd_var
+    cov = np.broadcast_to(p0, (n_runs, n, n)).copy()
+    started = np.zeros(n_runs, dtype=bool)
     for i in range(n_steps):
         cov = np.where(
             started[:, None, None],

@@ -16,6 +16,9 @@ For a step ``dt >= 0`` the exact discrete model of ``dx = F x dt + G dbeta + B u
     Truncated series of order ``order`` (no sub-stepping; for ``norm1(F) dt << 1``).
 ``"source"``
     Seed 000's printed Euler-type Singer transition and noise (spec A.4), for comparison only.
+``"auto"``
+    The closed form where a model block has one, ``"expm"`` otherwise: the fastest accurate
+    choice (used by the level-crossing trackers).
 
 Noise conventions: ``"white"`` (default, exact white noise) or ``"piecewise"`` (the noise
 held constant over each step with covariance ``Qc/dt``: ``Qd = Gamma_G (Qc/dt) Gamma_G^T``).
@@ -35,7 +38,7 @@ from .._validation import as_float_array
 from ._layout import Block, ClosedForm, assemble
 from .continuous import MotionModel, as_motion_model
 
-Method = Literal["expm", "analytic", "taylor", "source"]
+Method = Literal["expm", "analytic", "taylor", "source", "auto"]
 Noise = Literal["white", "piecewise"]
 _SUBSTEP_NORM = 0.5
 _ANALYTIC_SERIES_ORDER = 30
@@ -67,8 +70,9 @@ def discretize(
         E.g. :class:`~adaptrack.models.Singer`.
     dt : float or array_like, shape (...)
         Step(s) [s], >= 0; an array gives one discretisation per entry (e.g. per track).
-    method : {"expm", "analytic", "taylor", "source"}
-        See the module docstring.
+    method : {"expm", "analytic", "taylor", "source", "auto"}
+        See the module docstring; ``"auto"``: a model block's closed form where it has one
+        (CV, CA, Singer, M1: several times faster), else ``"expm"``.
     noise : {"white", "piecewise"}
         Process-noise convention (spec 0.3.4).
     order : int
@@ -120,8 +124,10 @@ def discretize_with_input(
     if np.any(dt_arr < 0):
         idx = tuple(int(i) for i in np.argwhere(dt_arr < 0)[0])
         raise ValueError(f"dt must be >= 0; got {dt_arr[idx]} at index {idx}")
-    if method not in ("expm", "analytic", "taylor", "source"):
-        raise ValueError(f"method must be 'expm', 'analytic', 'taylor' or 'source'; got {method!r}")
+    if method not in ("expm", "analytic", "taylor", "source", "auto"):
+        raise ValueError(
+            f"method must be 'expm', 'analytic', 'taylor', 'source' or 'auto'; got {method!r}"
+        )
     if noise not in ("white", "piecewise"):
         raise ValueError(f"noise must be 'white' or 'piecewise'; got {noise!r}")
     if method == "taylor" and (isinstance(order, bool) or not isinstance(order, int) or order < 0):
@@ -182,7 +188,7 @@ def _discretize_block(
                 "method='source' defines its own process noise (spec A.4); leave noise='white'"
             )
         return b.source_form(dt)
-    if method == "analytic" and b.closed_form is not None:
+    if method in ("analytic", "auto") and b.closed_form is not None:
         phi_, qd, gam = b.closed_form(dt)
     elif method == "analytic":
         phi_, qd, gam = _doubling_recipe(b, dt, _taylor_substep(b, _ANALYTIC_SERIES_ORDER))

@@ -1,0 +1,290 @@
+"""Compiled (numba) extended Kalman filters of :mod:`adaptrack.crossing.tracking`.
+
+The NumPy loops there are the readable reference; these kernels run the same recursion run by
+run (runs in parallel): predict with the tabulated transitions, hold an approaching vehicle at
+standstill instead of reversing (road model), linearise the (range, azimuth, radial speed)
+measurement at the prediction, Joseph update. Tracks start at their first detection with the
+initial state computed in NumPy. They agree with the reference to rounding (tests).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+from numba import prange
+
+from .._kernel_linalg import cholesky_into, cholesky_solve_into
+
+ROAD, FREE = 0, 1  # measurement models
+
+
+@numba.njit(cache=True, inline="always")
+def _polar_into(px, py, vx, vy, radar, zp, jp, jv):  # type: ignore[no-untyped-def]
+    """Predicted (r, az, vr) and its Jacobians (3, 2) w.r.t. position and velocity."""
+    ex, ey = px - radar[0], py - radar[1]
+    h2 = ex * ex + ey * ey
+    r = math.sqrt(h2 + radar[2] * radar[2])
+    rv = ex * vx + ey * vy
+    zp[0], zp[1], zp[2] = r, math.atan2(ex, ey), rv / r
+    jp[0, 0], jp[0, 1] = ex / r, ey / r
+    jp[1, 0], jp[1, 1] = ey / h2, -ex / h2
+    jp[2, 0] = vx / r - rv / r**3 * ex
+    jp[2, 1] = vy / r - rv / r**3 * ey
+    jv[0, 0] = jv[0, 1] = jv[1, 0] = jv[1, 1] = 0.0
+    jv[2, 0], jv[2, 1] = ex / r, ey / r
+
+
+@numba.njit(cache=True, inline="always")
+def _noise_into(radar, jp, ux, uy, scatter_std, rm):  # type: ignore[no-untyped-def]
+    """Measurement noise with the rank-one reflection-point scatter along ``u``."""
+    b0 = jp[0, 0] * ux + jp[0, 1] * uy
+    b1 = jp[1, 0] * ux + jp[1, 1] * uy
+    b2 = jp[2, 0] * ux + jp[2, 1] * uy
+    s2 = scatter_std * scatter_std
+    rm[0, 0], rm[1, 1], rm[2, 2] = radar[3] ** 2, radar[4] ** 2, radar[5] ** 2
+    rm[0, 1] = rm[1, 0] = rm[0, 2] = rm[2, 0] = rm[1, 2] = rm[2, 1] = 0.0
+    bb = (b0, b1, b2)
+    for a in range(3):
+        for c in range(3):
+            rm[a, c] += s2 * bb[a] * bb[c]
+
+
+@numba.njit(cache=True)
+def measure(kind, x, k, radar, road, half_width, scatter_std, zp, h, rm, jp, jv):  # type: ignore[no-untyped-def]
+    """Fill predicted detection ``zp``, Jacobian ``h`` (3, n) and noise ``rm`` at state ``x``.
+
+    ``road`` (4, S): sampled centreline ``s``, ``x``, ``y``, heading and curvature rows.
+    """
+    h[:, :] = 0.0
+    if kind == FREE:
+        vx, vy = x[2], x[3]
+        _polar_into(x[0], x[1], vx, vy, radar, zp, jp, jv)
+        for a in range(3):
+            h[a, 0], h[a, 1], h[a, 2], h[a, 3] = jp[a, 0], jp[a, 1], jv[a, 0], jv[a, 1]
+        speed = math.sqrt(vx * vx + vy * vy)
+        if speed > 0.5:
+            ux, uy = vx / max(speed, 1e-9), vy / max(speed, 1e-9)
+        else:
+            ex, ey = x[0] - radar[0], x[1] - radar[1]
+            dist = math.sqrt(ex * ex + ey * ey)
+            ux, uy = -ex / dist, -ey / dist
+        _noise_into(radar, jp, ux, uy, scatter_std, rm)
+        return
+    s, vs, d = x[0], x[1], x[k]
+    q = min(max(s, 0.0), road[0, road.shape[1] - 1])
+    cx = np.interp(q, road[0], road[1])
+    cy = np.interp(q, road[0], road[2])
+    th = np.interp(q, road[0], road[3])
+    kappa = np.interp(q, road[0], road[4])
+    tx, ty = math.sin(th), math.cos(th)
+    rx, ry = -ty, tx
+    off = half_width + d
+    _polar_into(cx + off * rx, cy + off * ry, vs * tx, vs * ty, radar, zp, jp, jv)
+    lever = 1.0 + kappa * (half_width + d)
+    dpx, dpy = lever * tx, lever * ty
+    dvx, dvy = -(vs * kappa) * rx, -(vs * kappa) * ry
+    for a in range(3):
+        h[a, 0] = jp[a, 0] * dpx + jp[a, 1] * dpy + jv[a, 0] * dvx + jv[a, 1] * dvy
+        h[a, 1] = jv[a, 0] * tx + jv[a, 1] * ty
+        h[a, k] = jp[a, 0] * rx + jp[a, 1] * ry
+    _noise_into(radar, jp, -tx, -ty, scatter_std, rm)
+
+
+@numba.njit(cache=True)
+def joseph_update(x, p, resid, h, rm, s, lo, hp, kt, ikh, tmp):  # type: ignore[no-untyped-def]
+    """Update ``x``, ``p`` in place with innovation ``resid``; False if S is not PD."""
+    n, m = x.shape[0], resid.shape[0]
+    for a in range(m):
+        for b in range(n):
+            acc = 0.0
+            for c in range(n):
+                acc += h[a, c] * p[c, b]
+            hp[a, b] = acc
+    for a in range(m):
+        for b in range(m):
+            acc = 0.0
+            for c in range(n):
+                acc += hp[a, c] * h[b, c]
+            s[a, b] = acc + rm[a, b]
+    for a in range(m):
+        for b in range(a + 1, m):
+            v = 0.5 * (s[a, b] + s[b, a])
+            s[a, b] = v
+            s[b, a] = v
+    if not cholesky_into(s, lo):
+        return False
+    cholesky_solve_into(lo, hp, kt)
+    for a in range(n):
+        acc = 0.0
+        for b in range(m):
+            acc += kt[b, a] * resid[b]
+        x[a] += acc
+    for a in range(n):
+        for b in range(n):
+            acc = 0.0
+            for c in range(m):
+                acc += kt[c, a] * h[c, b]
+            ikh[a, b] = (1.0 if a == b else 0.0) - acc
+    for a in range(n):
+        for b in range(n):
+            acc = 0.0
+            for c in range(n):
+                acc += ikh[a, c] * p[c, b]
+            tmp[a, b] = acc
+    for a in range(n):
+        for b in range(n):
+            acc = 0.0
+            for c in range(n):
+                acc += tmp[a, c] * ikh[b, c]
+            krk = 0.0
+            for c in range(m):
+                for e in range(m):
+                    krk += kt[c, a] * rm[c, e] * kt[e, b]
+            p[a, b] = acc + krk
+    for a in range(n):
+        for b in range(a + 1, n):
+            v = 0.5 * (p[a, b] + p[b, a])
+            p[a, b] = v
+            p[b, a] = v
+    return True
+
+
+@numba.njit(cache=True, inline="always")
+def _predict(x, p, phi, qd, xt, tmp):  # type: ignore[no-untyped-def]
+    n = x.shape[0]
+    for a in range(n):
+        acc = 0.0
+        for b in range(n):
+            acc += phi[a, b] * x[b]
+        xt[a] = acc
+    x[:] = xt
+    for a in range(n):
+        for b in range(n):
+            acc = 0.0
+            for c in range(n):
+                acc += phi[a, c] * p[c, b]
+            tmp[a, b] = acc
+    for a in range(n):
+        for b in range(n):
+            acc = 0.0
+            for c in range(n):
+                acc += tmp[a, c] * phi[b, c]
+            p[a, b] = acc + qd[a, b]
+    for a in range(n):
+        for b in range(a + 1, n):
+            v = 0.5 * (p[a, b] + p[b, a])
+            p[a, b] = v
+            p[b, a] = v
+
+
+@numba.njit(cache=True, parallel=True)
+def ekf_kernel(  # type: ignore[no-untyped-def]
+    kind,
+    phis,
+    qds,
+    z,
+    detected,
+    first,
+    m0,
+    p0,
+    k,
+    radar,
+    road,
+    half_width,
+    scatter_std,
+    means,
+    covs,
+    status,
+):
+    """Run the EKF of ``kind`` (ROAD or FREE) over every run from its first detection.
+
+    ``phis``/``qds`` (N, T, n, n); ``z`` (N, T, 3); ``first`` (N,) first detection (-1:
+    none); ``m0``/``p0`` the initial state there; ``k`` the along-road model size (ROAD).
+    ``radar``: x, y, height, range/azimuth/radial-speed standard deviations. ``means``/
+    ``covs`` (pre-filled with NaN) receive the estimates; ``status[i] = t + 1`` if run ``i``
+    stops at step ``t`` (S not positive definite).
+    """
+    n_runs, n_steps = detected.shape
+    n = m0.shape[1]
+    for i in prange(n_runs):
+        f = first[i]
+        if f < 0:
+            continue
+        x = m0[i].copy()
+        p = p0[i].copy()
+        xt = np.empty(n)
+        tmp = np.empty((n, n))
+        ikh = np.empty((n, n))
+        zp = np.empty(3)
+        resid = np.empty(3)
+        h = np.zeros((3, n))
+        rm = np.empty((3, 3))
+        jp = np.empty((3, 2))
+        jv = np.empty((3, 2))
+        s = np.empty((3, 3))
+        lo = np.empty((3, 3))
+        hp = np.empty((3, n))
+        kt = np.empty((3, n))
+        means[i, f] = x
+        covs[i, f] = p
+        for t in range(f + 1, n_steps):
+            _predict(x, p, phis[i, t], qds[i, t], xt, tmp)
+            if kind == ROAD and x[1] > 0:  # an approaching vehicle does not reverse
+                for a in range(1, k):
+                    x[a] = 0.0
+            if detected[i, t]:
+                measure(kind, x, k, radar, road, half_width, scatter_std, zp, h, rm, jp, jv)
+                for a in range(3):
+                    resid[a] = z[i, t, a] - zp[a]
+                resid[1] = (resid[1] + np.pi) % (2 * np.pi) - np.pi
+                if not joseph_update(x, p, resid, h, rm, s, lo, hp, kt, ikh, tmp):
+                    status[i] = t + 1
+                    break
+            means[i, t] = x
+            covs[i, t] = p
+
+
+@numba.njit(cache=True, parallel=True)
+def pcrlb_kernel(  # type: ignore[no-untyped-def]
+    phis, qds, truth, detected, p0, k, radar, road, half_width, scatter_std, pos_var, spd_var
+):
+    """Bound covariance recursion of the road model along the true states ``truth`` (N, T, n).
+
+    The covariance stays at ``p0`` until the first detection; ``pos_var``/``spd_var`` (N, T),
+    pre-filled with NaN, receive ``P[0, 0] + P[k, k]`` and ``P[1, 1]`` from then on.
+    """
+    n_runs, n_steps = detected.shape
+    n = p0.shape[0]
+    for i in prange(n_runs):
+        p = p0.copy()
+        x = np.empty(n)
+        xt = np.empty(n)
+        tmp = np.empty((n, n))
+        ikh = np.empty((n, n))
+        zp = np.empty(3)
+        resid = np.zeros(3)
+        h = np.zeros((3, n))
+        rm = np.empty((3, 3))
+        jp = np.empty((3, 2))
+        jv = np.empty((3, 2))
+        s = np.empty((3, 3))
+        lo = np.empty((3, 3))
+        hp = np.empty((3, n))
+        kt = np.empty((3, n))
+        started = False
+        for t in range(n_steps):
+            if started:
+                _predict(xt, p, phis[i, t], qds[i, t], x, tmp)  # (the mean is not used)
+            else:
+                p[:, :] = p0
+            if detected[i, t]:
+                x[:] = truth[i, t]
+                measure(ROAD, x, k, radar, road, half_width, scatter_std, zp, h, rm, jp, jv)
+                if not joseph_update(x, p, resid, h, rm, s, lo, hp, kt, ikh, tmp):
+                    break
+                started = True
+            if started:
+                pos_var[i, t] = p[0, 0] + p[k, k]
+                spd_var[i, t] = p[1, 1]
