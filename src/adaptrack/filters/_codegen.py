@@ -25,6 +25,8 @@ from types import ModuleType
 from typing import Any
 
 LANES = 4
+GENERATED_MAX_STATES = 6  # larger states use the generic kernels (straight-line code for
+# n = 9, m = 3 takes minutes to compile once)
 _VERSION = 2
 DT_TOLERANCE_S = 1e-9  # online steps this close share one discretisation (clock round-off)
 

@@ -12,8 +12,10 @@ import math
 
 import numba
 import numpy as np
+from numba import prange
 
 from .._kernel_linalg import cholesky_into, cholesky_solve_into
+from ._codegen import GENERATED_MAX_STATES
 
 _LOG_2PI = math.log(2.0 * math.pi)
 
@@ -238,13 +240,14 @@ def run_kernels(x0, p0, phi, qd, u, z, mask, h, r, off, joseph):  # type: ignore
     """Filter with the fastest compiled kernel for the case (arguments of :func:`kalman_kernel`).
 
     Joseph form, every component present and one ``R`` run straight-line code generated for
-    the (n, m) at hand (:func:`adaptrack.filters._codegen.sequence_kernel`); anything else the
+    the (n, m) at hand (:func:`adaptrack.filters._codegen.sequence_kernel`; n <= 6, larger
+    straight-line code compiles too slowly); anything else the
     generic kernel. Raises ValueError if an innovation covariance is not positive definite.
     """
     c = np.ascontiguousarray
     n_tr, n_steps, m = z.shape
     n = h.shape[1]
-    if joseph and r.shape[:2] == (1, 1) and bool(mask.all()):
+    if joseph and r.shape[:2] == (1, 1) and n <= GENERATED_MAX_STATES and bool(mask.all()):
         from ._codegen import sequence_kernel
 
         out = tuple(
@@ -261,3 +264,45 @@ def run_kernels(x0, p0, phi, qd, u, z, mask, h, r, off, joseph):  # type: ignore
     return kalman_kernel(
         c(x0), c(p0), c(phi), c(qd), c(u), c(z), c(mask), c(h), c(r), c(off), joseph
     )
+
+
+@numba.njit(cache=True, parallel=True)
+def affine_forward(a, b, kg, obs, z, x0, out):  # type: ignore[no-untyped-def]
+    """Run the shared-gain forward recursion with generic loops (any n, m)."""
+    n_tr, n_st, m = z.shape
+    n = a.shape[1]
+    for i in prange(n_tr):
+        x = x0[i].copy()
+        y = np.empty(n)
+        for k in range(n_st):
+            for r in range(n):
+                acc = b[k, r]
+                for c in range(n):
+                    acc += a[k, r, c] * x[c]
+                for c in range(m):
+                    if obs[k, c]:
+                        acc += kg[k, r, c] * z[i, k, c]
+                y[r] = acc
+            for r in range(n):
+                x[r] = y[r]
+                out[i, k, r] = y[r]
+    return out
+
+
+@numba.njit(cache=True, parallel=True)
+def affine_backward(d, cg, e, out):  # type: ignore[no-untyped-def]
+    """Run the shared-gain RTS recursion with generic loops, in place."""
+    n_tr, n_st, n = out.shape
+    for i in prange(n_tr):
+        s = out[i, n_st - 1].copy()
+        y = np.empty(n)
+        for k in range(n_st - 2, -1, -1):
+            for r in range(n):
+                acc = e[k, r]
+                for c in range(n):
+                    acc += d[k, r, c] * out[i, k, c] + cg[k, r, c] * s[c]
+                y[r] = acc
+            for r in range(n):
+                s[r] = y[r]
+                out[i, k, r] = y[r]
+    return out

@@ -20,7 +20,7 @@ from .._validation import as_float_array, check_symmetric_pd
 from ..models.continuous import MotionModel, as_motion_model
 from ..models.discretize import Method, Noise, discretize_with_input
 from ..types import GaussianState, as_gaussian_state
-from ._codegen import DT_TOLERANCE_S, online_kernel
+from ._codegen import DT_TOLERANCE_S, GENERATED_MAX_STATES, online_kernel
 from ._kernels import _LOG_2PI, kf_step
 from .kalman import CovarianceError, UpdateForm, _check_form
 
@@ -129,9 +129,10 @@ def _online_step_masked(ws, trans, z, mask):  # type: ignore[no-untyped-def]
 class OnlineFilter:
     """Kalman filter fed one measurement at a time (streams, live radar).
 
-    Every component present and the Joseph form run a kernel generated for the (n, m) at hand
-    (about a microsecond per call from Python); a ``mask`` or ``form="standard"`` use the
-    generic compiled step. Both give the numbers of :func:`adaptrack.kalman_filter` to rounding.
+    Every component present, the Joseph form and up to 6 states run a kernel generated for the
+    (n, m) at hand (under a microsecond per call from Python); a ``mask``,
+    ``form="standard"`` or larger states use the generic compiled step (a few microseconds).
+    Both give the numbers of :func:`adaptrack.kalman_filter` to rounding.
 
     Parameters
     ----------
@@ -206,7 +207,7 @@ class OnlineFilter:
             self._block("off")[:] = as_float_array(measurement_noise_mean, "measurement_noise_mean")
         self._m = m
         self._fast = None
-        if joseph:
+        if joseph and n <= GENERATED_MAX_STATES:
             at = self._layout
             offsets = (_TIME, at["x"][0], at["p"][0], at["h"][0], at["r"][0], at["off"][0])
             self._fast = online_kernel(n, m, offsets)

@@ -39,6 +39,7 @@ from .kalman import (
 NanPolicy = Literal["raise", "missing"]
 Backend = Literal["auto", "numpy", "numba"]
 COMPILED_MIN_TRACK_STEPS = 20_000  # below this the NumPy path is used by "auto"
+SHARED_MIN_TRACKS = 64  # from this many tracks sharing one covariance, "auto" computes it once
 
 
 def kalman_filter(
@@ -96,8 +97,9 @@ def kalman_filter(
         ``"numpy"``: the readable reference implementation; ``"numba"``: the compiled kernel
         (same results to rounding, <= 1e-10 relative); ``"auto"``: the kernel from
         20,000 track-steps on, NumPy below (then the online :func:`kalman_step` reproduces the
-        result bit for bit) and for batches whose tracks share one covariance recursion (the
-        exact shared path computes it once).
+        result bit for bit) and for batches of 64 or more tracks that share one covariance
+        recursion (the exact shared path computes it once; see also
+        :func:`adaptrack.shared_gain_filter`).
 
     Returns
     -------
@@ -198,10 +200,11 @@ def kalman_filter(
     if backend not in ("auto", "numpy", "numba"):
         raise ValueError(f"backend must be 'auto', 'numpy' or 'numba'; got {backend!r}")
     batch = z.shape[:-2]
+    n_tracks = int(np.prod(batch, dtype=int))
     compiled = backend == "numba" or (
         backend == "auto"
         and z.size // max(m, 1) >= COMPILED_MIN_TRACK_STEPS
-        and not (batch and _covariance_shared(t, initial, r, mk))
+        and not (n_tracks >= SHARED_MIN_TRACKS and _covariance_shared(t, initial, r, mk))
     )
     problem = _Problem(
         t,

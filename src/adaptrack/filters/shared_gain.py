@@ -154,10 +154,12 @@ def shared_gain_filter(
         b = b - np.einsum("kij,kj->ki", kg, np.where(present, mu, 0.0))
     x0 = np.ascontiguousarray(np.broadcast_to(initial.mean, (n_tracks, n)))
     if compiled:
-        from ._codegen import forward_kernel
+        from ._codegen import GENERATED_MAX_STATES, forward_kernel
+        from ._kernels import affine_forward
 
+        forward = forward_kernel(n, m) if n <= GENERATED_MAX_STATES else affine_forward
         contiguous = np.ascontiguousarray
-        forward_kernel(n, m)(a, contiguous(b), contiguous(kg), present, contiguous(z), x0, out)
+        forward(a, contiguous(b), contiguous(kg), present, contiguous(z), x0, out)
     else:
         _forward_numpy(a, b, kg, present, z, x0, out)
     if not np.isfinite(out[:, -1]).all():  # a non-finite input reaches the last state
@@ -168,13 +170,22 @@ def shared_gain_filter(
     c = np.ascontiguousarray(mT(np.linalg.solve(pc[1:], phi[1:] @ fc[:-1])))  # C_0 .. C_T-2
     d = np.eye(n) - c @ phi[1:]
     e = np.ascontiguousarray(-np.einsum("kij,kj->ki", c, u[1:]))
-    ps = fc.copy()
-    for k in range(n_steps - 2, -1, -1):
-        ps[k] = symmetrize(fc[k] + c[k] @ (ps[k + 1] - pc[k + 1]) @ c[k].T)
     if compiled:
-        from ._codegen import backward_kernel
+        from ..smoothers._kernels import rts_kernel
 
-        backward_kernel(n)(d, c, e, out)
+        zeros = np.zeros((1, n_steps, n))
+        _, ps = rts_kernel(zeros, fc[None], zeros, pc[None], np.ascontiguousarray(phi[None]))
+        ps = ps[0]
+    else:
+        ps = fc.copy()
+        for k in range(n_steps - 2, -1, -1):
+            ps[k] = symmetrize(fc[k] + c[k] @ (ps[k + 1] - pc[k + 1]) @ c[k].T)
+    if compiled:
+        from ._codegen import GENERATED_MAX_STATES, backward_kernel
+        from ._kernels import affine_backward
+
+        backward = backward_kernel(n) if n <= GENERATED_MAX_STATES else affine_backward
+        backward(d, c, e, out)
     else:
         _backward_numpy(d, c, e, out)
     return SharedGainResult(t, out, ps, smoothed=True)

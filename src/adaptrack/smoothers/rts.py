@@ -27,6 +27,7 @@ def _gains(pf: FloatArray, pp_next: FloatArray, phi_next: FloatArray) -> FloatAr
 
 
 COMPILED_MIN_TRACK_STEPS = 20_000
+SHARED_MIN_TRACKS = 64  # from this many tracks sharing one covariance, "auto" smooths it once
 
 
 def rts_smooth(result: FilterResult, *, backend: str = "auto") -> GaussianState:
@@ -38,7 +39,7 @@ def rts_smooth(result: FilterResult, *, backend: str = "auto") -> GaussianState:
         Output of :func:`adaptrack.kalman_filter`, shapes (..., T, n).
     backend : {"auto", "numpy", "numba"}
         NumPy reference or the compiled kernel (same results to rounding); ``"auto"`` uses the
-        kernel from 20,000 track-steps on unless the covariances are shared by all tracks.
+        kernel from 20,000 track-steps on unless 64 or more tracks share their covariances.
 
     Returns
     -------
@@ -67,8 +68,11 @@ def rts_smooth(result: FilterResult, *, backend: str = "auto") -> GaussianState:
     shared = [a for a in sh if a is not None]
     if len(shared) < 3:
         shared = []
+    n_tracks = filt.mean.size // (filt.dim * n_steps)
     if backend == "numba" or (
-        backend == "auto" and not shared and filt.mean.size // filt.dim >= COMPILED_MIN_TRACK_STEPS
+        backend == "auto"
+        and not (shared and n_tracks >= SHARED_MIN_TRACKS)
+        and filt.mean.size // filt.dim >= COMPILED_MIN_TRACK_STEPS
     ):
         return _rts_compiled(result)
     sm = np.array(filt.mean)
