@@ -15,7 +15,7 @@ import numba
 import numpy as np
 from numba import prange
 
-from .._kernel_linalg import cholesky_into, cholesky_solve_into
+from ..filters._kernels import predict_into, update_into
 
 ROAD, FREE = 0, 1  # measurement models
 
@@ -92,93 +92,6 @@ def measure(kind, x, k, radar, road, half_width, scatter_std, zp, h, rm, jp, jv)
     _noise_into(radar, jp, -tx, -ty, scatter_std, rm)
 
 
-@numba.njit(cache=True)
-def joseph_update(x, p, resid, h, rm, s, lo, hp, kt, ikh, tmp):  # type: ignore[no-untyped-def]
-    """Update ``x``, ``p`` in place with innovation ``resid``; False if S is not PD."""
-    n, m = x.shape[0], resid.shape[0]
-    for a in range(m):
-        for b in range(n):
-            acc = 0.0
-            for c in range(n):
-                acc += h[a, c] * p[c, b]
-            hp[a, b] = acc
-    for a in range(m):
-        for b in range(m):
-            acc = 0.0
-            for c in range(n):
-                acc += hp[a, c] * h[b, c]
-            s[a, b] = acc + rm[a, b]
-    for a in range(m):
-        for b in range(a + 1, m):
-            v = 0.5 * (s[a, b] + s[b, a])
-            s[a, b] = v
-            s[b, a] = v
-    if not cholesky_into(s, lo):
-        return False
-    cholesky_solve_into(lo, hp, kt)
-    for a in range(n):
-        acc = 0.0
-        for b in range(m):
-            acc += kt[b, a] * resid[b]
-        x[a] += acc
-    for a in range(n):
-        for b in range(n):
-            acc = 0.0
-            for c in range(m):
-                acc += kt[c, a] * h[c, b]
-            ikh[a, b] = (1.0 if a == b else 0.0) - acc
-    for a in range(n):
-        for b in range(n):
-            acc = 0.0
-            for c in range(n):
-                acc += ikh[a, c] * p[c, b]
-            tmp[a, b] = acc
-    for a in range(n):
-        for b in range(n):
-            acc = 0.0
-            for c in range(n):
-                acc += tmp[a, c] * ikh[b, c]
-            krk = 0.0
-            for c in range(m):
-                for e in range(m):
-                    krk += kt[c, a] * rm[c, e] * kt[e, b]
-            p[a, b] = acc + krk
-    for a in range(n):
-        for b in range(a + 1, n):
-            v = 0.5 * (p[a, b] + p[b, a])
-            p[a, b] = v
-            p[b, a] = v
-    return True
-
-
-@numba.njit(cache=True, inline="always")
-def _predict(x, p, phi, qd, xt, tmp):  # type: ignore[no-untyped-def]
-    n = x.shape[0]
-    for a in range(n):
-        acc = 0.0
-        for b in range(n):
-            acc += phi[a, b] * x[b]
-        xt[a] = acc
-    x[:] = xt
-    for a in range(n):
-        for b in range(n):
-            acc = 0.0
-            for c in range(n):
-                acc += phi[a, c] * p[c, b]
-            tmp[a, b] = acc
-    for a in range(n):
-        for b in range(n):
-            acc = 0.0
-            for c in range(n):
-                acc += tmp[a, c] * phi[b, c]
-            p[a, b] = acc + qd[a, b]
-    for a in range(n):
-        for b in range(a + 1, n):
-            v = 0.5 * (p[a, b] + p[b, a])
-            p[a, b] = v
-            p[b, a] = v
-
-
 @numba.njit(cache=True, parallel=True)
 def ekf_kernel(  # type: ignore[no-untyped-def]
     kind,
@@ -214,34 +127,31 @@ def ekf_kernel(  # type: ignore[no-untyped-def]
             continue
         x = m0[i].copy()
         p = p0[i].copy()
-        xt = np.empty(n)
-        tmp = np.empty((n, n))
-        ikh = np.empty((n, n))
-        zp = np.empty(3)
-        resid = np.empty(3)
-        h = np.zeros((3, n))
-        rm = np.empty((3, 3))
-        jp = np.empty((3, 2))
-        jv = np.empty((3, 2))
-        s = np.empty((3, 3))
-        lo = np.empty((3, 3))
-        hp = np.empty((3, n))
-        kt = np.empty((3, n))
+        xp, u0, w = np.empty(n), np.zeros(n), np.empty(3)
+        pp, tmp, ikh = np.empty((n, n)), np.empty((n, n)), np.empty((n, n))
+        zp, resid, rm = np.empty(3), np.empty(3), np.empty((3, 3))
+        h, hp, kt = np.zeros((3, n)), np.empty((3, n)), np.empty((3, n))
+        jp, jv = np.empty((3, 2)), np.empty((3, 2))
+        s, lo = np.empty((3, 3)), np.empty((3, 3))
         means[i, f] = x
         covs[i, f] = p
         for t in range(f + 1, n_steps):
-            _predict(x, p, phis[i, t], qds[i, t], xt, tmp)
-            if kind == ROAD and x[1] > 0:  # an approaching vehicle does not reverse
+            predict_into(x, p, phis[i, t], qds[i, t], u0, xp, pp, tmp)
+            if kind == ROAD and xp[1] > 0:  # an approaching vehicle does not reverse
                 for a in range(1, k):
-                    x[a] = 0.0
+                    xp[a] = 0.0
             if detected[i, t]:
-                measure(kind, x, k, radar, road, half_width, scatter_std, zp, h, rm, jp, jv)
+                measure(kind, xp, k, radar, road, half_width, scatter_std, zp, h, rm, jp, jv)
                 for a in range(3):
                     resid[a] = z[i, t, a] - zp[a]
                 resid[1] = (resid[1] + np.pi) % (2 * np.pi) - np.pi
-                if not joseph_update(x, p, resid, h, rm, s, lo, hp, kt, ikh, tmp):
+                ok, _, _ = update_into(xp, pp, resid, h, rm, True, x, p, hp, s, lo, kt, w, ikh, tmp)
+                if not ok:
                     status[i] = t + 1
                     break
+            else:
+                x[:] = xp
+                p[:, :] = pp
             means[i, t] = x
             covs[i, t] = p
 
@@ -259,32 +169,27 @@ def pcrlb_kernel(  # type: ignore[no-untyped-def]
     n = p0.shape[0]
     for i in prange(n_runs):
         p = p0.copy()
-        x = np.empty(n)
-        xt = np.empty(n)
-        tmp = np.empty((n, n))
-        ikh = np.empty((n, n))
-        zp = np.empty(3)
-        resid = np.zeros(3)
-        h = np.zeros((3, n))
-        rm = np.empty((3, 3))
-        jp = np.empty((3, 2))
-        jv = np.empty((3, 2))
-        s = np.empty((3, 3))
-        lo = np.empty((3, 3))
-        hp = np.empty((3, n))
-        kt = np.empty((3, n))
+        x, xp, u0, w = np.zeros(n), np.empty(n), np.zeros(n), np.empty(3)
+        pp, tmp, ikh = np.empty((n, n)), np.empty((n, n)), np.empty((n, n))
+        zp, resid, rm = np.empty(3), np.zeros(3), np.empty((3, 3))
+        h, hp, kt = np.zeros((3, n)), np.empty((3, n)), np.empty((3, n))
+        jp, jv = np.empty((3, 2)), np.empty((3, 2))
+        s, lo = np.empty((3, 3)), np.empty((3, 3))
         started = False
         for t in range(n_steps):
             if started:
-                _predict(xt, p, phis[i, t], qds[i, t], x, tmp)  # (the mean is not used)
+                predict_into(x, p, phis[i, t], qds[i, t], u0, xp, pp, tmp)  # (means unused)
             else:
-                p[:, :] = p0
+                pp[:, :] = p0
             if detected[i, t]:
-                x[:] = truth[i, t]
-                measure(ROAD, x, k, radar, road, half_width, scatter_std, zp, h, rm, jp, jv)
-                if not joseph_update(x, p, resid, h, rm, s, lo, hp, kt, ikh, tmp):
+                xp[:] = truth[i, t]
+                measure(ROAD, xp, k, radar, road, half_width, scatter_std, zp, h, rm, jp, jv)
+                ok, _, _ = update_into(xp, pp, resid, h, rm, True, x, p, hp, s, lo, kt, w, ikh, tmp)
+                if not ok:
                     break
                 started = True
+            else:
+                p[:, :] = pp
             if started:
                 pos_var[i, t] = p[0, 0] + p[k, k]
                 spd_var[i, t] = p[1, 1]

@@ -21,20 +21,9 @@ _LOG_2PI = math.log(2.0 * math.pi)
 
 
 @numba.njit(cache=True, inline="always")
-def kf_step(  # type: ignore[no-untyped-def]
-    x, p, phi, qd, u, z, mask, h, r, off, joseph, xp, pp, tmp, hm, rm, hp, s, lo, kt, nu, w, ikh
-):
-    """One predict + update in place: ``x``, ``p`` (n), (n, n) become the filtered moments.
-
-    ``phi``, ``qd`` (n, n), ``u`` (n,), ``z``, ``mask``, ``off`` (m,), ``h`` (m, n), ``r``
-    (m, m); the rest are scratch buffers that hold the predicted moments (``xp``, ``pp``),
-    innovation ``nu``, its covariance ``s`` and the transposed gain ``kt`` afterwards.
-    Returns ``(ok, nis, log det S, observed components)``; ``ok`` is False (and ``x``, ``p``
-    untouched) when ``S`` is not positive definite.
-    """
+def predict_into(x, p, phi, qd, u, xp, pp, tmp):  # type: ignore[no-untyped-def]
+    """``xp = Phi x + u``, ``pp = Phi P Phi^T + Qd`` (symmetrised); ``tmp`` (n, n) scratch."""
     n = x.shape[0]
-    m = z.shape[0]
-    # predict: xp = F x + u, Pp = F P F^T + Q
     for a in range(n):
         acc = 0.0
         for b in range(n):
@@ -57,35 +46,30 @@ def kf_step(  # type: ignore[no-untyped-def]
             v = 0.5 * (pp[a, b] + pp[b, a])
             pp[a, b] = v
             pp[b, a] = v
-    # masked measurement model
-    nobs = 0.0
+
+
+@numba.njit(cache=True, inline="always")
+def update_into(xp, pp, nu, h, r, joseph, x, p, hp, s, lo, kt, w, ikh, tmp):  # type: ignore[no-untyped-def]
+    """Posterior ``x``, ``p`` of the prior ``xp``, ``pp`` given innovation ``nu`` (m,).
+
+    ``h`` (m, n), ``r`` (m, m); Joseph or standard covariance form; the rest are scratch and
+    hold ``H P``, ``S``, its Cholesky factor and the transposed gain afterwards. Returns
+    ``(ok, nis, log det S)``; ``ok`` is False (``x``, ``p`` untouched) if S is not PD.
+    """
+    n = xp.shape[0]
+    m = nu.shape[0]
     for a in range(m):
-        on = mask[a]
-        nobs += 1.0 if on else 0.0
         for b in range(n):
-            hm[a, b] = h[a, b] if on else 0.0
-        for b in range(m):
-            if on and mask[b]:
-                rm[a, b] = r[a, b]
-            else:
-                rm[a, b] = 1.0 if a == b and not on else 0.0
-    # innovation and its covariance
-    for a in range(m):
-        acc = 0.0
-        for b in range(n):
-            acc += hm[a, b] * xp[b]
-        nu[a] = (z[a] - off[a] - acc) if mask[a] else -acc
-        for b in range(n):
-            acc2 = 0.0
+            acc = 0.0
             for c in range(n):
-                acc2 += hm[a, c] * pp[c, b]
-            hp[a, b] = acc2
+                acc += h[a, c] * pp[c, b]
+            hp[a, b] = acc
     for a in range(m):
         for b in range(m):
             acc = 0.0
             for c in range(n):
-                acc += hp[a, c] * hm[b, c]
-            s[a, b] = acc + rm[a, b]
+                acc += hp[a, c] * h[b, c]
+            s[a, b] = acc + r[a, b]
     for a in range(m):
         for b in range(a + 1, m):
             v = 0.5 * (s[a, b] + s[b, a])
@@ -93,7 +77,7 @@ def kf_step(  # type: ignore[no-untyped-def]
             s[b, a] = v
     # Cholesky S = L L^T; K^T = S^-1 (H P)
     if not cholesky_into(s, lo):
-        return False, 0.0, 0.0, 0.0
+        return False, 0.0, 0.0
     logdet = 0.0
     for a in range(m):
         logdet += 2.0 * math.log(lo[a, a])
@@ -107,7 +91,6 @@ def kf_step(  # type: ignore[no-untyped-def]
     nis = 0.0
     for a in range(m):
         nis += w[a] * w[a]
-    # update
     for a in range(n):
         acc = 0.0
         for b in range(m):
@@ -117,7 +100,7 @@ def kf_step(  # type: ignore[no-untyped-def]
         for b in range(n):
             acc = 0.0
             for c in range(m):
-                acc += kt[c, a] * hm[c, b]
+                acc += kt[c, a] * h[c, b]
             ikh[a, b] = (1.0 if a == b else 0.0) - acc
     for a in range(n):
         for b in range(n):
@@ -134,7 +117,7 @@ def kf_step(  # type: ignore[no-untyped-def]
                 krk = 0.0
                 for c in range(m):
                     for d in range(m):
-                        krk += kt[c, a] * rm[c, d] * kt[d, b]
+                        krk += kt[c, a] * r[c, d] * kt[d, b]
                 p[a, b] = acc + krk
     else:
         for a in range(n):
@@ -145,7 +128,43 @@ def kf_step(  # type: ignore[no-untyped-def]
             v = 0.5 * (p[a, b] + p[b, a])
             p[a, b] = v
             p[b, a] = v
-    return True, nis, logdet, nobs
+    return True, nis, logdet
+
+
+@numba.njit(cache=True, inline="always")
+def kf_step(  # type: ignore[no-untyped-def]
+    x, p, phi, qd, u, z, mask, h, r, off, joseph, xp, pp, tmp, hm, rm, hp, s, lo, kt, nu, w, ikh
+):
+    """One predict + update in place: ``x``, ``p`` (n), (n, n) become the filtered moments.
+
+    ``phi``, ``qd`` (n, n), ``u`` (n,), ``z``, ``mask``, ``off`` (m,), ``h`` (m, n), ``r``
+    (m, m); the rest are scratch buffers that hold the predicted moments (``xp``, ``pp``),
+    innovation ``nu``, its covariance ``s`` and the transposed gain ``kt`` afterwards.
+    Returns ``(ok, nis, log det S, observed components)``; ``ok`` is False (and ``x``, ``p``
+    untouched) when ``S`` is not positive definite.
+    """
+    n = x.shape[0]
+    m = z.shape[0]
+    predict_into(x, p, phi, qd, u, xp, pp, tmp)
+    # masked measurement model and innovation
+    nobs = 0.0
+    for a in range(m):
+        on = mask[a]
+        nobs += 1.0 if on else 0.0
+        for b in range(n):
+            hm[a, b] = h[a, b] if on else 0.0
+        for b in range(m):
+            if on and mask[b]:
+                rm[a, b] = r[a, b]
+            else:
+                rm[a, b] = 1.0 if a == b and not on else 0.0
+    for a in range(m):
+        acc = 0.0
+        for b in range(n):
+            acc += hm[a, b] * xp[b]
+        nu[a] = (z[a] - off[a] - acc) if mask[a] else -acc
+    ok, nis, logdet = update_into(xp, pp, nu, hm, rm, joseph, x, p, hp, s, lo, kt, w, ikh, tmp)
+    return ok, nis, logdet, nobs
 
 
 @numba.njit(cache=True, fastmath=False)
