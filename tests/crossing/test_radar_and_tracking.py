@@ -32,6 +32,24 @@ def simulate(case, vehicle="car", n_runs=50, seed=0, **radar_change):
     )
 
 
+def point_target(n_runs, seed, detection_probability=1.0):
+    """A car without body scatter on road B, radar without bias or jitter, no lane offset."""
+    radar = dataclasses.replace(SITE.radar_for("B"), azimuth_bias_rad=0.0, time_jitter_s=0.0)
+    veh = dataclasses.replace(VEHICLES["car"], length_m=0.0)
+    return radar, simulate_case(
+        SITE.roads["B"],
+        radar,
+        veh,
+        CASE["pass_60"],
+        n_runs=n_runs,
+        rng=np.random.default_rng(seed),
+        start_m=200.0,
+        stop_line_m=15.0,
+        detection_probability=detection_probability,
+        lateral_offset_std_m=0.0,
+    )
+
+
 def test_detections_noise_and_gates():
     radar, runs = simulate(CASE["pass_60"], azimuth_bias_rad=0.0, time_jitter_s=0.0)
     assert runs.detected.mean() == pytest.approx(0.95, abs=0.02)
@@ -75,21 +93,7 @@ def test_jitter_keeps_times_increasing():
 def test_road_constrained_filter_on_point_targets_is_near_the_bound():
     """No scatter, no bias, no jitter, no offset: CROSSING-LIMITS gives ~0.04 m / 0.2-0.4 km/h
     for the road filters on the nominal radar; allow a factor ~3 for this simple CA filter."""
-    case = CASE["pass_60"]
-    radar = dataclasses.replace(SITE.radar_for("B"), azimuth_bias_rad=0.0, time_jitter_s=0.0)
-    veh = dataclasses.replace(VEHICLES["car"], length_m=0.0)
-    runs = simulate_case(
-        SITE.roads["B"],
-        radar,
-        veh,
-        case,
-        n_runs=100,
-        rng=np.random.default_rng(1),
-        start_m=200.0,
-        stop_line_m=15.0,
-        detection_probability=1.0,
-        lateral_offset_std_m=0.0,
-    )
+    radar, runs = point_target(100, 1)
     est = track_on_road(
         runs.times,
         runs.measurements,
@@ -166,21 +170,7 @@ def test_road_pcrlb_matches_the_filter_covariance_on_point_targets():
     speed variances must approach the bound's (same model, same Jacobians)."""
     from adaptrack.crossing.tracking import road_pcrlb
 
-    case = CASE["pass_60"]
-    radar = dataclasses.replace(SITE.radar_for("B"), azimuth_bias_rad=0.0, time_jitter_s=0.0)
-    veh = dataclasses.replace(VEHICLES["car"], length_m=0.0)
-    runs = simulate_case(
-        SITE.roads["B"],
-        radar,
-        veh,
-        case,
-        n_runs=20,
-        rng=np.random.default_rng(2),
-        start_m=200.0,
-        stop_line_m=15.0,
-        detection_probability=1.0,
-        lateral_offset_std_m=0.0,
-    )
+    radar, runs = point_target(20, 2)
     model = ConstantAcceleration(jerk_psd=3.0)
     pos_var, spd_var = road_pcrlb(
         runs.times,
@@ -205,21 +195,7 @@ def test_road_pcrlb_matches_the_filter_covariance_on_point_targets():
 def test_converted_measurement_kf_tracks_but_needs_doppler_for_speed():
     from adaptrack.crossing.tracking import track_converted
 
-    case = CASE["pass_60"]
-    radar = dataclasses.replace(SITE.radar_for("B"), azimuth_bias_rad=0.0, time_jitter_s=0.0)
-    veh = dataclasses.replace(VEHICLES["car"], length_m=0.0)
-    runs = simulate_case(
-        SITE.roads["B"],
-        radar,
-        veh,
-        case,
-        n_runs=30,
-        rng=np.random.default_rng(5),
-        start_m=200.0,
-        stop_line_m=15.0,
-        detection_probability=0.95,
-        lateral_offset_std_m=0.0,
-    )
+    radar, runs = point_target(30, 5, detection_probability=0.95)
     zone = (runs.along_road_m <= 150) & (runs.true_times >= 1.0)
     cm = track_converted(runs.times, runs.measurements, runs.detected, radar)
     ekf = track_free_2d(runs.times, runs.measurements, runs.detected, radar)
