@@ -89,31 +89,16 @@ Tracker = Callable[[CrossingRuns, Site, Case, VehicleClass], TrackEstimates]
 
 
 @dataclass(frozen=True)
-class FreeTracker:
-    """The free planar EKF (nearly constant velocity) on a case's radar."""
+class PlanarTracker:
+    """A planar tracker (:func:`track_free_2d`, :func:`track_converted`) on a case's radar."""
+
+    track: Callable[..., TrackEstimates]
 
     def __call__(
         self, runs: CrossingRuns, site: Site, case: Case, veh: VehicleClass
     ) -> TrackEstimates:
         """Track the runs of one class x case."""
-        return track_free_2d(
-            runs.times,
-            runs.measurements,
-            runs.detected,
-            site.radar_for(case.road),
-            scatter_std_m=veh.scatter_std_m,
-        )
-
-
-@dataclass(frozen=True)
-class ConvertedTracker:
-    """The converted-measurement KF (position only, no Doppler) on a case's radar."""
-
-    def __call__(
-        self, runs: CrossingRuns, site: Site, case: Case, veh: VehicleClass
-    ) -> TrackEstimates:
-        """Track the runs of one class x case."""
-        return track_converted(
+        return self.track(
             runs.times,
             runs.measurements,
             runs.detected,
@@ -156,8 +141,8 @@ def default_trackers(tuned_m1: tuple[float, float] | None = None) -> dict[str, T
         )
     return {
         **tuned,
-        "free 2-D EKF (CV)": FreeTracker(),
-        "CMKF (2-D, no Doppler)": ConvertedTracker(),
+        "free 2-D EKF (CV)": PlanarTracker(track_free_2d),
+        "CMKF (2-D, no Doppler)": PlanarTracker(track_converted),
         "road EKF (CV)": RoadTracker(ConstantVelocity(accel_psd=3.0)),
         "road EKF (CA)": RoadTracker(ConstantAcceleration(jerk_psd=3.0)),
         "road EKF (M2)": RoadTracker(
@@ -320,8 +305,7 @@ def evaluate_site(
 __all__ = [
     "ComplianceResult",
     "ComplianceRow",
-    "ConvertedTracker",
-    "FreeTracker",
+    "PlanarTracker",
     "RoadTracker",
     "default_trackers",
     "evaluate_pair",

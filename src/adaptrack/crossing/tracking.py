@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._backend import Backend, use_compiled
 from .._typing import BoolArray, FloatArray
 from ..filters.kalman import CovarianceError, _update, predict
 from ..models.continuous import ConstantVelocity, MotionModel
@@ -217,12 +218,6 @@ def _run_compiled(
     return means, covs, started
 
 
-def _use_kernel(backend: str, detected: BoolArray) -> bool:
-    if backend not in ("auto", "numpy", "numba"):
-        raise ValueError(f"backend must be 'auto', 'numpy' or 'numba'; got {backend!r}")
-    return backend == "numba" or (backend == "auto" and detected.size >= COMPILED_MIN_RUN_STEPS)
-
-
 def track_free_2d(
     times: FloatArray,
     z: FloatArray,
@@ -231,7 +226,7 @@ def track_free_2d(
     *,
     model: MotionModel | None = None,
     scatter_std_m: float = 0.0,
-    backend: str = "auto",
+    backend: Backend = "auto",
 ) -> TrackEstimates:
     """Planar EKF ``[x, y, vx, vy]`` on (range, azimuth, radial speed) detections.
 
@@ -281,7 +276,11 @@ def track_free_2d(
             cov[:, i, i] = 9.0
         return mean, cov
 
-    spec = _compiled_spec(FREE, radar, scatter_std_m) if _use_kernel(backend, detected) else None
+    spec = (
+        _compiled_spec(FREE, radar, scatter_std_m)
+        if use_compiled(backend, detected.size, threshold=COMPILED_MIN_RUN_STEPS)
+        else None
+    )
     means, covs, _ = _run(times, z, detected, n, transition, measure, initial, compiled=spec)
     vel = means[..., 2:4]
     return TrackEstimates(means[..., :2], vel, np.linalg.norm(vel, axis=-1), covs[..., :2, :2])
@@ -344,7 +343,7 @@ def track_on_road(
     scatter_std_m: float = 0.0,
     lateral_psd: float = 0.01,
     lateral_std_m: float = 0.5,
-    backend: str = "auto",
+    backend: Backend = "auto",
 ) -> TrackEstimates:
     """Road-constrained EKF: one-axis ``model`` for the along-road coordinate + lateral offset.
 
@@ -391,7 +390,7 @@ def track_on_road(
 
     spec = (
         _compiled_spec(ROAD, radar, scatter_std_m, k, road)
-        if _use_kernel(backend, detected)
+        if use_compiled(backend, detected.size, threshold=COMPILED_MIN_RUN_STEPS)
         else None
     )
     means, covs, _ = _run(
@@ -486,7 +485,7 @@ def road_pcrlb(
     scatter_std_m: float = 0.0,
     lateral_psd: float = 0.01,
     lateral_std_m: float = 0.5,
-    backend: str = "auto",
+    backend: Backend = "auto",
 ) -> tuple[FloatArray, FloatArray]:
     """Posterior Cramer-Rao bound of the road-constrained model along true trajectories.
 
@@ -509,7 +508,7 @@ def road_pcrlb(
     p0 = np.diag([1.0 + scatter_std_m**2, 1.0] + [9.0] * (k - 2) + [lateral_std_m**2])
     pos_var = np.full((n_runs, n_steps), np.nan)
     spd_var = np.full((n_runs, n_steps), np.nan)
-    if _use_kernel(backend, detected):
+    if use_compiled(backend, detected.size, threshold=COMPILED_MIN_RUN_STEPS):
         from ._ekf_kernels import pcrlb_kernel
 
         spec = _compiled_spec(ROAD, radar, scatter_std_m, k, road)

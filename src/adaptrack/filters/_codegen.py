@@ -25,6 +25,8 @@ from types import ModuleType
 from typing import Any
 
 LANES = 4
+Term = Callable[[int, int, int], str]  # (row, column, summation index) -> one product
+Extra = Callable[[int, int], str]
 GENERATED_MAX_STATES = 6  # larger states use the generic kernels (straight-line code for
 # n = 9, m = 3 takes minutes to compile once)
 _VERSION = 2
@@ -199,39 +201,35 @@ def kf_step_lines(n: int, m: int) -> list[str]:
     def dot(terms: list[str]) -> str:
         return " + ".join(terms) if terms else "0.0"
 
+    def product(name: str, rows: int, cols: int, inner: int, term: Term) -> list[str]:
+        """``name{i}_{j} = sum_k term(i, j, k)``."""
+        return [
+            f"{name}{i}_{j} = " + dot([term(i, j, k) for k in range(inner)])
+            for i in range(rows)
+            for j in range(cols)
+        ]
+
+    def symmetric(name: str, size: int, inner: int, term: Term, extra: Extra) -> list[str]:
+        """Upper triangle of ``0.5 (M + M^T) + extra`` with ``M_ij = sum_k term(i, j, k)``."""
+        return [
+            f"{name}{i}_{j} = 0.5 * ("
+            + dot([term(i, j, k) for k in range(inner)])
+            + " + "
+            + dot([term(j, i, k) for k in range(inner)])
+            + f") + {extra(i, j)}"
+            for i in range(size)
+            for j in range(i, size)
+        ]
+
     out = [f"xp{i} = " + dot([f"F{i}_{k} * x{k}" for k in range(n)] + [f"u{i}"]) for i in range(n)]
-    out += [
-        f"tf{i}_{j} = " + dot([f"F{i}_{k} * {p(k, j)}" for k in range(n)])
-        for i in range(n)
-        for j in range(n)
-    ]
-    out += [
-        f"pp{i}_{j} = 0.5 * ("
-        + dot([f"tf{i}_{k} * F{j}_{k}" for k in range(n)])
-        + " + "
-        + dot([f"tf{j}_{k} * F{i}_{k}" for k in range(n)])
-        + f") + Q{i}_{j}"
-        for i in range(n)
-        for j in range(i, n)
-    ]
+    out += product("tf", n, n, n, lambda i, j, k: f"F{i}_{k} * {p(k, j)}")
+    out += symmetric("pp", n, n, lambda i, j, k: f"tf{i}_{k} * F{j}_{k}", lambda i, j: f"Q{i}_{j}")
     out += [
         f"nu{a} = z{a} - o{a} - (" + dot([f"H{a}_{k} * xp{k}" for k in range(n)]) + ")"
         for a in range(m)
     ]
-    out += [
-        f"hp{a}_{j} = " + dot([f"H{a}_{k} * {pp(k, j)}" for k in range(n)])
-        for a in range(m)
-        for j in range(n)
-    ]
-    out += [
-        f"S{a}_{b} = 0.5 * ("
-        + dot([f"hp{a}_{k} * H{b}_{k}" for k in range(n)])
-        + " + "
-        + dot([f"hp{b}_{k} * H{a}_{k}" for k in range(n)])
-        + f") + R{a}_{b}"
-        for a in range(m)
-        for b in range(a, m)
-    ]
+    out += product("hp", m, n, n, lambda a, j, k: f"H{a}_{k} * {pp(k, j)}")
+    out += symmetric("S", m, n, lambda a, b, k: f"hp{a}_{k} * H{b}_{k}", lambda a, b: f"R{a}_{b}")
     # Cholesky S = L L^T
     for a in range(m):
         for b in range(a + 1):
@@ -262,26 +260,15 @@ def kf_step_lines(n: int, m: int) -> list[str]:
         for i in range(n)
         for j in range(n)
     ]
-    out += [
-        f"ta{i}_{j} = " + dot([f"ikh{i}_{k} * {pp(k, j)}" for k in range(n)])
-        for i in range(n)
-        for j in range(n)
-    ]
-    out += [
-        f"kr{i}_{b} = " + dot([f"kt{a}_{i} * R{_sym(a, b)[0]}_{_sym(a, b)[1]}" for a in range(m)])
-        for i in range(n)
-        for b in range(m)
-    ]
-    out += [
-        f"P{i}_{j} = 0.5 * ("
-        + dot([f"ta{i}_{k} * ikh{j}_{k}" for k in range(n)])
-        + " + "
-        + dot([f"ta{j}_{k} * ikh{i}_{k}" for k in range(n)])
-        + ") + "
-        + dot([f"kr{i}_{b} * kt{b}_{j}" for b in range(m)])
-        for i in range(n)
-        for j in range(i, n)
-    ]
+    out += product("ta", n, n, n, lambda i, j, k: f"ikh{i}_{k} * {pp(k, j)}")
+    out += product("kr", n, m, m, lambda i, b, a: f"kt{a}_{i} * R{_sym(a, b)[0]}_{_sym(a, b)[1]}")
+    out += symmetric(
+        "P",
+        n,
+        n,
+        lambda i, j, k: f"ta{i}_{k} * ikh{j}_{k}",
+        lambda i, j: dot([f"kr{i}_{b} * kt{b}_{j}" for b in range(m)]),
+    )
     return out
 
 

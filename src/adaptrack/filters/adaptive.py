@@ -26,6 +26,7 @@ from typing import Literal
 
 import numpy as np
 
+from .._backend import Backend, use_compiled
 from .._typing import ArrayLike, BoolArray, FloatArray
 from .._validation import as_float_array, check_positive_scalar, check_times
 from ..types import GaussianState, _trusted
@@ -95,7 +96,7 @@ def innovation_adaptive_filter(
     relaxation: float = 0.5,
     warmup: int = 50,
     step_s: float | None = None,
-    backend: Literal["auto", "numpy", "numba"] = "auto",
+    backend: Backend = "auto",
 ) -> AdaptiveResult:
     """Run the seed-002 adaptive Kalman filter on position measurements.
 
@@ -195,9 +196,7 @@ def innovation_adaptive_filter(
     mr = np.repeat(mk.reshape(-1, n_steps), d, axis=0)
     r_rows = np.tile(r0, rows // d)
     q_rows = np.tile(q0, (rows // d, 1, 1))
-    if backend not in ("auto", "numpy", "numba"):
-        raise ValueError(f"backend must be 'auto', 'numpy' or 'numba'; got {backend!r}")
-    compiled = backend == "numba" or (backend == "auto" and rows * n_steps >= 20_000)
+    compiled = use_compiled(backend, rows * n_steps)
     if identification == "published":
         n_min = 2 * (difference_order + 2) if min_statistics is None else min_statistics
         run = _published_compiled if compiled else _published

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import logsumexp
 
+from .._backend import Backend, use_compiled
 from .._linalg import symmetrize
 from .._typing import ArrayLike, FloatArray
 from .._validation import as_float_array, check_symmetric_pd, check_times
@@ -73,7 +74,7 @@ def imm_filter(
     method: Method = "expm",
     noise: Noise = "white",
     form: str = "joseph",
-    backend: str = "auto",
+    backend: Backend = "auto",
 ) -> IMMResult:
     """Run an IMM estimator over one track or a batch of tracks.
 
@@ -164,9 +165,7 @@ def imm_filter(
     dt = tb - t_prev
     if np.any(dt < 0):
         raise ValueError("initial times must not be after the first measurement time")
-    if backend not in ("auto", "numpy", "numba"):
-        raise ValueError(f"backend must be 'auto', 'numpy' or 'numba'; got {backend!r}")
-    if backend == "numba" or (backend == "auto" and z.size // m >= 20_000):
+    if use_compiled(backend, z.size // m):
         return _imm_compiled(
             tb, dt, z, mk, models, measured, r, initial, pi, mu0, method, noise, form
         )

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 
 from .._typing import ArrayLike, FloatArray
@@ -55,75 +54,6 @@ def _offsets(n: int, m: int) -> dict[str, tuple[int, tuple[int, ...]]]:
         pos += math.prod(shape)
     out["end"] = (pos, ())
     return out
-
-
-@numba.njit(cache=True, inline="always")
-def _view(ws, pos, rows, cols):  # type: ignore[no-untyped-def]
-    return ws[pos : pos + rows * cols].reshape((rows, cols))
-
-
-@numba.njit(cache=True)
-def _online_step_masked(ws, trans, z, mask):  # type: ignore[no-untyped-def]
-    """Advance the filter in ``ws`` by ``trans`` and update where ``mask`` is True.
-
-    ``trans`` = [Phi, Qd, u] flattened; any update form (the generic path).
-
-    Returns 0, 1 (a present component of ``z`` is not finite; nothing changed) or 2 (the
-    innovation covariance is not positive definite; nothing changed).
-    """
-    n = int(ws[0])
-    m = int(ws[1])
-    joseph = ws[2] != 0.0
-    for a in range(m):
-        if mask[a] and not math.isfinite(z[a]):
-            return 1
-    nn, mn, mm = n * n, m * n, m * m
-    pos = _HEADER
-    x = ws[pos : pos + n]
-    pos += n
-    p = _view(ws, pos, n, n)
-    pos += nn
-    h = _view(ws, pos, m, n)
-    pos += mn
-    r = _view(ws, pos, m, m)
-    pos += mm
-    off = ws[pos : pos + m]
-    pos += m
-    xp = ws[pos : pos + n]
-    pos += n
-    pp = _view(ws, pos, n, n)
-    pos += nn
-    tmp = _view(ws, pos, n, n)
-    pos += nn
-    hm = _view(ws, pos, m, n)
-    pos += mn
-    rm = _view(ws, pos, m, m)
-    pos += mm
-    hp = _view(ws, pos, m, n)
-    pos += mn
-    s = _view(ws, pos, m, m)
-    pos += mm
-    lo = _view(ws, pos, m, m)
-    pos += mm
-    kt = _view(ws, pos, m, n)
-    pos += mn
-    nu = ws[pos : pos + m]
-    pos += m
-    w = ws[pos : pos + m]
-    pos += m
-    ikh = _view(ws, pos, n, n)
-    phi = trans[:nn].reshape((n, n))
-    qd = trans[nn : 2 * nn].reshape((n, n))
-    u = trans[2 * nn : 2 * nn + n]
-    ok, nis, logdet, nobs = kf_step(
-        x, p, phi, qd, u, z, mask, h, r, off, joseph, xp, pp, tmp, hm, rm, hp, s, lo, kt, nu, w, ikh
-    )
-    if not ok:
-        return 2
-    ws[3] = nis
-    ws[4] = -0.5 * (logdet + nis + nobs * _LOG_2PI) if nobs > 0 else 0.0
-    ws[5] = nobs
-    return 0
 
 
 class OnlineFilter:
@@ -206,6 +136,7 @@ class OnlineFilter:
         if measurement_noise_mean is not None:
             self._block("off")[:] = as_float_array(measurement_noise_mean, "measurement_noise_mean")
         self._m = m
+        self._blocks = {name: self._block(name) for name in self._layout if name != "end"}
         self._fast = None
         if joseph and n <= GENERATED_MAX_STATES:
             at = self._layout
@@ -259,12 +190,22 @@ class OnlineFilter:
         present = np.ones(self._m, dtype=np.bool_) if mask is None else np.asarray(mask)
         if present.shape != (self._m,) or present.dtype != np.bool_:
             raise ValueError(f"mask must be boolean of shape ({self._m},); got {present.shape}")
-        row = self._row(dt)
-        status = _online_step_masked(self._ws, self._bank[row, 1:], z, present)
-        if status:
-            self._raise(status, t, z)
+        if not np.isfinite(z[present]).all():
+            self._raise(1, t, z)
+        n = self.model.state_dim
+        phi, qd, u = np.split(self._bank[self._row(dt), 1:], [n * n, 2 * n * n])
+        blk = self._blocks
+        ok, nis, logdet, nobs = kf_step(  # the generic compiled step, in the work buffer
+            blk["x"], blk["p"], phi.reshape(n, n), qd.reshape(n, n), u, z, present, blk["h"],
+            blk["r"], blk["off"], self._ws[2] != 0.0, blk["xp"], blk["pp"], blk["tmp"],
+            blk["hm"], blk["rm"], blk["hp"], blk["s"], blk["lo"], blk["kt"], blk["nu"],
+            blk["w"], blk["ikh"],
+        )  # fmt: skip
+        if not ok:
+            self._raise(2, t, z)
+        self._ws[3:_TIME] = nis, -0.5 * (logdet + nis + nobs * _LOG_2PI) if nobs else 0.0, nobs
         self._ws[_TIME] = t
-        return float(self._ws[3])
+        return float(nis)
 
     def _raise(self, status: int, time: float, z: FloatArray) -> None:
         if status == 1:

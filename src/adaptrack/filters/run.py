@@ -14,6 +14,7 @@ from typing import Literal
 
 import numpy as np
 
+from .._backend import SHARED_MIN_TRACKS, Backend, use_compiled
 from .._linalg import matvec
 from .._typing import AnyArray, ArrayLike, BoolArray, FloatArray
 from .._validation import (
@@ -37,9 +38,6 @@ from .kalman import (
 )
 
 NanPolicy = Literal["raise", "missing"]
-Backend = Literal["auto", "numpy", "numba"]
-COMPILED_MIN_TRACK_STEPS = 20_000  # below this the NumPy path is used by "auto"
-SHARED_MIN_TRACKS = 64  # from this many tracks sharing one covariance, "auto" computes it once
 
 
 def kalman_filter(
@@ -197,14 +195,11 @@ def kalman_filter(
                 "mask=... or nan_policy='missing' to treat NaN as missing"
             )
         mk = mk & ~nan
-    if backend not in ("auto", "numpy", "numba"):
-        raise ValueError(f"backend must be 'auto', 'numpy' or 'numba'; got {backend!r}")
     batch = z.shape[:-2]
     n_tracks = int(np.prod(batch, dtype=int))
-    compiled = backend == "numba" or (
-        backend == "auto"
-        and z.size // max(m, 1) >= COMPILED_MIN_TRACK_STEPS
-        and not (n_tracks >= SHARED_MIN_TRACKS and _covariance_shared(t, initial, r, mk))
+    compiled = use_compiled(backend, z.size // max(m, 1)) and (
+        backend == "numba"
+        or not (n_tracks >= SHARED_MIN_TRACKS and _covariance_shared(t, initial, r, mk))
     )
     problem = _Problem(
         t,

@@ -18,10 +18,10 @@ numbers as :func:`adaptrack.kalman_filter` / :func:`adaptrack.rts_smooth` to rou
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
 
 import numpy as np
 
+from .._backend import Backend, use_compiled
 from .._linalg import mT, symmetrize
 from .._typing import ArrayLike, FloatArray
 from .._validation import as_float_array, check_symmetric_pd, check_times
@@ -30,8 +30,6 @@ from ..models.discretize import Method, Noise
 from ..types import GaussianState, as_gaussian_state
 from .kalman import UpdateForm, _check_form, covariance_recursion
 from .run import _transitions
-
-Backend = Literal["auto", "numpy", "numba"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -109,8 +107,6 @@ def shared_gain_filter(
     model = as_motion_model(model)
     initial = as_gaussian_state(initial, "initial")
     form = _check_form(form)
-    if backend not in ("auto", "numpy", "numba"):
-        raise ValueError(f"backend must be 'auto', 'numpy' or 'numba'; got {backend!r}")
     n = model.state_dim
     t = as_float_array(times, "times", min_ndim=1)
     if t.ndim != 1 or t.size == 0:
@@ -140,7 +136,7 @@ def shared_gain_filter(
     present = _shared_mask(mask, n_steps, m)
     out = _output(out, (n_tracks, n_steps, n))
     phi, qd, u = _transitions(model, t, t_init, method, noise, order)
-    compiled = backend == "numba" or (backend == "auto" and n_tracks * n_steps >= 20_000)
+    compiled = use_compiled(backend, n_tracks * n_steps)
     if compiled:
         pc, fc, kg = _covariances_compiled(phi, qd, u, h, r, present, cov0, form)
     else:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._backend import SHARED_MIN_TRACKS, Backend, use_compiled
 from .._linalg import matvec, mT, symmetrize
 from .._typing import FloatArray
 from ..types import FilterResult, GaussianState, _trusted
@@ -26,11 +27,7 @@ def _gains(pf: FloatArray, pp_next: FloatArray, phi_next: FloatArray) -> FloatAr
     return mT(np.linalg.solve(pp_next, phi_next @ pf))
 
 
-COMPILED_MIN_TRACK_STEPS = 20_000
-SHARED_MIN_TRACKS = 64  # from this many tracks sharing one covariance, "auto" smooths it once
-
-
-def rts_smooth(result: FilterResult, *, backend: str = "auto") -> GaussianState:
+def rts_smooth(result: FilterResult, *, backend: Backend = "auto") -> GaussianState:
     """Smooth a Kalman filter result (fixed interval, all tracks at once).
 
     Parameters
@@ -59,8 +56,6 @@ def rts_smooth(result: FilterResult, *, backend: str = "auto") -> GaussianState:
     """
     if not isinstance(result, FilterResult):
         raise TypeError(f"result must be a FilterResult; got {type(result).__name__}")
-    if backend not in ("auto", "numpy", "numba"):
-        raise ValueError(f"backend must be 'auto', 'numpy' or 'numba'; got {backend!r}")
     pred, filt = result.predicted, result.filtered
     b = pred.mean.ndim - 2
     n_steps = pred.mean.shape[-2]
@@ -69,10 +64,8 @@ def rts_smooth(result: FilterResult, *, backend: str = "auto") -> GaussianState:
     if len(shared) < 3:
         shared = []
     n_tracks = filt.mean.size // (filt.dim * n_steps)
-    if backend == "numba" or (
-        backend == "auto"
-        and not (shared and n_tracks >= SHARED_MIN_TRACKS)
-        and filt.mean.size // filt.dim >= COMPILED_MIN_TRACK_STEPS
+    if use_compiled(backend, filt.mean.size // filt.dim) and (
+        backend == "numba" or not (shared and n_tracks >= SHARED_MIN_TRACKS)
     ):
         return _rts_compiled(result)
     sm = np.array(filt.mean)
