@@ -248,3 +248,60 @@ def test_compiled_trackers_and_bound_equal_the_numpy_reference(case_name):
         same(x, y)
     with pytest.raises(ValueError, match="backend must be"):
         track_free_2d(*args, backend="gpu")
+
+
+def test_generated_ekf_kernel_equals_the_generic_kernel(monkeypatch):
+    """The straight-line kernel (per state size) and the generic-loop one agree to rounding."""
+    from adaptrack.crossing import _ekf_codegen, _ekf_kernels
+
+    case = CASE["curve_stop_60"]
+    radar, runs = simulate(case, vehicle="truck", n_runs=8, seed=5)
+    args = (runs.times, runs.measurements, runs.detected, radar)
+    road = SITE.roads[case.road]
+    generated = [
+        track_on_road(*args, road, model=ConstantAcceleration(jerk_psd=3.0), backend="numba"),
+        track_free_2d(*args, scatter_std_m=0.7, backend="numba"),
+    ]
+    monkeypatch.setattr(_ekf_codegen, "ekf_kernel", lambda n: _ekf_kernels.ekf_kernel)
+    generic = [
+        track_on_road(*args, road, model=ConstantAcceleration(jerk_psd=3.0), backend="numba"),
+        track_free_2d(*args, scatter_std_m=0.7, backend="numba"),
+    ]
+    for a, b in zip(generated, generic, strict=True):
+        for x, y in zip(dataclasses.astuple(a), dataclasses.astuple(b), strict=True):
+            np.testing.assert_array_equal(np.isnan(x), np.isnan(y))
+            assert np.nanmax(np.abs(x - y)) <= 1e-10 * np.nanmax(np.abs(x))
+
+
+def test_detection_kernel_equals_the_numpy_geometry():
+    """Noise-free detections of the compiled simulation equal :func:`radial_geometry`."""
+    from adaptrack.crossing._radar_kernel import detections_kernel
+    from adaptrack.crossing.radar_sim import radial_geometry
+
+    radar, runs = simulate(CASE["curve_60"], n_runs=4, seed=2, azimuth_bias_rad=0.01)
+    n_runs, n_steps = runs.speed.shape
+    direction = runs.velocity / np.maximum(runs.speed, 1e-12)[..., None]
+    zeros = np.zeros((n_runs, n_steps))
+    radar_arr = np.array(
+        [*radar.position_m, radar.height_m, radar.azimuth_bias_rad, radar.boresight_rad]
+        + [radar.fov_half_rad, radar.min_range_m, radar.max_range_m, 0.1, 0.0]
+    )
+    meas = np.empty((n_runs, n_steps, 3))
+    detected = np.empty((n_runs, n_steps), dtype=bool)
+    detections_kernel(
+        runs.position, direction, runs.speed, zeros, np.zeros((n_runs, n_steps, 3)), zeros,
+        radar_arr, 1.0, meas, detected,
+    )  # fmt: skip
+    rng_m, az, vr = radial_geometry(runs.position, runs.velocity, radar)
+    off_axis = (az - radar.boresight_rad + np.pi) % (2 * np.pi) - np.pi
+    gate = (
+        (np.abs(off_axis) <= radar.fov_half_rad)
+        & (rng_m <= radar.max_range_m)
+        & (rng_m >= radar.min_range_m)
+        & (np.abs(vr) >= 0.1)
+    )
+    np.testing.assert_array_equal(detected, gate)
+    assert gate.any() and not gate.all()
+    ref = np.stack([rng_m, (az + radar.azimuth_bias_rad + np.pi) % (2 * np.pi) - np.pi, vr], -1)
+    np.testing.assert_allclose(meas[gate], ref[gate], rtol=1e-13, atol=1e-13)
+    assert np.isnan(meas[~gate]).all()

@@ -1,8 +1,9 @@
 """Compiled (numba) extended Kalman filters of :mod:`adaptrack.crossing.tracking`.
 
 The NumPy loops there are the readable reference; these kernels run the same recursion run by
-run (runs in parallel): predict with the tabulated transitions, hold an approaching vehicle at
-standstill instead of reversing (road model), linearise the (range, azimuth, radial speed)
+run (runs in parallel): predict with the transition of each step evaluated from a series table
+(:mod:`adaptrack.models.series_table`), hold an approaching vehicle at standstill instead of
+reversing (road model), linearise the (range, azimuth, radial speed)
 measurement at the prediction, Joseph update. Tracks start at their first detection with the
 initial state computed in NumPy. They agree with the reference to rounding (tests).
 """
@@ -15,7 +16,7 @@ import numba
 import numpy as np
 from numba import prange
 
-from ..filters._kernels import predict_into, update_into
+from ..filters._kernels import predict_into, series_transition_into, update_into
 
 ROAD, FREE = 0, 1  # measurement models
 
@@ -51,7 +52,28 @@ def _noise_into(radar, jp, ux, uy, scatter_std, rm):  # type: ignore[no-untyped-
             rm[a, c] += s2 * bb[a] * bb[c]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
+def _centreline(road, s):  # type: ignore[no-untyped-def]
+    """Centreline x, y, heading and curvature at ``s`` (clipped to the road), as np.interp."""
+    sv = road[0]
+    last = sv.shape[0] - 1
+    q = min(max(s, 0.0), sv[last])
+    # last j with sv[j] <= q (as np.interp); the samples are nearly uniform: guess, then walk
+    j = min(int(q * (last / sv[last])), last - 1)
+    while j < last - 1 and sv[j + 1] <= q:
+        j += 1
+    while j > 0 and sv[j] > q:
+        j -= 1
+    u = q - sv[j]
+    ds = sv[j + 1] - sv[j]
+    cx = (road[1, j + 1] - road[1, j]) / ds * u + road[1, j]
+    cy = (road[2, j + 1] - road[2, j]) / ds * u + road[2, j]
+    th = (road[3, j + 1] - road[3, j]) / ds * u + road[3, j]
+    kappa = (road[4, j + 1] - road[4, j]) / ds * u + road[4, j]
+    return cx, cy, th, kappa
+
+
+@numba.njit(cache=True, inline="always")
 def measure(kind, x, k, radar, road, half_width, scatter_std, zp, h, rm, jp, jv):  # type: ignore[no-untyped-def]
     """Fill predicted detection ``zp``, Jacobian ``h`` (3, n) and noise ``rm`` at state ``x``.
 
@@ -73,11 +95,7 @@ def measure(kind, x, k, radar, road, half_width, scatter_std, zp, h, rm, jp, jv)
         _noise_into(radar, jp, ux, uy, scatter_std, rm)
         return
     s, vs, d = x[0], x[1], x[k]
-    q = min(max(s, 0.0), road[0, road.shape[1] - 1])
-    cx = np.interp(q, road[0], road[1])
-    cy = np.interp(q, road[0], road[2])
-    th = np.interp(q, road[0], road[3])
-    kappa = np.interp(q, road[0], road[4])
+    cx, cy, th, kappa = _centreline(road, s)
     tx, ty = math.sin(th), math.cos(th)
     rx, ry = -ty, tx
     off = half_width + d
@@ -92,11 +110,39 @@ def measure(kind, x, k, radar, road, half_width, scatter_std, zp, h, rm, jp, jv)
     _noise_into(radar, jp, -tx, -ty, scatter_std, rm)
 
 
+@numba.njit(cache=True, inline="always")
+def _planar_into(kind, x, p, k, road, half_width, pos, vel, pcov):  # type: ignore[no-untyped-def]
+    """Planar position, velocity and position covariance (2, 2) of state ``x``, ``p``.
+
+    ROAD: ``p = c(s) + (w/2 + d) right(s)``, ``v = ds/dt t(s)``, covariance through
+    ``dp/ds = (1 + kappa (w/2 + d)) t``, ``dp/dd = right``. Returns the speed.
+    """
+    if kind == FREE:
+        pos[0], pos[1], vel[0], vel[1] = x[0], x[1], x[2], x[3]
+        pcov[0, 0], pcov[0, 1], pcov[1, 0], pcov[1, 1] = p[0, 0], p[0, 1], p[1, 0], p[1, 1]
+        return math.sqrt(x[2] * x[2] + x[3] * x[3])
+    s, vs, d = x[0], x[1], x[k]
+    cx, cy, th, kappa = _centreline(road, s)
+    tx, ty = math.sin(th), math.cos(th)
+    rx, ry = -ty, tx
+    off = half_width + d
+    pos[0], pos[1] = cx + off * rx, cy + off * ry
+    vel[0], vel[1] = vs * tx, vs * ty
+    ax, ay = (1.0 + kappa * off) * tx, (1.0 + kappa * off) * ty
+    pss, psd, pdd = p[0, 0], p[0, k], p[k, k]
+    pcov[0, 0] = pss * ax * ax + 2.0 * psd * ax * rx + pdd * rx * rx
+    pcov[1, 1] = pss * ay * ay + 2.0 * psd * ay * ry + pdd * ry * ry
+    pcov[0, 1] = pcov[1, 0] = pss * ax * ay + psd * (ax * ry + rx * ay) + pdd * rx * ry
+    return abs(vs)
+
+
 @numba.njit(cache=True, parallel=True)
 def ekf_kernel(  # type: ignore[no-untyped-def]
     kind,
-    phis,
-    qds,
+    times,
+    phi_coef,
+    qd_coef,
+    h_max,
     z,
     detected,
     first,
@@ -107,17 +153,21 @@ def ekf_kernel(  # type: ignore[no-untyped-def]
     road,
     half_width,
     scatter_std,
-    means,
-    covs,
+    pos,
+    vel,
+    speed,
+    pcov,
     status,
 ):
     """Run the EKF of ``kind`` (ROAD or FREE) over every run from its first detection.
 
-    ``phis``/``qds`` (N, T, n, n); ``z`` (N, T, 3); ``first`` (N,) first detection (-1:
-    none); ``m0``/``p0`` the initial state there; ``k`` the along-road model size (ROAD).
-    ``radar``: x, y, height, range/azimuth/radial-speed standard deviations. ``means``/
-    ``covs`` (pre-filled with NaN) receive the estimates; ``status[i] = t + 1`` if run ``i``
-    stops at step ``t`` (S not positive definite).
+    ``times`` (N, T) [s]; the transitions come from the series table ``phi_coef``,
+    ``qd_coef``, ``h_max`` (:mod:`adaptrack.models.series_table`); ``z`` (N, T, 3); ``first``
+    (N,) first detection (-1: none); ``m0``/``p0`` the initial state there; ``k`` the
+    along-road model size (ROAD). ``radar``: x, y, height, range/azimuth/radial-speed standard
+    deviations. ``pos``/``vel`` (N, T, 2), ``speed`` (N, T), ``pcov`` (N, T, 2, 2) (pre-filled
+    with NaN) receive the planar estimates; ``status[i] = t + 1`` if run ``i`` stops at step
+    ``t`` (S not positive definite). The generic reference of :mod:`._ekf_codegen`'s kernels.
     """
     n_runs, n_steps = detected.shape
     n = m0.shape[1]
@@ -128,15 +178,20 @@ def ekf_kernel(  # type: ignore[no-untyped-def]
         x = m0[i].copy()
         p = p0[i].copy()
         xp, u0, w = np.empty(n), np.zeros(n), np.empty(3)
+        phi, qd = np.empty((n, n)), np.empty((n, n))
         pp, tmp, ikh = np.empty((n, n)), np.empty((n, n)), np.empty((n, n))
         zp, resid, rm = np.empty(3), np.empty(3), np.empty((3, 3))
         h, hp, kt = np.zeros((3, n)), np.empty((3, n)), np.empty((3, n))
         jp, jv = np.empty((3, 2)), np.empty((3, 2))
         s, lo = np.empty((3, 3)), np.empty((3, 3))
-        means[i, f] = x
-        covs[i, f] = p
+        speed[i, f] = _planar_into(
+            kind, x, p, k, road, half_width, pos[i, f], vel[i, f], pcov[i, f]
+        )
         for t in range(f + 1, n_steps):
-            predict_into(x, p, phis[i, t], qds[i, t], u0, xp, pp, tmp)
+            series_transition_into(
+                times[i, t] - times[i, t - 1], phi_coef, qd_coef, h_max, phi, qd, tmp
+            )
+            predict_into(x, p, phi, qd, u0, xp, pp, tmp)
             if kind == ROAD and xp[1] > 0:  # an approaching vehicle does not reverse
                 for a in range(1, k):
                     xp[a] = 0.0
@@ -152,24 +207,40 @@ def ekf_kernel(  # type: ignore[no-untyped-def]
             else:
                 x[:] = xp
                 p[:, :] = pp
-            means[i, t] = x
-            covs[i, t] = p
+            speed[i, t] = _planar_into(
+                kind, x, p, k, road, half_width, pos[i, t], vel[i, t], pcov[i, t]
+            )
 
 
 @numba.njit(cache=True, parallel=True)
 def pcrlb_kernel(  # type: ignore[no-untyped-def]
-    phis, qds, truth, detected, p0, k, radar, road, half_width, scatter_std, pos_var, spd_var
+    times,
+    phi_coef,
+    qd_coef,
+    h_max,
+    truth,
+    detected,
+    p0,
+    k,
+    radar,
+    road,
+    half_width,
+    scatter_std,
+    pos_var,
+    spd_var,
 ):
     """Bound covariance recursion of the road model along the true states ``truth`` (N, T, n).
 
-    The covariance stays at ``p0`` until the first detection; ``pos_var``/``spd_var`` (N, T),
-    pre-filled with NaN, receive ``P[0, 0] + P[k, k]`` and ``P[1, 1]`` from then on.
+    Transitions as in :func:`ekf_kernel`. The covariance stays at ``p0`` until the first
+    detection; ``pos_var``/``spd_var`` (N, T), pre-filled with NaN, receive
+    ``P[0, 0] + P[k, k]`` and ``P[1, 1]`` from then on.
     """
     n_runs, n_steps = detected.shape
     n = p0.shape[0]
     for i in prange(n_runs):
         p = p0.copy()
         x, xp, u0, w = np.zeros(n), np.empty(n), np.zeros(n), np.empty(3)
+        phi, qd = np.empty((n, n)), np.empty((n, n))
         pp, tmp, ikh = np.empty((n, n)), np.empty((n, n)), np.empty((n, n))
         zp, resid, rm = np.empty(3), np.zeros(3), np.empty((3, 3))
         h, hp, kt = np.zeros((3, n)), np.empty((3, n)), np.empty((3, n))
@@ -178,7 +249,10 @@ def pcrlb_kernel(  # type: ignore[no-untyped-def]
         started = False
         for t in range(n_steps):
             if started:
-                predict_into(x, p, phis[i, t], qds[i, t], u0, xp, pp, tmp)  # (means unused)
+                series_transition_into(
+                    times[i, t] - times[i, t - 1], phi_coef, qd_coef, h_max, phi, qd, tmp
+                )
+                predict_into(x, p, phi, qd, u0, xp, pp, tmp)  # (means unused)
             else:
                 pp[:, :] = p0
             if detected[i, t]:

@@ -221,11 +221,15 @@ def evaluate_pair(
     seed: np.random.SeedSequence,
     trackers: dict[str, Tracker] | None = None,
     tuned_m1: tuple[float, float] | None = None,
+    bound: bool = True,
 ) -> list[ComplianceRow]:
-    """Simulate one class x case ``n_runs`` times and score every tracker on the same runs."""
+    """Simulate one class x case ``n_runs`` times and score every tracker on the same runs.
+
+    ``bound=False`` skips the PCRLB (NaN in the rows).
+    """
     trackers = default_trackers(tuned_m1) if trackers is None else trackers
     runs = simulate_site_case(site, case, veh, n_runs=n_runs, rng=np.random.default_rng(seed))
-    bound_p, bound_s = case_bound(runs, site, case, veh)
+    bound_p, bound_s = case_bound(runs, site, case, veh) if bound else (math.nan, math.nan)
     rows = []
     for name, tracker in trackers.items():
         pos, spd, rel, n = score(tracker(runs, site, case, veh), runs, site.zone_m)
@@ -251,8 +255,12 @@ def evaluate_site(
     pool: TaskPool | None = None,
     tuned_m1: tuple[float, float] | None = None,
     progress: Callable[[str], None] | None = None,
+    bound: bool = True,
 ) -> ComplianceResult:
     """Simulate every applicable class x case ``n_runs`` times and score every tracker.
+
+    ``bound=False`` leaves out the road-aligned PCRLB of each case (a diagnostic; the verdict
+    does not use it).
 
     The (class, case) pairs are tasks of ``pool`` (in-process when None, e.g. a Dask cluster
     from :func:`adaptrack.parallel.task_pool`); every pair has its own seed stream, so the
@@ -266,7 +274,10 @@ def evaluate_site(
     pool = TaskPool() if pool is None else pool
     per_pair = pool.map(
         evaluate_pair,
-        [(site, c, v, n_runs, ss, trackers) for (c, v), ss in zip(pairs, seeds, strict=True)],
+        [
+            (site, c, v, n_runs, ss, trackers, None, bound)
+            for (c, v), ss in zip(pairs, seeds, strict=True)
+        ],
         progress=(lambda i: progress(f"{pairs[i][1].name} / {pairs[i][0].name}"))
         if progress
         else None,

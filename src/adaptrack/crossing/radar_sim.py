@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._typing import BoolArray, FloatArray
+from ._radar_kernel import detections_kernel
 from .road import Road
 from .site import RadarSpec, Site
 from .traffic import Case, VehicleClass, along_road_profile, case_duration, random_profiles
@@ -68,41 +69,55 @@ def simulate_case(
     t_true = radar.period_s * np.arange(n)
     if case.kind == "random":
         s, v, _ = random_profiles(case, vehicle, start_m, t_true, n_runs, rng)
-    else:
-        s, v, _ = along_road_profile(case, vehicle, start_m, stop_line_m, t_true)
-        s, v = np.broadcast_to(s, (n_runs, n)), np.broadcast_to(v, (n_runs, n))
+        on_road = s
+    else:  # one profile for every run: the road geometry once (broadcast below)
+        on_road, v, _ = along_road_profile(case, vehicle, start_m, stop_line_m, t_true)
+        s, v = np.broadcast_to(on_road, (n_runs, n)), np.broadcast_to(v, (n_runs, n))
     half = 0.5 * road.lane_width_m - 0.5 * 2.0  # keep a 2 m wide vehicle inside its lane
     offset = np.clip(rng.normal(0.0, lateral_offset_std_m, n_runs), -half, half)
-    pos = road.lane_point(s, offset[:, None])
-    direction = road.inbound_direction(s)
+    pos = road.lane_point(on_road, offset[:, None])
+    direction = road.inbound_direction(on_road)
     vel = v[..., None] * direction
     # reflection point: along the body about the front face
     scatter = rng.normal(0.0, vehicle.scatter_std_m, (n_runs, n))
-    refl = pos - scatter[..., None] * direction
-    rng_m, az, vr = radial_geometry(refl, vel, radar)
     noise = rng.standard_normal((n_runs, n, 3)) * [
         radar.range_std_m,
         radar.azimuth_std_rad,
         radar.radial_speed_std_mps,
     ]
-    meas = np.stack([rng_m, az + radar.azimuth_bias_rad, vr], -1) + noise
-    meas[..., 1] = (meas[..., 1] + np.pi) % (2 * np.pi) - np.pi
-    if radar.max_unambiguous_speed_mps is not None:
-        vmax = radar.max_unambiguous_speed_mps
-        meas[..., 2] = (meas[..., 2] + vmax) % (2 * vmax) - vmax
-    off_axis = (az - radar.boresight_rad + np.pi) % (2 * np.pi) - np.pi
-    detected = (
-        (np.abs(off_axis) <= radar.fov_half_rad)
-        & (rng_m <= radar.max_range_m)
-        & (rng_m >= radar.min_range_m)
-        & (np.abs(vr) >= radar.min_radial_speed_mps)
-        & (rng.uniform(size=(n_runs, n)) < detection_probability)
-    )
+    draw = rng.uniform(size=(n_runs, n))
     jitter = rng.uniform(-radar.time_jitter_s, radar.time_jitter_s, (n_runs, n))
+    radar_arr = np.array(
+        [
+            *radar.position_m,
+            radar.height_m,
+            radar.azimuth_bias_rad,
+            radar.boresight_rad,
+            radar.fov_half_rad,
+            radar.min_range_m,
+            radar.max_range_m,
+            radar.min_radial_speed_mps,
+            radar.max_unambiguous_speed_mps or 0.0,
+        ]
+    )
+    meas = np.empty((n_runs, n, 3))
+    detected = np.empty((n_runs, n), dtype=bool)
+    detections_kernel(
+        np.broadcast_to(pos, (n_runs, n, 2)),
+        np.broadcast_to(direction, (n_runs, n, 2)),
+        v,
+        scatter,
+        noise,
+        draw,
+        radar_arr,
+        detection_probability,
+        meas,
+        detected,
+    )
     return CrossingRuns(
         t_true + jitter,
         np.broadcast_to(t_true, (n_runs, n)).copy(),
-        np.where(detected[..., None], meas, np.nan),
+        meas,
         detected,
         pos,
         vel,

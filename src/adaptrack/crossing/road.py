@@ -11,8 +11,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from .._typing import ArrayLike, FloatArray
 from .._validation import as_float_array
@@ -91,12 +93,19 @@ class Road:
         _, th = self.centreline(s)
         return -np.stack([np.sin(th), np.cos(th)], -1)
 
+    @cached_property
+    def _lane_index(self) -> cKDTree:
+        """Nearest-neighbour index of the sampled lane centre (built on first projection)."""
+        return cKDTree(self.lane_point(self.s))
+
     def project(self, xy: ArrayLike) -> tuple[FloatArray, FloatArray]:
-        """Along-road position ``s`` and signed offset from the lane centre (to the right)."""
+        """Along-road position ``s`` and signed offset from the lane centre (to the right).
+
+        ``s`` is the nearest lane sample's (every ``STEP_M``).
+        """
         p = as_float_array(xy, "xy", min_ndim=1)
-        lane = self.lane_point(self.s)
-        d2 = np.sum((p[..., None, :] - lane) ** 2, axis=-1)
-        i = np.argmin(d2, axis=-1)
+        _, i = self._lane_index.query(p)
+        lane = self._lane_index.data
         s = self.s[i]
         right = np.stack([-np.cos(self.heading[i]), np.sin(self.heading[i])], -1)
         return s, np.einsum("...i,...i->...", p - lane[i], right)

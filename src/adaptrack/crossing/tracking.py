@@ -29,6 +29,7 @@ from .._typing import BoolArray, FloatArray
 from ..filters.kalman import CovarianceError, _update, predict
 from ..models.continuous import ConstantVelocity, MotionModel
 from ..models.discretize import discretize
+from ..models.series_table import SeriesTable, model_series_table
 from ..types import GaussianState, _trusted
 from ._ekf_kernels import FREE, ROAD
 from .road import Road
@@ -129,19 +130,16 @@ def _run(
     measure: Callable[[FloatArray], tuple[FloatArray, FloatArray, FloatArray]],
     initial: Callable[[FloatArray], tuple[FloatArray, FloatArray]],
     constrain: Callable[[FloatArray], FloatArray] | None = None,
-    compiled: _Compiled | None = None,
-) -> tuple[FloatArray, FloatArray, BoolArray]:
-    """Run the batched EKF loop; each run starts at its first detection.
+) -> tuple[FloatArray, FloatArray]:
+    """Run the batched EKF loop (NumPy reference); each run starts at its first detection.
 
-    With ``compiled`` the same recursion runs in :func:`._ekf_kernels.ekf_kernel`.
+    Returns the state means (N, T, n) and covariances (N, T, n, n), NaN before the start.
     """
     n_runs, n_steps = detected.shape
     means = np.full((n_runs, n_steps, n), np.nan)
     covs = np.full((n_runs, n_steps, n, n), np.nan)
     # all transitions at once (before a track starts its state is replaced at initialisation)
     phis, qds = transition(np.diff(times, axis=1, prepend=times[:, :1]))
-    if compiled is not None:
-        return _run_compiled(z, detected, phis, qds, initial, compiled, means, covs)
     mean = np.zeros((n_runs, n))
     cov = np.broadcast_to(np.eye(n), (n_runs, n, n)).copy()
     started = np.zeros(n_runs, dtype=bool)
@@ -168,35 +166,50 @@ def _run(
             started |= new
         means[started, k], covs[started, k] = mean[started], cov[started]
         t_prev = t
-    return means, covs, started
+    return means, covs
+
+
+def _series(
+    model: MotionModel, times: FloatArray, extra_random_walk_psd: tuple[float, ...] = ()
+) -> SeriesTable:
+    """Series table of ``model`` covering the longest step of ``times`` without doublings."""
+    steps = np.diff(times, axis=1)
+    return model_series_table(
+        model, float(steps.max()) if steps.size else 1.0, extra_random_walk_psd
+    )
 
 
 def _run_compiled(
+    times: FloatArray,
     z: FloatArray,
     detected: BoolArray,
-    phis: FloatArray,
-    qds: FloatArray,
+    table: SeriesTable,
     initial: Callable[[FloatArray], tuple[FloatArray, FloatArray]],
     spec: _Compiled,
-    means: FloatArray,
-    covs: FloatArray,
-) -> tuple[FloatArray, FloatArray, BoolArray]:
-    from ._ekf_kernels import ekf_kernel
+    n: int,
+) -> TrackEstimates:
+    """Run the compiled EKF (:mod:`._ekf_codegen`); the planar estimates come from the kernel."""
+    from ._ekf_codegen import ekf_kernel
 
-    n_runs, _ = detected.shape
-    n = means.shape[-1]
+    n_runs, n_steps = detected.shape
     started = np.asarray(detected.any(axis=1), dtype=bool)
     first = np.where(started, np.argmax(detected, axis=1), -1)
     m0, p0 = np.zeros((n_runs, n)), np.zeros((n_runs, n, n))
     if started.any():
         m0[started], p0[started] = initial(z[started, first[started]])
     status = np.zeros(n_runs, dtype=np.int64)
+    out = TrackEstimates(
+        np.full((n_runs, n_steps, 2), np.nan),
+        np.full((n_runs, n_steps, 2), np.nan),
+        np.full((n_runs, n_steps), np.nan),
+        np.full((n_runs, n_steps, 2, 2), np.nan),
+    )
     c = np.ascontiguousarray
-    ekf_kernel(
+    ekf_kernel(n)(
         spec.kind,
-        c(phis),
-        c(qds),
-        c(z),
+        c(times, dtype=float),
+        *table,
+        c(z, dtype=float),
         c(detected),
         first,
         m0,
@@ -206,8 +219,10 @@ def _run_compiled(
         c(spec.road),
         spec.half_width_m,
         spec.scatter_std_m,
-        means,
-        covs,
+        out.position,
+        out.velocity,
+        out.speed,
+        out.position_cov,
         status,
     )
     if status.any():
@@ -215,7 +230,13 @@ def _run_compiled(
         raise CovarianceError(
             f"innovation covariance is not positive definite at step {int(status[i]) - 1}, run {i}"
         )
-    return means, covs, started
+    return out
+
+
+def _check_no_input(model: MotionModel) -> None:
+    blocks, _ = model.blocks()
+    if any(np.any(b.control) for b in blocks):
+        raise ValueError("the trackers need a motion model without a known input")
 
 
 def track_free_2d(
@@ -236,6 +257,7 @@ def track_free_2d(
     model = ConstantVelocity(accel_psd=10.0, n_axes=2) if model is None else model
     if model.state_names[:4] != ("x", "y", "vx", "vy"):
         raise ValueError("track_free_2d needs a 2-axis model whose first states are x, y, vx, vy")
+    _check_no_input(model)
     n = model.state_dim
 
     def transition(dt: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -276,12 +298,10 @@ def track_free_2d(
             cov[:, i, i] = 9.0
         return mean, cov
 
-    spec = (
-        _compiled_spec(FREE, radar, scatter_std_m)
-        if use_compiled(backend, detected.size, threshold=COMPILED_MIN_RUN_STEPS)
-        else None
-    )
-    means, covs, _ = _run(times, z, detected, n, transition, measure, initial, compiled=spec)
+    if use_compiled(backend, detected.size, threshold=COMPILED_MIN_RUN_STEPS):
+        spec = _compiled_spec(FREE, radar, scatter_std_m)
+        return _run_compiled(times, z, detected, _series(model, times), initial, spec, n)
+    means, covs = _run(times, z, detected, n, transition, measure, initial)
     vel = means[..., 2:4]
     return TrackEstimates(means[..., :2], vel, np.linalg.norm(vel, axis=-1), covs[..., :2, :2])
 
@@ -354,6 +374,7 @@ def track_on_road(
     k = model.state_dim
     if model.state_names[:2] != ("x", "vx"):
         raise ValueError("track_on_road needs a one-axis model with states (x, vx, ...)")
+    _check_no_input(model)
     n = k + 1
     transition = _road_transition(model, lateral_psd)
     measure = _road_measure(road, radar, k, scatter_std_m)
@@ -388,26 +409,25 @@ def track_on_road(
         out[rev, 1:k] = 0.0
         return out
 
-    spec = (
-        _compiled_spec(ROAD, radar, scatter_std_m, k, road)
-        if use_compiled(backend, detected.size, threshold=COMPILED_MIN_RUN_STEPS)
-        else None
-    )
-    means, covs, _ = _run(
-        times, z, detected, n, transition, measure, initial, no_reversal, compiled=spec
-    )
+    if use_compiled(backend, detected.size, threshold=COMPILED_MIN_RUN_STEPS):
+        spec = _compiled_spec(ROAD, radar, scatter_std_m, k, road)
+        table = _series(model, times, (lateral_psd,))
+        return _run_compiled(times, z, detected, table, initial, spec, n)
+    means, covs = _run(times, z, detected, n, transition, measure, initial, no_reversal)
+    return _road_estimates(means, covs, road, k)
+
+
+def _road_estimates(means: FloatArray, covs: FloatArray, road: Road, k: int) -> TrackEstimates:
+    """Planar estimates of road states ``[s, ds/dt, ..., d]`` (as the compiled kernel's)."""
     s, vs, d = means[..., 0], means[..., 1], means[..., k]
-    pos = road.lane_point(np.nan_to_num(s), np.nan_to_num(d))
+    pos, tangent, right, kappa = road.lane_geometry(np.nan_to_num(s), np.nan_to_num(d))
     pos[np.isnan(s)] = np.nan
-    vel = vs[..., None] * -road.inbound_direction(np.nan_to_num(s))
-    # planar position covariance from the along-road and lateral variances
-    t_dir = -road.inbound_direction(np.nan_to_num(s))
-    right = np.stack([t_dir[..., 1], -t_dir[..., 0]], -1)
-    pc = (
-        covs[..., 0, 0, None, None] * t_dir[..., :, None] * t_dir[..., None, :]
-        + covs[..., k, k, None, None] * right[..., :, None] * right[..., None, :]
+    # dp/ds = (1 + kappa (w/2 + d)) t, dp/dd = right
+    jac = np.stack([(1.0 + kappa * (0.5 * road.lane_width_m + d))[..., None] * tangent, right], -1)
+    sub = covs[..., [0, k], :][..., :, [0, k]]
+    return TrackEstimates(
+        pos, vs[..., None] * tangent, np.abs(vs), jac @ sub @ np.swapaxes(jac, -1, -2)
     )
-    return TrackEstimates(pos, vel, np.abs(vs), pc)
 
 
 def track_converted(
@@ -496,15 +516,13 @@ def road_pcrlb(
     filter can beat this bound: it is the design reference of a target that really moves
     like ``model``. ``backend`` as in :func:`track_free_2d`.
     """
+    _check_no_input(model)
     k = model.state_dim
     n = k + 1
-    transition = _road_transition(model, lateral_psd)
-    measure = _road_measure(road, radar, k, scatter_std_m)
     n_runs, n_steps = detected.shape
     truth = np.zeros((n_runs, n_steps, n))
     truth[..., 0], truth[..., 1] = along_road_m, -speed
     truth[..., k] = lateral_offset_m[:, None]
-    phis, qds = transition(np.diff(runs_times, axis=1, prepend=runs_times[:, :1]))
     p0 = np.diag([1.0 + scatter_std_m**2, 1.0] + [9.0] * (k - 2) + [lateral_std_m**2])
     pos_var = np.full((n_runs, n_steps), np.nan)
     spd_var = np.full((n_runs, n_steps), np.nan)
@@ -514,8 +532,8 @@ def road_pcrlb(
         spec = _compiled_spec(ROAD, radar, scatter_std_m, k, road)
         c = np.ascontiguousarray
         pcrlb_kernel(
-            c(phis),
-            c(qds),
+            c(runs_times, dtype=float),
+            *_series(model, runs_times, (lateral_psd,)),
             truth,
             c(detected),
             p0,
@@ -528,6 +546,10 @@ def road_pcrlb(
             spd_var,
         )
         return pos_var, spd_var
+    measure = _road_measure(road, radar, k, scatter_std_m)
+    phis, qds = _road_transition(model, lateral_psd)(
+        np.diff(runs_times, axis=1, prepend=runs_times[:, :1])
+    )
     cov = np.broadcast_to(p0, (n_runs, n, n)).copy()
     started = np.zeros(n_runs, dtype=bool)
     for i in range(n_steps):

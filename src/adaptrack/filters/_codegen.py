@@ -46,7 +46,9 @@ def _step(lane: str, n: int, m: int) -> list[str]:
     return lines
 
 
-def _module(signature: str, doc: str, body: list[str], parallel: bool) -> str:
+def module_source(
+    signature: str, doc: str, body: list[str], parallel: bool, imports: tuple[str, ...] = ()
+) -> str:
     """Source of a module holding one ``numba.njit`` function with ``body``."""
     flags = "cache=True, parallel=True" if parallel else "cache=True"
     return "\n".join(
@@ -54,7 +56,9 @@ def _module(signature: str, doc: str, body: list[str], parallel: bool) -> str:
             "import math",
             "",
             "import numba",
+            "import numpy as np",
             "from numba import prange",
+            *imports,
             "",
             "",
             f"@numba.njit({flags}, boundscheck=False, fastmath=False)",
@@ -94,7 +98,7 @@ def _forward_source(n: int, m: int) -> str:
             inner += _step(str(g), n, m)
         return body + ["    " + s for s in inner]
 
-    return _module(
+    return module_source(
         "forward(a, b, kg, obs, z, x0, out)",
         f"Filtered means of every track; n = {n}, m = {m}, {LANES} lanes.",
         ["n_steps = z.shape[1]", *_lane_groups("z.shape[0]", group), "return out"],
@@ -121,7 +125,7 @@ def _backward_source(n: int) -> str:
             inner += [f"out[i{g}, k, {r}] = s{g}_{r}" for r in range(n)]
         return body + ["    " + s for s in inner]
 
-    return _module(
+    return module_source(
         "backward(d, cg, e, out)",
         f"RTS-smoothed means in place of the filtered ones; n = {n}, {LANES} lanes.",
         ["n_steps = out.shape[1]", *_lane_groups("out.shape[0]", group), "return out"],
@@ -143,7 +147,7 @@ def _kernel_dir() -> Path:
     return base
 
 
-def _load(name: str, source: str) -> ModuleType:
+def load(name: str, source: str) -> ModuleType:
     """Write ``source`` (once, atomically) and import it as a module."""
     digest = hashlib.sha1(source.encode()).hexdigest()[:12]
     path = _kernel_dir() / f"{name}_{digest}.py"
@@ -163,13 +167,13 @@ def _load(name: str, source: str) -> ModuleType:
 @cache
 def forward_kernel(n: int, m: int) -> Any:
     """``forward(a, b, kg, obs, z, x0, out)`` for state size ``n`` and measurement size ``m``."""
-    return _load(f"forward_v{_VERSION}_n{n}_m{m}", _forward_source(n, m)).forward
+    return load(f"forward_v{_VERSION}_n{n}_m{m}", _forward_source(n, m)).forward
 
 
 @cache
 def backward_kernel(n: int) -> Any:
     """``backward(d, cg, e, out)`` (in place) for state size ``n``."""
-    return _load(f"backward_v{_VERSION}_n{n}", _backward_source(n)).backward
+    return load(f"backward_v{_VERSION}_n{n}", _backward_source(n)).backward
 
 
 def _sym(i: int, j: int) -> tuple[int, int]:
@@ -316,7 +320,7 @@ def _online_source(n: int, m: int, layout: tuple[int, int, int, int, int, int]) 
         f"ws[{hdr_time}] = t",
         "return 0",
     ]
-    return _module(
+    return module_source(
         "online_step(ws, bank, t, z)",
         f"One online Joseph-form step, every component present; n = {n}, m = {m}.",
         body,
@@ -331,7 +335,7 @@ def online_kernel(n: int, m: int, layout: tuple[int, int, int, int, int, int]) -
     ``layout``: the header's time index and the offsets of x, P, H, R and the noise mean in the
     work buffer.
     """
-    return _load(f"online_v{_VERSION}_n{n}_m{m}", _online_source(n, m, layout)).online_step
+    return load(f"online_v{_VERSION}_n{n}_m{m}", _online_source(n, m, layout)).online_step
 
 
 def _sequence_source(n: int, m: int) -> str:
@@ -379,7 +383,7 @@ def _sequence_source(n: int, m: int) -> str:
     ]
     inner += ["    " + s for s in step]
     body += ["    " + s for s in inner]
-    return _module(
+    return module_source(
         "sequence(A_x0, A_p0, A_phi, A_qd, A_u, A_z, A_h, A_r, A_off, A_pm, A_pc, A_fm, A_fc, "
         "A_nu, A_s, A_nis, A_ll, A_kg, A_status)",
         f"Joseph-form filter of every track, all components present; n = {n}, m = {m}.",
@@ -396,4 +400,4 @@ def sequence_kernel(n: int, m: int) -> Any:
     component present, Joseph form) followed by the output arrays it fills and a status (N,)
     of zeros.
     """
-    return _load(f"sequence_v{_VERSION}_n{n}_m{m}", _sequence_source(n, m)).sequence
+    return load(f"sequence_v{_VERSION}_n{n}_m{m}", _sequence_source(n, m)).sequence

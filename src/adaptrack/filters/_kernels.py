@@ -325,3 +325,52 @@ def affine_backward(d, cg, e, out):  # type: ignore[no-untyped-def]
                 s[r] = y[r]
                 out[i, k, r] = y[r]
     return out
+
+
+@numba.njit(cache=True, inline="always")
+def series_transition_into(dt, phi_coef, qd_coef, h_max, phi, qd, tmp):  # type: ignore[no-untyped-def]
+    """``Phi(dt)``, ``Qd(dt)`` of a :class:`~adaptrack.models.series_table.SeriesTable`.
+
+    Horner in ``h = dt / 2^s <= h_max``, then ``s`` doublings; ``tmp`` (n, n) scratch.
+    """
+    n = phi.shape[0]
+    h, s = dt, 0
+    while h > h_max:
+        h *= 0.5
+        s += 1
+    top = phi_coef.shape[0] - 1
+    for a in range(n):
+        for b in range(n):
+            acc = phi_coef[top, a, b]
+            for i in range(top - 1, -1, -1):
+                acc = acc * h + phi_coef[i, a, b]
+            phi[a, b] = acc
+    top = qd_coef.shape[0] - 1
+    for a in range(n):
+        for b in range(a, n):
+            acc = qd_coef[top, a, b]
+            for i in range(top - 1, -1, -1):
+                acc = acc * h + qd_coef[i, a, b]
+            qd[a, b] = acc * h
+            qd[b, a] = acc * h
+    for _ in range(s):  # Qd(2h) = Phi Qd Phi^T + Qd, Phi(2h) = Phi Phi
+        for a in range(n):
+            for b in range(n):
+                acc = 0.0
+                for c in range(n):
+                    acc += phi[a, c] * qd[c, b]
+                tmp[a, b] = acc
+        for a in range(n):
+            for b in range(a, n):
+                acc = qd[a, b]
+                for c in range(n):
+                    acc += tmp[a, c] * phi[b, c]
+                qd[a, b] = acc
+                qd[b, a] = acc
+        for a in range(n):
+            for b in range(n):
+                acc = 0.0
+                for c in range(n):
+                    acc += phi[a, c] * phi[c, b]
+                tmp[a, b] = acc
+        phi[:, :] = tmp

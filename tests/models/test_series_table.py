@@ -1,0 +1,77 @@
+"""Series tables (matrix polynomials in the step) against the exact discretisation."""
+
+import math
+
+import numba
+import numpy as np
+import pytest
+
+from adaptrack.filters._kernels import series_transition_into
+from adaptrack.models import (
+    ConstantAcceleration,
+    ConstantVelocity,
+    InverseDynamics,
+    ShapingFilter,
+    Singer,
+    discretize,
+)
+from adaptrack.models.series_table import model_series_table, series_table
+
+
+@numba.njit(cache=True)
+def _evaluate(dt, phi_coef, qd_coef, h_max):
+    n = phi_coef.shape[1]
+    phi, qd, tmp = np.empty((n, n)), np.empty((n, n)), np.empty((n, n))
+    series_transition_into(dt, phi_coef, qd_coef, h_max, phi, qd, tmp)
+    return phi, qd
+
+
+MODELS = [
+    ConstantVelocity(accel_psd=3.0, n_axes=2),
+    ConstantAcceleration(jerk_psd=3.0),
+    Singer(time_constant_s=2.0, accel_std_mps2=3.0),
+    InverseDynamics(lambda_per_s2=0.05, accel_psd=0.4),
+    InverseDynamics(lambda_per_s2=4.0, accel_psd=0.4),
+    ShapingFilter(0.05, 1 / 3, 5.0),
+    ShapingFilter(0.09, 0.3, 5.0),  # alpha = sqrt(lambda): confluent
+]
+STEPS = [0.0, 1e-6, 0.01, 0.0437, 0.05, 0.061, 0.3, 1.0, 5.0, 40.0]
+
+
+@pytest.mark.parametrize("model", MODELS, ids=lambda m: type(m).__name__)
+@pytest.mark.parametrize("max_dt", [0.06, math.inf])
+def test_series_equals_exact_discretisation(model, max_dt):
+    """Normwise <= 1e-13 against the element-wise accurate closed forms / Van Loan (spec
+    0.3: the M2 analytic recipe's accuracy), including steps that need doublings."""
+    table = model_series_table(model, max_dt)
+    for dt in STEPS:
+        phi, qd = _evaluate(dt, *table)
+        ref_phi, ref_qd = discretize(model, dt, method="analytic")
+        assert np.max(np.abs(phi - ref_phi)) <= 1e-13 * np.max(np.abs(ref_phi)), dt
+        assert np.max(np.abs(qd - ref_qd)) <= 1e-13 * max(np.max(np.abs(ref_qd)), 1e-300), dt
+        np.testing.assert_array_equal(qd, qd.T)
+    phi, qd = _evaluate(0.0, *table)
+    np.testing.assert_array_equal(phi, np.eye(phi.shape[0]))
+    assert not qd.any()
+
+
+def test_nilpotent_models_are_exact_without_doublings():
+    """Constant velocity/acceleration: finite series (F^3 = 0), any step in one evaluation."""
+    table = model_series_table(ConstantAcceleration(jerk_psd=2.0))
+    assert table.h_max == math.inf
+    assert table.phi_coef.shape[0] == 3 and table.qd_coef.shape[0] == 5
+    phi, qd = _evaluate(7.0, *table)
+    ref_phi, ref_qd = discretize(ConstantAcceleration(jerk_psd=2.0), 7.0, method="analytic")
+    np.testing.assert_allclose(phi, ref_phi, rtol=1e-15)
+    np.testing.assert_allclose(qd, ref_qd, rtol=1e-14)
+
+
+def test_appended_random_walk_and_errors():
+    table = model_series_table(ConstantVelocity(accel_psd=1.0), 0.1, (0.01,))
+    phi, qd = _evaluate(0.5, *table)
+    assert phi[2, 2] == 1.0 and qd[2, 2] == pytest.approx(0.005, rel=1e-15)
+    assert not phi[:2, 2].any() and not qd[:2, 2].any()
+    with pytest.raises(ValueError, match="max_dt"):
+        series_table(np.zeros((2, 2)), np.eye(2), 0.0)
+    with pytest.raises(ValueError, match="known input"):
+        model_series_table(Singer(time_constant_s=2.0, accel_std_mps2=1.0, mean_accel_mps2=0.5))
