@@ -176,6 +176,14 @@ def stream_adaptrack(t: np.ndarray, z: np.ndarray) -> np.ndarray:
     return out
 
 
+def adaptrack_update_many(t: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """``OnlineFilter.update_many`` per track: means, variances and NIS per step."""
+    out = np.empty(z.shape[:-1] + (3,))
+    for i in range(z.shape[0]):
+        out[i] = at.OnlineFilter(MODEL, H, R, _prior(t)).update_many(t, z[i]).mean
+    return out
+
+
 def stream_filterpy(t: np.ndarray, z: np.ndarray) -> np.ndarray:
     from filterpy.kalman import KalmanFilter
 

@@ -6,7 +6,8 @@ Workloads (full sizes; ``--quick`` shrinks them to a smoke test):
 * ``batch``: 10,000 tracks x 1,000 steps sharing model, start and sampling (peers without
   batching run a subset of tracks and are reported per track-step);
 * ``rts``/``rts_batch``: fixed-interval smoothing of one long track and of the batch;
-* ``stream``: one online update per call from Python (20,000 measurements);
+* ``stream``: one online update per call from Python (20,000 measurements), also with
+  jittered timestamps (``stream_jitter``);
 * ``lx_mc``: the ``lx_default`` level-crossing compliance Monte Carlo;
 * ``memory``: peak traced memory of the batch filter over its input + output arrays.
 

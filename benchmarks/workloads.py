@@ -80,7 +80,12 @@ def _compare(
 
 
 def single(quick: bool, repeats: int) -> list[Result]:
-    """One track of 100,000 steps (2,000 with ``quick``)."""
+    """One track of 100,000 steps (2,000 with ``quick``).
+
+    ``adaptrack``: ``OnlineFilter.update_many`` (per-step means, variances and NIS, the state
+    kept for going on live); ``kalman_filter`` also stores every covariance, gain and
+    transition (what smoothing needs).
+    """
     n = 2_000 if quick else 100_000
     few = n if quick else n // 10
     t, z = peers.data(1, n)
@@ -89,7 +94,8 @@ def single(quick: bool, repeats: int) -> list[Result]:
         t,
         z,
         {
-            "adaptrack": (peers.adaptrack_filter, 1, n),
+            "adaptrack": (peers.adaptrack_update_many, 1, n),
+            "adaptrack (kalman_filter, full result)": (peers.adaptrack_filter, 1, n),
             "adaptrack (fleet path, means + shared cov)": (peers.adaptrack_fleet, 1, n),
             "adaptrack (numpy reference)": (
                 lambda t, z: peers.adaptrack_filter(t, z, "numpy"),
@@ -183,10 +189,11 @@ def rts(quick: bool, repeats: int) -> list[Result]:
 
 
 def streaming(quick: bool, repeats: int) -> list[Result]:
-    """One measurement at a time from Python (online update), 20,000 steps."""
+    """One measurement at a time from Python (online update), 20,000 steps; then the same with
+    jittered timestamps (every step length new: no peer caches discretisations)."""
     n = 1_000 if quick else 20_000
     t, z = peers.data(1, n, seed=4)
-    return _compare(
+    rows = _compare(
         "stream",
         t,
         z,
@@ -198,6 +205,15 @@ def streaming(quick: bool, repeats: int) -> list[Result]:
         },
         repeats,
         reference=peers.adaptrack_filter(t, z),
+    )
+    jittered = t + np.random.default_rng(5).uniform(-0.2, 0.2, n) * peers.DT
+    return rows + _compare(
+        "stream_jitter",
+        jittered,
+        z,
+        {"adaptrack": (peers.stream_adaptrack, 1, n)},
+        repeats,
+        reference=peers.adaptrack_filter(jittered, z),
     )
 
 

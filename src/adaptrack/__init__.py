@@ -14,7 +14,7 @@ from .analysis.observability import (
 )
 from .filters.dead_reckoning import DeadReckoningResult, dead_reckoning_filter
 from .filters.kalman import CovarianceError, kalman_step, predict, update
-from .filters.online import OnlineFilter
+from .filters.online import OnlineFilter, StreamEstimates
 from .filters.run import kalman_filter
 from .filters.shared_gain import SharedGainResult, shared_gain_filter
 from .models.discretize import Discretization, control_offset, discretize
@@ -32,6 +32,7 @@ __all__ = [
     "OnlineFilter",
     "SharedGainResult",
     "StepInfo",
+    "StreamEstimates",
     "__version__",
     "control_offset",
     "dead_reckoning_filter",

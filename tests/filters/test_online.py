@@ -101,3 +101,73 @@ def test_bad_input_raises_and_leaves_the_filter_unchanged(rng):
         )
     with pytest.raises(ValueError, match="measurement_cov must be positive definite"):
         OnlineFilter(model, h, -r, prior)
+
+
+@pytest.mark.parametrize("form", ["joseph", "standard"])
+@pytest.mark.parametrize(("model", "m"), CASES)
+def test_update_many_equals_row_by_row_updates(model, m, form, rng):
+    """A block of rows gives the per-row updates' numbers (and the sequence filter's), also
+    when a step length is new mid-block and the cache replaces rows (generated and generic)."""
+    t, z, h, r, prior = _stream(model, m, rng)
+    mu = 0.2 * rng.standard_normal(m)
+    kw = {"form": form, "measurement_noise_mean": mu, "cache_size": 2}
+    one, block = OnlineFilter(model, h, r, prior, **kw), OnlineFilter(model, h, r, prior, **kw)
+    means, nis = [], []
+    for k in range(t.size):
+        nis.append(one.update(t[k], z[k]))
+        means.append(one.mean)
+    head = block.update_many(t[:25], z[:25])  # two blocks: the state carries over
+    tail = block.update_many(t[25:], z[25:])
+    got = np.concatenate([head.mean, tail.mean])
+    np.testing.assert_allclose(got, np.array(means), rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(np.concatenate([head.nis, tail.nis]), nis, rtol=1e-10)
+    np.testing.assert_allclose(block.cov, one.cov, rtol=1e-10, atol=1e-12)
+    assert block.time == one.time
+    assert block.log_likelihood == pytest.approx(one.log_likelihood, rel=1e-10)
+    ref = at.kalman_filter(
+        t, z, model, h, r, prior, form=form, measurement_noise_mean=mu, backend="numpy"
+    )
+    var = np.diagonal(ref.filtered.cov, axis1=-2, axis2=-1)
+    np.testing.assert_allclose(tail.variance, var[25:], rtol=1e-9)
+
+
+def test_update_many_rejects_bad_blocks_before_any_step(rng):
+    model, m = CASES[2]
+    t, z, h, r, prior = _stream(model, m, rng)
+    f = OnlineFilter(model, h, r, prior)
+    before = f.state
+    bad_z = z.copy()
+    bad_z[7, 1] = np.nan
+    back = t.copy()
+    back[9] = back[8] - 0.01
+    for args, match in (
+        ((t, bad_z), "measurements"),
+        ((back, z), "row 9"),
+        ((t - 100.0, z), "row 0"),
+        ((t, z[:, :1]), "shape"),
+    ):
+        with pytest.raises(ValueError, match=match):
+            f.update_many(*args)
+        np.testing.assert_array_equal(f.mean, before.mean)
+        assert f.time == before.time
+
+
+@pytest.mark.parametrize("method", ["expm", "taylor"])
+def test_jittered_stream_with_a_known_input_equals_the_sequence_filter(method, rng):
+    """Every step length new (timestamp jitter), a mean acceleration: exact methods evaluate
+    each step from the series table inside the compiled step, others discretise in NumPy."""
+    model = Singer(time_constant_s=4.0, accel_std_mps2=1.5, mean_accel_mps2=[0.4, -0.2], n_axes=2)
+    n_steps = 200
+    t = np.cumsum(0.05 + rng.uniform(-0.004, 0.004, n_steps))
+    h = np.zeros((2, 6))
+    h[0, 0] = h[1, 1] = 1.0
+    z = rng.standard_normal((n_steps, 2)) + 0.3 * t[:, None] ** 2
+    prior = at.GaussianState(np.zeros(6), 25.0 * np.eye(6), t[0])
+    ref = at.kalman_filter(t, z, model, h, 0.3 * np.eye(2), prior, method=method, backend="numpy")
+    f = OnlineFilter(model, h, 0.3 * np.eye(2), prior, method=method)
+    got = f.update_many(t[:150], z[:150]).mean
+    for k in range(150, n_steps):
+        f.update(t[k], z[k])
+    scale = np.abs(ref.filtered.mean).max()
+    np.testing.assert_allclose(got, ref.filtered.mean[:150], rtol=0, atol=1e-10 * scale)
+    np.testing.assert_allclose(f.mean, ref.filtered.mean[-1], rtol=0, atol=1e-10 * scale)

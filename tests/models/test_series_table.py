@@ -2,28 +2,36 @@
 
 import math
 
-import numba
 import numpy as np
 import pytest
 
-from adaptrack.filters._kernels import series_transition_into
+from adaptrack.filters._kernels import series_bank_row
 from adaptrack.models import (
     ConstantAcceleration,
     ConstantVelocity,
     InverseDynamics,
     ShapingFilter,
     Singer,
+    control_offset,
     discretize,
 )
 from adaptrack.models.series_table import model_series_table, series_table
 
 
-@numba.njit(cache=True)
-def _evaluate(dt, phi_coef, qd_coef, h_max):
-    n = phi_coef.shape[1]
-    phi, qd, tmp = np.empty((n, n)), np.empty((n, n)), np.empty((n, n))
-    series_transition_into(dt, phi_coef, qd_coef, h_max, phi, qd, tmp)
-    return phi, qd
+def _discretize(dt, table):
+    """(Phi, Qd, u) of one step through the kernels' series evaluation."""
+    n = table.phi_coef.shape[1]
+    row = np.empty((1, 1 + 2 * n * n + n))
+    series_bank_row(row, 0, dt, *table)
+    return (
+        row[0, 1 : 1 + n * n].reshape(n, n),
+        row[0, 1 + n * n : 1 + 2 * n * n].reshape(n, n),
+        row[0, 1 + 2 * n * n :],
+    )
+
+
+def _evaluate(dt, table):
+    return _discretize(dt, table)[:2]
 
 
 MODELS = [
@@ -45,12 +53,12 @@ def test_series_equals_exact_discretisation(model, max_dt):
     0.3: the M2 analytic recipe's accuracy), including steps that need doublings."""
     table = model_series_table(model, max_dt)
     for dt in STEPS:
-        phi, qd = _evaluate(dt, *table)
+        phi, qd = _evaluate(dt, table)
         ref_phi, ref_qd = discretize(model, dt, method="analytic")
         assert np.max(np.abs(phi - ref_phi)) <= 1e-13 * np.max(np.abs(ref_phi)), dt
         assert np.max(np.abs(qd - ref_qd)) <= 1e-13 * max(np.max(np.abs(ref_qd)), 1e-300), dt
         np.testing.assert_array_equal(qd, qd.T)
-    phi, qd = _evaluate(0.0, *table)
+    phi, qd = _evaluate(0.0, table)
     np.testing.assert_array_equal(phi, np.eye(phi.shape[0]))
     assert not qd.any()
 
@@ -60,18 +68,29 @@ def test_nilpotent_models_are_exact_without_doublings():
     table = model_series_table(ConstantAcceleration(jerk_psd=2.0))
     assert table.h_max == math.inf
     assert table.phi_coef.shape[0] == 3 and table.qd_coef.shape[0] == 5
-    phi, qd = _evaluate(7.0, *table)
+    phi, qd = _evaluate(7.0, table)
     ref_phi, ref_qd = discretize(ConstantAcceleration(jerk_psd=2.0), 7.0, method="analytic")
     np.testing.assert_allclose(phi, ref_phi, rtol=1e-15)
     np.testing.assert_allclose(qd, ref_qd, rtol=1e-14)
 
 
-def test_appended_random_walk_and_errors():
+def test_appended_random_walk_and_bad_max_dt():
     table = model_series_table(ConstantVelocity(accel_psd=1.0), 0.1, (0.01,))
-    phi, qd = _evaluate(0.5, *table)
+    phi, qd = _evaluate(0.5, table)
     assert phi[2, 2] == 1.0 and qd[2, 2] == pytest.approx(0.005, rel=1e-15)
     assert not phi[:2, 2].any() and not qd[:2, 2].any()
     with pytest.raises(ValueError, match="max_dt"):
         series_table(np.zeros((2, 2)), np.eye(2), 0.0)
-    with pytest.raises(ValueError, match="known input"):
-        model_series_table(Singer(time_constant_s=2.0, accel_std_mps2=1.0, mean_accel_mps2=0.5))
+
+
+@pytest.mark.parametrize("max_dt", [0.06, math.inf])
+def test_known_input_offset_equals_control_offset(max_dt):
+    """The known-input offset ``u(dt)`` (mean acceleration of a Singer model), with doublings."""
+    model = Singer(time_constant_s=2.0, accel_std_mps2=1.0, mean_accel_mps2=[0.5, -1.5], n_axes=2)
+    table = model_series_table(model, max_dt)
+    assert table.offset_coef.shape[1] == 6
+    assert model_series_table(Singer(time_constant_s=2.0)).offset_coef.shape == (0, 3)
+    for dt in STEPS:
+        _, _, u = _discretize(dt, table)
+        ref = control_offset(model, dt, method="analytic")
+        np.testing.assert_allclose(u, ref, rtol=1e-13, atol=1e-13 * np.abs(ref).max(initial=1.0))

@@ -30,7 +30,7 @@ def _ekf_source(n: int) -> str:
         "if f < 0:",
         "    continue",
         f"phi, qd, tmp = np.empty(({n}, {n})), np.empty(({n}, {n})), np.empty(({n}, {n}))",
-        f"xa, pa = np.empty({n}), np.empty(({n}, {n}))",
+        f"xa, pa, uo = np.empty({n}), np.empty(({n}, {n})), np.empty({n})",
         f"zp, h, rm = np.empty(3), np.zeros((3, {n})), np.empty((3, 3))",
         "jp, jv = np.empty((3, 2)), np.empty((3, 2))",
         *(f"x{j} = m0[i, {j}]" for j in range(n)),
@@ -41,7 +41,8 @@ def _ekf_source(n: int) -> str:
         "for t in range(f + 1, n_steps):",
     ]
     step = [
-        "transition(times[i, t] - times[i, t - 1], phi_coef, qd_coef, h_max, phi, qd, tmp)",
+        "transition(times[i, t] - times[i, t - 1], phi_coef, qd_coef, off_coef, h_max, phi, qd, "
+        "uo, tmp)",
         *(f"F{a}_{b} = phi[{a}, {b}]" for a in range(n) for b in range(n)),
         *(f"Q{a}_{b} = qd[{a}, {b}]" for a in range(n) for b in range(a, n)),
         *predict,
@@ -77,7 +78,8 @@ def _ekf_source(n: int) -> str:
         *("        " + line for line in "\n".join(step).split("\n")),
     ]
     return module_source(
-        "ekf(kind, times, phi_coef, qd_coef, h_max, z, detected, first, m0, p0, k, radar, road, "
+        "ekf(kind, times, phi_coef, qd_coef, off_coef, h_max, z, detected, first, m0, p0, k, "
+        "radar, road, "
         "half_width, scatter_std, pos, vel, speed, pcov, status)",
         f"Road or free EKF with {n} states (see adaptrack.crossing._ekf_kernels.ekf_kernel).",
         body,

@@ -142,6 +142,7 @@ def ekf_kernel(  # type: ignore[no-untyped-def]
     times,
     phi_coef,
     qd_coef,
+    off_coef,
     h_max,
     z,
     detected,
@@ -162,12 +163,13 @@ def ekf_kernel(  # type: ignore[no-untyped-def]
     """Run the EKF of ``kind`` (ROAD or FREE) over every run from its first detection.
 
     ``times`` (N, T) [s]; the transitions come from the series table ``phi_coef``,
-    ``qd_coef``, ``h_max`` (:mod:`adaptrack.models.series_table`); ``z`` (N, T, 3); ``first``
-    (N,) first detection (-1: none); ``m0``/``p0`` the initial state there; ``k`` the
-    along-road model size (ROAD). ``radar``: x, y, height, range/azimuth/radial-speed standard
-    deviations. ``pos``/``vel`` (N, T, 2), ``speed`` (N, T), ``pcov`` (N, T, 2, 2) (pre-filled
-    with NaN) receive the planar estimates; ``status[i] = t + 1`` if run ``i`` stops at step
-    ``t`` (S not positive definite). The generic reference of :mod:`._ekf_codegen`'s kernels.
+    ``qd_coef``, ``off_coef``, ``h_max`` (:mod:`adaptrack.models.series_table`); ``z``
+    (N, T, 3); ``first`` (N,) first detection (-1: none); ``m0``/``p0`` the initial state
+    there; ``k`` the along-road model size (ROAD). ``radar``: x, y, height, range / azimuth /
+    radial-speed standard deviations. ``pos``/``vel`` (N, T, 2), ``speed`` (N, T), ``pcov``
+    (N, T, 2, 2) (pre-filled with NaN) receive the planar estimates; ``status[i] = t + 1`` if
+    run ``i`` stops at step ``t`` (S not positive definite). Generic loops:
+    :mod:`._ekf_codegen` generates the same recursion in straight-line code per state size.
     """
     n_runs, n_steps = detected.shape
     n = m0.shape[1]
@@ -177,7 +179,7 @@ def ekf_kernel(  # type: ignore[no-untyped-def]
             continue
         x = m0[i].copy()
         p = p0[i].copy()
-        xp, u0, w = np.empty(n), np.zeros(n), np.empty(3)
+        xp, u, w = np.empty(n), np.zeros(n), np.empty(3)
         phi, qd = np.empty((n, n)), np.empty((n, n))
         pp, tmp, ikh = np.empty((n, n)), np.empty((n, n)), np.empty((n, n))
         zp, resid, rm = np.empty(3), np.empty(3), np.empty((3, 3))
@@ -189,9 +191,9 @@ def ekf_kernel(  # type: ignore[no-untyped-def]
         )
         for t in range(f + 1, n_steps):
             series_transition_into(
-                times[i, t] - times[i, t - 1], phi_coef, qd_coef, h_max, phi, qd, tmp
+                times[i, t] - times[i, t - 1], phi_coef, qd_coef, off_coef, h_max, phi, qd, u, tmp
             )
-            predict_into(x, p, phi, qd, u0, xp, pp, tmp)
+            predict_into(x, p, phi, qd, u, xp, pp, tmp)
             if kind == ROAD and xp[1] > 0:  # an approaching vehicle does not reverse
                 for a in range(1, k):
                     xp[a] = 0.0
@@ -217,6 +219,7 @@ def pcrlb_kernel(  # type: ignore[no-untyped-def]
     times,
     phi_coef,
     qd_coef,
+    off_coef,
     h_max,
     truth,
     detected,
@@ -239,7 +242,7 @@ def pcrlb_kernel(  # type: ignore[no-untyped-def]
     n = p0.shape[0]
     for i in prange(n_runs):
         p = p0.copy()
-        x, xp, u0, w = np.zeros(n), np.empty(n), np.zeros(n), np.empty(3)
+        x, xp, u, w = np.zeros(n), np.empty(n), np.zeros(n), np.empty(3)
         phi, qd = np.empty((n, n)), np.empty((n, n))
         pp, tmp, ikh = np.empty((n, n)), np.empty((n, n)), np.empty((n, n))
         zp, resid, rm = np.empty(3), np.zeros(3), np.empty((3, 3))
@@ -250,9 +253,17 @@ def pcrlb_kernel(  # type: ignore[no-untyped-def]
         for t in range(n_steps):
             if started:
                 series_transition_into(
-                    times[i, t] - times[i, t - 1], phi_coef, qd_coef, h_max, phi, qd, tmp
+                    times[i, t] - times[i, t - 1],
+                    phi_coef,
+                    qd_coef,
+                    off_coef,
+                    h_max,
+                    phi,
+                    qd,
+                    u,
+                    tmp,
                 )
-                predict_into(x, p, phi, qd, u0, xp, pp, tmp)  # (means unused)
+                predict_into(x, p, phi, qd, u, xp, pp, tmp)  # (means unused)
             else:
                 pp[:, :] = p0
             if detected[i, t]:

@@ -2,7 +2,7 @@
 
 from .dead_reckoning import DeadReckoningResult, dead_reckoning_filter
 from .kalman import CovarianceError, kalman_step, predict, update
-from .online import OnlineFilter
+from .online import OnlineFilter, StreamEstimates
 from .run import kalman_filter
 from .shared_gain import SharedGainResult, shared_gain_filter
 
@@ -11,6 +11,7 @@ __all__ = [
     "DeadReckoningResult",
     "OnlineFilter",
     "SharedGainResult",
+    "StreamEstimates",
     "dead_reckoning_filter",
     "kalman_filter",
     "kalman_step",

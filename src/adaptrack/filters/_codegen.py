@@ -29,8 +29,10 @@ Term = Callable[[int, int, int], str]  # (row, column, summation index) -> one p
 Extra = Callable[[int, int], str]
 GENERATED_MAX_STATES = 6  # larger states use the generic kernels (straight-line code for
 # n = 9, m = 3 takes minutes to compile once)
-_VERSION = 2
+_VERSION = 3
 DT_TOLERANCE_S = 1e-9  # online steps this close share one discretisation (clock round-off)
+WS_NEXT_ROW, WS_H_MAX = 7, 8  # OnlineFilter work-buffer header: next bank row, series table h_max
+_FILL = ("from adaptrack.filters._kernels import series_bank_row as fill",)
 
 
 def _step(lane: str, n: int, m: int) -> list[str]:
@@ -234,28 +236,32 @@ def kf_step_lines(n: int, m: int) -> list[str]:
     ]
     out += product("hp", m, n, n, lambda a, j, k: f"H{a}_{k} * {pp(k, j)}")
     out += symmetric("S", m, n, lambda a, b, k: f"hp{a}_{k} * H{b}_{k}", lambda a, b: f"R{a}_{b}")
-    # Cholesky S = L L^T
-    for a in range(m):
-        for b in range(a + 1):
-            acc = s_(a, b) + "".join(f" - L{a}_{c} * L{b}_{c}" for c in range(b))
-            if a == b:
-                out += [f"d{a} = {acc}", f"if not d{a} > 0.0:", "    return 2"]
-                out.append(f"L{a}_{a} = math.sqrt(d{a})")
-            else:
-                out.append(f"L{a}_{b} = ({acc}) / L{b}_{b}")
-    out.append("logdet = " + dot([f"2.0 * math.log(L{a}_{a})" for a in range(m)]))
-    # K^T = S^-1 (H P): forward then backward substitution, column by column
-    for j in range(n):
+    if m == 1:  # S is a scalar: one reciprocal instead of a square root and two divisions
+        out += ["d0 = S0_0", "if not d0 > 0.0:", "    return 2", "iS = 1.0 / d0"]
+        out += [f"kt0_{j} = hp0_{j} * iS" for j in range(n)]
+        out += ["nis = nu0 * nu0 * iS"]
+    else:  # Cholesky S = L L^T with reciprocal pivots
         for a in range(m):
-            acc = f"hp{a}_{j}" + "".join(f" - L{a}_{c} * y{c}_{j}" for c in range(a))
-            out.append(f"y{a}_{j} = ({acc}) / L{a}_{a}")
-        for a in range(m - 1, -1, -1):
-            acc = f"y{a}_{j}" + "".join(f" - L{c}_{a} * kt{c}_{j}" for c in range(a + 1, m))
-            out.append(f"kt{a}_{j} = ({acc}) / L{a}_{a}")
-    for a in range(m):
-        acc = f"nu{a}" + "".join(f" - L{a}_{c} * w{c}" for c in range(a))
-        out.append(f"w{a} = ({acc}) / L{a}_{a}")
-    out.append("nis = " + dot([f"w{a} * w{a}" for a in range(m)]))
+            for b in range(a + 1):
+                acc = s_(a, b) + "".join(f" - L{a}_{c} * L{b}_{c}" for c in range(b))
+                if a == b:
+                    out += [f"d{a} = {acc}", f"if not d{a} > 0.0:", "    return 2"]
+                    out += [f"L{a}_{a} = math.sqrt(d{a})", f"iL{a} = 1.0 / L{a}_{a}"]
+                else:
+                    out.append(f"L{a}_{b} = ({acc}) * iL{b}")
+        # K^T = S^-1 (H P): forward then backward substitution, column by column
+        for j in range(n):
+            for a in range(m):
+                acc = f"hp{a}_{j}" + "".join(f" - L{a}_{c} * y{c}_{j}" for c in range(a))
+                out.append(f"y{a}_{j} = ({acc}) * iL{a}")
+            for a in range(m - 1, -1, -1):
+                acc = f"y{a}_{j}" + "".join(f" - L{c}_{a} * kt{c}_{j}" for c in range(a + 1, m))
+                out.append(f"kt{a}_{j} = ({acc}) * iL{a}")
+        for a in range(m):
+            acc = f"nu{a}" + "".join(f" - L{a}_{c} * w{c}" for c in range(a))
+            out.append(f"w{a} = ({acc}) * iL{a}")
+        out.append("nis = " + dot([f"w{a} * w{a}" for a in range(m)]))
+    out.append("logdet = " + dot([f"math.log(d{a})" for a in range(m)]))
     out += [f"x{i} = xp{i} + " + dot([f"kt{a}_{i} * nu{a}" for a in range(m)]) for i in range(n)]
     out += [
         f"ikh{i}_{j} = {1.0 if i == j else 0.0} - ("
@@ -276,7 +282,31 @@ def kf_step_lines(n: int, m: int) -> list[str]:
     return out
 
 
-def _online_source(n: int, m: int, layout: tuple[int, int, int, int, int, int]) -> str:
+def _bank_miss(
+    n: int, series: tuple[int, int, int, int, int, int] | None, miss: list[str]
+) -> list[str]:
+    """Statements for a step length not in the bank.
+
+    With ``series`` (offsets and term counts of the series table's three coefficient blocks in
+    the work buffer) the next bank row is filled from it; without, ``miss`` (status 3).
+    """
+    if series is None:
+        return ["if row < 0:", *("    " + line for line in miss)]
+    po, p, qo, q, oo, r = series
+    return [
+        "if row < 0:",
+        f"    row = int(ws[{WS_NEXT_ROW}])",
+        f"    ws[{WS_NEXT_ROW}] = (row + 1) % bank.shape[0]",
+        f"    fill(bank, row, dt, ws[{po}:{po + p * n * n}].reshape(({p}, {n}, {n})), "
+        f"ws[{qo}:{qo + q * n * n}].reshape(({q}, {n}, {n})), "
+        f"ws[{oo}:{oo + r * n}].reshape(({r}, {n})), ws[{WS_H_MAX}])",
+    ]
+
+
+Layout = tuple[int, int, int, int, int, int]
+
+
+def _online_source(n: int, m: int, layout: Layout, series: Layout | None) -> str:
     """``online_step(ws, bank, t, z) -> status`` on the work buffer of ``OnlineFilter``."""
     hdr_time, xo, po, ho, ro, oo = layout
     body = [
@@ -290,8 +320,7 @@ def _online_source(n: int, m: int, layout: tuple[int, int, int, int, int, int]) 
         f"    if abs(bank[j, 0] - dt) <= {DT_TOLERANCE_S!r}:",
         "        row = j",
         "        break",
-        "if row < 0:",
-        "    return 3",
+        *_bank_miss(n, series, ["return 3"]),
     ]
     body += [f"z{a} = z[{a}]" for a in range(m)]
     body += [
@@ -325,17 +354,100 @@ def _online_source(n: int, m: int, layout: tuple[int, int, int, int, int, int]) 
         f"One online Joseph-form step, every component present; n = {n}, m = {m}.",
         body,
         parallel=False,
+        imports=_FILL,
+    )
+
+
+def _online_run_source(n: int, m: int, layout: Layout, series: Layout | None) -> str:
+    """``online_run(ws, bank, times, z, k, means, variances, nis) -> (status, k)``.
+
+    The steps of ``online_step`` for rows ``k, k + 1, ...`` of validated ``times`` (T,) and
+    ``z`` (T, m), the state in locals between steps; stops at the end (status 0), at a step
+    length not in the bank (3) or a non-positive-definite ``S`` (2), with the state of the rows
+    before ``k`` written back to ``ws``.
+    """
+    hdr_time, xo, po, ho, ro, oo = layout
+    body = [f"x{i} = ws[{xo + i}]" for i in range(n)]
+    body += [f"P{i}_{j} = ws[{po + i * n + j}]" for i in range(n) for j in range(i, n)]
+    body += [f"H{a}_{j} = ws[{ho + a * n + j}]" for a in range(m) for j in range(n)]
+    body += [f"R{a}_{b} = ws[{ro + a * m + b}]" for a in range(m) for b in range(a, m)]
+    body += [f"o{a} = ws[{oo + a}]" for a in range(m)]
+    body += [
+        f"t_prev, last_nis, last_ll = ws[{hdr_time}], ws[{hdr_time - 3}], ws[{hdr_time - 2}]",
+        f"last_nobs = ws[{hdr_time - 1}]",
+        "status = 0",
+    ]
+    step = [
+        "t = times[k]",
+        "dt = t - t_prev",
+        "row = -1",
+        "for j in range(bank.shape[0]):",
+        f"    if abs(bank[j, 0] - dt) <= {DT_TOLERANCE_S!r}:",
+        "        row = j",
+        "        break",
+        *_bank_miss(n, series, ["status = 3", "break"]),
+    ]
+    step += [f"F{i}_{j} = bank[row, {1 + i * n + j}]" for i in range(n) for j in range(n)]
+    step += [f"Q{i}_{j} = bank[row, {1 + n * n + i * n + j}]" for i in range(n) for j in range(n)]
+    step += [f"u{i} = bank[row, {1 + 2 * n * n + i}]" for i in range(n)]
+    step += [f"z{a} = z[k, {a}]" for a in range(m)]
+    for line in kf_step_lines(n, m):
+        if line.strip() == "return 2":
+            step += [line.replace("return 2", "status = 2"), "    break"]
+        elif line.startswith("logdet = "):  # only the last step's is kept: after the loop
+            step += [f"last_d{a} = d{a}" for a in range(m)]
+        else:
+            step.append(line)
+    step += [f"means[k, {i}] = x{i}" for i in range(n)]
+    step += [f"variances[k, {i}] = P{i}_{i}" for i in range(n)]
+    step += ["nis_out[k] = nis", "last_nis = nis", "t_prev = t", "k += 1"]
+    body += [f"last_d{a} = 1.0" for a in range(m)]
+    body += ["k_start = k", "while k < times.shape[0]:"]
+    body += ["    " + line for line in step]
+    body += [
+        "if k > k_start:",
+        "    logdet = " + " + ".join(f"math.log(last_d{a})" for a in range(m)),
+        f"    last_ll = -0.5 * (logdet + last_nis + {m} * {math.log(2 * math.pi)!r})",
+        f"    last_nobs = {float(m)}",
+    ]
+    body += [f"ws[{xo + i}] = x{i}" for i in range(n)]
+    for i in range(n):
+        for j in range(i, n):
+            body.append(f"ws[{po + i * n + j}] = P{i}_{j}")
+            if j != i:
+                body.append(f"ws[{po + j * n + i}] = P{i}_{j}")
+    body += [
+        f"ws[{hdr_time - 3}], ws[{hdr_time - 2}], ws[{hdr_time - 1}] = last_nis, last_ll, "
+        "last_nobs",
+        f"ws[{hdr_time}] = t_prev",
+        "return status, k",
+    ]
+    return module_source(
+        "online_run(ws, bank, times, z, k, means, variances, nis_out)",
+        f"Online Joseph-form steps over a sequence, every component present; n = {n}, m = {m}.",
+        body,
+        parallel=False,
+        imports=_FILL,
     )
 
 
 @cache
-def online_kernel(n: int, m: int, layout: tuple[int, int, int, int, int, int]) -> Any:
+def online_run_kernel(n: int, m: int, layout: Layout, series: Layout | None) -> Any:
+    """``online_run(ws, bank, times, z, k, means, variances, nis)`` for ``OnlineFilter``."""
+    source = _online_run_source(n, m, layout, series)
+    return load(f"online_run_v{_VERSION}_n{n}_m{m}", source).online_run
+
+
+@cache
+def online_kernel(n: int, m: int, layout: Layout, series: Layout | None) -> Any:
     """``online_step(ws, bank, t, z)`` for ``OnlineFilter``.
 
     ``layout``: the header's time index and the offsets of x, P, H, R and the noise mean in the
-    work buffer.
+    work buffer; ``series``: offsets and term counts of the series-table blocks (None: a new
+    step length returns status 3 and is discretised in Python).
     """
-    return load(f"online_v{_VERSION}_n{n}_m{m}", _online_source(n, m, layout)).online_step
+    source = _online_source(n, m, layout, series)
+    return load(f"online_v{_VERSION}_n{n}_m{m}", source).online_step
 
 
 def _sequence_source(n: int, m: int) -> str:

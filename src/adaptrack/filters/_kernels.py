@@ -328,10 +328,11 @@ def affine_backward(d, cg, e, out):  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True, inline="always")
-def series_transition_into(dt, phi_coef, qd_coef, h_max, phi, qd, tmp):  # type: ignore[no-untyped-def]
-    """``Phi(dt)``, ``Qd(dt)`` of a :class:`~adaptrack.models.series_table.SeriesTable`.
+def series_transition_into(dt, phi_coef, qd_coef, off_coef, h_max, phi, qd, u, tmp):  # type: ignore[no-untyped-def]
+    """``Phi(dt)``, ``Qd(dt)``, ``u(dt)`` of a :class:`~adaptrack.models.series_table.SeriesTable`.
 
-    Horner in ``h = dt / 2^s <= h_max``, then ``s`` doublings; ``tmp`` (n, n) scratch.
+    Horner in ``h = dt / 2^s <= h_max``, then ``s`` doublings; ``u`` is zero without offset
+    coefficients; ``tmp`` (n, n) scratch.
     """
     n = phi.shape[0]
     h, s = dt, 0
@@ -353,7 +354,13 @@ def series_transition_into(dt, phi_coef, qd_coef, h_max, phi, qd, tmp):  # type:
                 acc = acc * h + qd_coef[i, a, b]
             qd[a, b] = acc * h
             qd[b, a] = acc * h
-    for _ in range(s):  # Qd(2h) = Phi Qd Phi^T + Qd, Phi(2h) = Phi Phi
+    top = off_coef.shape[0] - 1
+    for a in range(n):
+        acc = 0.0
+        for i in range(top, -1, -1):
+            acc = acc * h + off_coef[i, a]
+        u[a] = acc * h
+    for _ in range(s):  # Qd(2h) = Phi Qd Phi^T + Qd, u(2h) = Phi u + u, Phi(2h) = Phi Phi
         for a in range(n):
             for b in range(n):
                 acc = 0.0
@@ -367,6 +374,14 @@ def series_transition_into(dt, phi_coef, qd_coef, h_max, phi, qd, tmp):  # type:
                     acc += tmp[a, c] * phi[b, c]
                 qd[a, b] = acc
                 qd[b, a] = acc
+        if top >= 0:
+            for a in range(n):
+                acc = u[a]
+                for c in range(n):
+                    acc += phi[a, c] * u[c]
+                tmp[a, 0] = acc
+            for a in range(n):
+                u[a] = tmp[a, 0]
         for a in range(n):
             for b in range(n):
                 acc = 0.0
@@ -374,3 +389,18 @@ def series_transition_into(dt, phi_coef, qd_coef, h_max, phi, qd, tmp):  # type:
                     acc += phi[a, c] * phi[c, b]
                 tmp[a, b] = acc
         phi[:, :] = tmp
+
+
+@numba.njit(cache=True)
+def series_bank_row(bank, row, dt, phi_coef, qd_coef, off_coef, h_max):  # type: ignore[no-untyped-def]
+    """Write ``[dt, Phi, Qd, u]`` of step ``dt`` (from a series table) into ``bank[row]``."""
+    n = phi_coef.shape[1]
+    phi, qd, tmp = np.empty((n, n)), np.empty((n, n)), np.empty((n, n))
+    u = np.empty(n)
+    series_transition_into(dt, phi_coef, qd_coef, off_coef, h_max, phi, qd, u, tmp)
+    bank[row, 0] = dt
+    for a in range(n):
+        for b in range(n):
+            bank[row, 1 + a * n + b] = phi[a, b]
+            bank[row, 1 + n * n + a * n + b] = qd[a, b]
+        bank[row, 1 + 2 * n * n + a] = u[a]

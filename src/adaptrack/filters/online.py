@@ -3,14 +3,17 @@
 :class:`OnlineFilter` keeps its state, the model matrices and all scratch space in one
 preallocated buffer and runs the same predict + Joseph update as the batch kernel
 (:func:`adaptrack.filters._kernels.kf_step`), so a stream filtered step by step gives the
-numbers of :func:`adaptrack.kalman_filter` to rounding. Transitions are cached by step length:
-regular sampling discretises once; every new ``dt`` costs one discretisation. Step lengths
-within 1 ns of a cached one share it (clock round-off, e.g. ``0.15 - 0.1 != 0.05``).
+numbers of :func:`adaptrack.kalman_filter` to rounding. Transitions are cached by step length
+(steps within 1 ns of a cached one share it: clock round-off, e.g. ``0.15 - 0.1 != 0.05``). For
+the exact methods a new step length is discretised inside the compiled step from a series table
+(:mod:`adaptrack.models.series_table`), so a jittered stream costs about a microsecond per
+update too; other methods discretise it in NumPy.
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -18,18 +21,29 @@ from .._typing import ArrayLike, FloatArray
 from .._validation import as_float_array, check_symmetric_pd
 from ..models.continuous import MotionModel, as_motion_model
 from ..models.discretize import Method, Noise, discretize_with_input
+from ..models.series_table import SeriesTable, model_series_table
 from ..types import GaussianState, as_gaussian_state
-from ._codegen import DT_TOLERANCE_S, GENERATED_MAX_STATES, online_kernel
-from ._kernels import _LOG_2PI, kf_step
+from ._codegen import (
+    DT_TOLERANCE_S,
+    GENERATED_MAX_STATES,
+    WS_H_MAX,
+    WS_NEXT_ROW,
+    online_kernel,
+    online_run_kernel,
+)
+from ._kernels import _LOG_2PI, kf_step, series_bank_row
 from .kalman import CovarianceError, UpdateForm, _check_form
 
-_HEADER = 7  # n, m, Joseph form (0/1), nis, log-likelihood, observed components, time
+# header: n, m, Joseph form (0/1), nis, log-likelihood, observed components, time, next bank
+# row, series table h_max
+_HEADER = 9
 _TIME = 6
+_SERIES_BLOCKS = ("series_phi", "series_qd", "series_off")
 
 
-def _offsets(n: int, m: int) -> dict[str, tuple[int, tuple[int, ...]]]:
-    """Offset and shape of every block of the work buffer."""
-    shapes = {
+def _offsets(n: int, m: int, series: SeriesTable | None) -> dict[str, tuple[int, tuple[int, ...]]]:
+    """Offset and shape of every block of the work buffer (the series table's last)."""
+    shapes: dict[str, tuple[int, ...]] = {
         "x": (n,),
         "p": (n, n),
         "h": (m, n),
@@ -48,12 +62,27 @@ def _offsets(n: int, m: int) -> dict[str, tuple[int, tuple[int, ...]]]:
         "w": (m,),
         "ikh": (n, n),
     }
+    if series is not None:
+        for name, coef in zip(_SERIES_BLOCKS, series[:3], strict=True):
+            shapes[name] = coef.shape
     out, pos = {}, _HEADER
     for name, shape in shapes.items():
         out[name] = (pos, shape)
         pos += math.prod(shape)
     out["end"] = (pos, ())
     return out
+
+
+class StreamEstimates(NamedTuple):
+    """Per-measurement results of :meth:`OnlineFilter.update_many`.
+
+    ``mean`` (T, n) and ``variance`` (T, n) (the covariance diagonal) after each update,
+    ``nis`` (T,) the normalised innovation squared of each measurement.
+    """
+
+    mean: FloatArray
+    variance: FloatArray
+    nis: FloatArray
 
 
 class OnlineFilter:
@@ -123,10 +152,19 @@ class OnlineFilter:
             raise ValueError(f"cache_size must be >= 1; got {cache_size}")
         joseph = _check_form(form) == "joseph"
         self._discretization = (method, noise, order)
+        # exact white-noise discretisation of a new step length in microseconds (a jittered
+        # stream meets one per update) instead of a matrix exponential in NumPy
+        exact = method in ("expm", "analytic", "auto") and noise == "white"
+        series = model_series_table(self.model) if exact else None
         self._bank = np.full((int(cache_size), 1 + 2 * n * n + n), np.nan)  # [dt, Phi, Qd, u]
-        self._next_row = 0
-        self._layout = _offsets(n, m)
+        self._layout = _offsets(n, m, series)
         self._ws = np.zeros(self._layout["end"][0])
+        self._series = None
+        if series is not None:
+            self._ws[WS_H_MAX] = series.h_max
+            self._series = tuple(self._block(name) for name in _SERIES_BLOCKS)
+            for block, coef in zip(self._series, series[:3], strict=True):
+                block[:] = coef
         self._ws[0], self._ws[1], self._ws[2] = n, m, 1.0 if joseph else 0.0
         self._ws[_TIME] = float(initial.time)
         self._block("x")[:] = initial.mean
@@ -137,11 +175,17 @@ class OnlineFilter:
             self._block("off")[:] = as_float_array(measurement_noise_mean, "measurement_noise_mean")
         self._m = m
         self._blocks = {name: self._block(name) for name in self._layout if name != "end"}
-        self._fast = None
+        self._fast = self._fast_run = None
         if joseph and n <= GENERATED_MAX_STATES:
             at = self._layout
             offsets = (_TIME, at["x"][0], at["p"][0], at["h"][0], at["r"][0], at["off"][0])
-            self._fast = online_kernel(n, m, offsets)
+            table = (
+                None
+                if series is None
+                else tuple(v for name in _SERIES_BLOCKS for v in (at[name][0], at[name][1][0]))
+            )
+            self._fast = online_kernel(n, m, offsets, table)
+            self._fast_run = online_run_kernel(n, m, offsets, table)
 
     def _block(self, name: str) -> FloatArray:
         pos, shape = self._layout[name]
@@ -152,11 +196,15 @@ class OnlineFilter:
         hit = np.flatnonzero(np.abs(self._bank[:, 0] - dt) <= DT_TOLERANCE_S)
         if hit.size:
             return int(hit[0])
-        method, noise, order = self._discretization
-        phi, qd, u = discretize_with_input(self.model, dt, method, noise=noise, order=order)
-        row = self._next_row
-        self._bank[row] = np.concatenate([[dt], phi.ravel(), qd.ravel(), u.ravel()])
-        self._next_row = (row + 1) % self._bank.shape[0]
+        row = int(self._ws[WS_NEXT_ROW])
+        self._ws[WS_NEXT_ROW] = (row + 1) % self._bank.shape[0]
+        if self._series is not None:
+            phi_coef, qd_coef, off_coef = self._series
+            series_bank_row(self._bank, row, dt, phi_coef, qd_coef, off_coef, self._ws[WS_H_MAX])
+        else:
+            method, noise, order = self._discretization
+            phi, qd, u = discretize_with_input(self.model, dt, method, noise=noise, order=order)
+            self._bank[row] = np.concatenate([[dt], phi.ravel(), qd.ravel(), u.ravel()])
         return row
 
     def update(self, time: float, measurement: ArrayLike, mask: ArrayLike | None = None) -> float:
@@ -180,6 +228,56 @@ class OnlineFilter:
             if status != 3:  # 3: a step length not in the bank yet
                 self._raise(status, time, z)
         return self._update_slow(float(time), np.asarray(z, dtype=np.float64), mask)
+
+    def update_many(self, times: ArrayLike, measurements: ArrayLike) -> StreamEstimates:
+        """Apply a block of measurements ``(T, m)`` at ``times`` (T,) [s], in order.
+
+        The same steps as calling :meth:`update` for each row (bit for bit), with the state kept
+        in compiled code between rows: for replaying a recorded file before going live, or for
+        blocks of a fast stream. Every component is present.
+
+        Raises
+        ------
+        ValueError
+            Before any step, naming the row: wrong shapes, a non-finite value, times that
+            decrease or start before the filter time.
+        CovarianceError
+            If ``S`` is not positive definite at some row; the rows before it are applied.
+        """
+        t = as_float_array(times, "times", min_ndim=1)
+        z = as_float_array(measurements, "measurements", min_ndim=2)
+        n_rows = t.shape[0]
+        if t.ndim != 1 or z.shape != (n_rows, self._m):
+            raise ValueError(
+                f"times must have shape (T,) and measurements (T, {self._m}); got {t.shape} "
+                f"and {z.shape}"
+            )
+        back = np.flatnonzero(np.diff(t, prepend=self._ws[_TIME]) < 0)
+        if back.size:
+            k = int(back[0])
+            raise ValueError(
+                f"times must not decrease or start before the filter time {self.time} s; "
+                f"row {k}: {t[k]}"
+            )
+        n = self.model.state_dim
+        out = StreamEstimates(np.empty((n_rows, n)), np.empty((n_rows, n)), np.empty(n_rows))
+        if self._fast_run is None:
+            for k in range(n_rows):
+                out.nis[k] = self.update(t[k], z[k])
+                out.mean[k] = self._blocks["x"]
+                out.variance[k] = np.diagonal(self._blocks["p"])
+            return out
+        k = 0
+        while True:
+            status, k = self._fast_run(self._ws, self._bank, t, z, k, *out)
+            if status == 0:
+                return out
+            if status != 3:
+                raise CovarianceError(
+                    f"innovation covariance is not positive definite at row {k} "
+                    f"(t = {t[k]} s); rows 0-{k - 1} are applied"
+                )
+            self._row(t[k] - self._ws[_TIME])  # a new step length: discretise, go on
 
     def _update_slow(self, t: float, z: FloatArray, mask: ArrayLike | None) -> float:
         dt = t - self._ws[_TIME]
@@ -248,4 +346,4 @@ class OnlineFilter:
         return float(self._ws[4])
 
 
-__all__ = ["OnlineFilter"]
+__all__ = ["OnlineFilter", "StreamEstimates"]

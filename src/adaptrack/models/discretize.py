@@ -132,17 +132,23 @@ def discretize_with_input(
         raise ValueError(f"noise must be 'white' or 'piecewise'; got {noise!r}")
     if method == "taylor" and (isinstance(order, bool) or not isinstance(order, int) or order < 0):
         raise ValueError(f"order must be an int >= 0 for method='taylor'; got {order!r}")
-    uniq, inv = np.unique(dt_arr, return_inverse=True)
+    blocks, _ = model.blocks()
+    if method in ("analytic", "auto") and all(b.closed_form is not None for b in blocks):
+        # element-wise closed forms: cheaper than sorting out the distinct steps
+        steps, inv = dt_arr.reshape(-1), None
+    else:
+        steps, inv = np.unique(dt_arr, return_inverse=True)
     parts = [
-        _discretize_model(model, uniq[i : i + _CHUNK], method, noise, order)
-        for i in range(0, uniq.size, _CHUNK)
+        _discretize_model(model, steps[i : i + _CHUNK], method, noise, order)
+        for i in range(0, steps.size, _CHUNK)
     ]
-    inv = inv.reshape(-1)
 
     def per_step(j: int) -> FloatArray:
         """Gather the table of distinct steps (contiguous: layout decides BLAS rounding)."""
         table = np.ascontiguousarray(np.concatenate([p[j] for p in parts]))
-        return np.take(table, inv, axis=0).reshape(dt_arr.shape + table.shape[1:])
+        if inv is not None:
+            table = np.take(table, inv.reshape(-1), axis=0)
+        return table.reshape(dt_arr.shape + table.shape[1:])
 
     return per_step(0), per_step(1), per_step(2)
 
