@@ -58,7 +58,9 @@ class TaskPool:
             return out
         from distributed import as_completed
 
-        futures = [self.client.submit(fn, *args, pure=False) for args in tasks]
+        futures = [
+            self.client.submit(_one_kernel_thread, fn, *args, pure=False) for args in tasks
+        ]
         index = {f.key: i for i, f in enumerate(futures)}
         results: list[Any] = [None] * len(futures)
         try:
@@ -70,6 +72,18 @@ class TaskPool:
         finally:
             self.client.cancel([f for f in futures if not f.done()])
         return results
+
+
+def _one_kernel_thread(fn: Callable[..., R], *args: Any) -> R:
+    """Run ``fn`` on a cluster worker with one compiled-kernel thread.
+
+    The workers (one task at a time each) are the parallelism; numba's default of a thread per
+    core in every worker would oversubscribe the cores.
+    """
+    import numba
+
+    numba.set_num_threads(1)
+    return fn(*args)
 
 
 @contextmanager
