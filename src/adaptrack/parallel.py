@@ -58,9 +58,7 @@ class TaskPool:
             return out
         from distributed import as_completed
 
-        futures = [
-            self.client.submit(_one_kernel_thread, fn, *args, pure=False) for args in tasks
-        ]
+        futures = [self.client.submit(_one_kernel_thread, fn, *args, pure=False) for args in tasks]
         index = {f.key: i for i, f in enumerate(futures)}
         results: list[Any] = [None] * len(futures)
         try:

@@ -129,7 +129,10 @@ def test_tracks_start_at_first_detection_and_coast():
 
 
 @pytest.mark.distributed
-def test_compliance_on_a_dask_cluster_is_bit_identical_and_structured(dask_pool):
+def test_compliance_on_a_dask_cluster_is_bit_identical_and_structured(dask_pool, monkeypatch):
+    from adaptrack.crossing import compliance
+
+    monkeypatch.setattr(compliance, "RUN_BLOCK_STEPS", 1_000)  # several blocks per pair
     cases = (CASE["pass_60"], CASE["curve_60"])
     classes = {"car": VEHICLES["car"], "bus": VEHICLES["bus"]}
     a = evaluate_site(SITE, 3, 7, cases=cases, classes=classes)
@@ -163,6 +166,31 @@ def test_custom_trackers_run_on_the_cluster_too(dask_pool):
     np.testing.assert_equal(
         [dataclasses.astuple(r) for r in a.rows], [dataclasses.astuple(r) for r in b.rows]
     )
+
+
+def test_run_blocks_merge_to_the_pooled_rms(monkeypatch):
+    """Blocks of runs (own seed streams) pool into the RMS over all their epochs."""
+    import math
+
+    from adaptrack.crossing import compliance
+    from adaptrack.crossing.compliance import RoadTracker, _blocks, evaluate_pair
+    from adaptrack.crossing.radar_sim import site_scan_count
+
+    case, veh = CASE["pass_60"], VEHICLES["car"]
+    mine = {"ca": RoadTracker(ConstantAcceleration(jerk_psd=3.0))}
+    seed = np.random.SeedSequence(11)
+    n_steps = site_scan_count(SITE, case, veh)
+    monkeypatch.setattr(compliance, "RUN_BLOCK_STEPS", 2 * n_steps)
+    blocks = _blocks(5, n_steps, seed)
+    assert [size for size, _ in blocks] == [2, 2, 1]
+    assert blocks[0][1] is seed  # one block: the pair's own stream, as without blocks
+    whole = evaluate_pair(SITE, case, veh, 5, seed, mine)[0]
+    parts = [evaluate_pair(SITE, case, veh, size, ss, mine)[0] for size, ss in blocks]
+    n = sum(p.n_epochs for p in parts)
+    assert whole.n_epochs == n and len({p.position_rms_m for p in parts}) == 3
+    for field in ("position_rms_m", "speed_rms_kmh"):  # 60 km/h: every epoch scores speed
+        pooled = math.sqrt(sum(getattr(p, field) ** 2 * p.n_epochs for p in parts) / n)
+        assert getattr(whole, field) == pytest.approx(pooled, rel=1e-12)
 
 
 def test_road_pcrlb_matches_the_filter_covariance_on_point_targets():
@@ -262,7 +290,7 @@ def test_generated_ekf_kernel_equals_the_generic_kernel(monkeypatch):
         track_on_road(*args, road, model=ConstantAcceleration(jerk_psd=3.0), backend="numba"),
         track_free_2d(*args, scatter_std_m=0.7, backend="numba"),
     ]
-    monkeypatch.setattr(_ekf_codegen, "ekf_kernel", lambda n: _ekf_kernels.ekf_kernel)
+    monkeypatch.setattr(_ekf_codegen, "ekf_kernel", lambda *_: _ekf_kernels.ekf_kernel)
     generic = [
         track_on_road(*args, road, model=ConstantAcceleration(jerk_psd=3.0), backend="numba"),
         track_free_2d(*args, scatter_std_m=0.7, backend="numba"),

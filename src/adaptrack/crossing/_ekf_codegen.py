@@ -14,13 +14,72 @@ from functools import cache
 from pathlib import Path
 from typing import Any
 
+from .._typing import FloatArray
 from ..filters._codegen import GENERATED_MAX_STATES, kf_step_lines, load, module_source
 
-_VERSION = 1
+_VERSION = 2
 _M = 3  # range, azimuth, radial speed
 
 
-def _ekf_source(n: int) -> str:
+Pattern = tuple[tuple[tuple[bool, ...], ...], ...]  # [row][column][term]: non-zero
+
+
+def _horner(name: str, terms: tuple[bool, ...], times_h: bool) -> str:
+    """``sum_i name_i dt^i`` over the non-zero terms (times ``dt`` once more if ``times_h``)."""
+    if not any(terms):
+        return "0.0"
+    top = max(i for i, nz in enumerate(terms) if nz)
+    acc = f"{name}_{top}"
+    for i in range(top - 1, -1, -1):
+        acc = f"({acc}) * dt" + (f" + {name}_{i}" if terms[i] else "")
+    return f"({acc}) * dt" if times_h else acc
+
+
+def _transition_lines(n: int, pattern: tuple[Pattern, Pattern]) -> tuple[list[str], list[str]]:
+    """Coefficient loads (per run) and straight-line ``F``, ``Q`` of a step (per step).
+
+    ``pattern``: which coefficients of the series table (``phi_coef``, ``qd_coef``) are non-zero;
+    only those are loaded and multiplied. Steps longer than ``h_max`` use the generic series
+    evaluation (with doublings).
+    """
+    phi_nz, qd_nz = pattern
+    loads = [
+        f"a{a}_{b}_{i} = phi_coef[{i}, {a}, {b}]"
+        for a in range(n)
+        for b in range(n)
+        for i, nz in enumerate(phi_nz[a][b])
+        if nz
+    ]
+    loads += [
+        f"c{a}_{b}_{i} = qd_coef[{i}, {a}, {b}]"
+        for a in range(n)
+        for b in range(a, n)
+        for i, nz in enumerate(qd_nz[a][b])
+        if nz
+    ]
+    step = [
+        "dt = times[i, t] - times[i, t - 1]",
+        "if dt <= h_max:",
+        *(
+            f"    F{a}_{b} = {_horner(f'a{a}_{b}', phi_nz[a][b], False)}"
+            for a in range(n)
+            for b in range(n)
+        ),
+        *(
+            f"    Q{a}_{b} = {_horner(f'c{a}_{b}', qd_nz[a][b], True)}"
+            for a in range(n)
+            for b in range(a, n)
+        ),
+        "else:",
+        "    transition(dt, phi_coef, qd_coef, off_coef, h_max, phi, qd, uo, tmp)",
+        *(f"    F{a}_{b} = phi[{a}, {b}]" for a in range(n) for b in range(n)),
+        *(f"    Q{a}_{b} = qd[{a}, {b}]" for a in range(n) for b in range(a, n)),
+    ]
+    return loads, step
+
+
+def _ekf_source(n: int, pattern: tuple[Pattern, Pattern]) -> str:
+    loads, transition = _transition_lines(n, pattern)
     step_lines = kf_step_lines(n, _M)
     split = next(i for i, line in enumerate(step_lines) if line.startswith("nu0 ="))
     predict = step_lines[:split]
@@ -36,15 +95,13 @@ def _ekf_source(n: int) -> str:
         *(f"x{j} = m0[i, {j}]" for j in range(n)),
         *(f"P{a}_{b} = p0[i, {a}, {b}]" for a in range(n) for b in range(a, n)),
         *(f"u{j} = 0.0" for j in range(n)),
+        *loads,
         "speed[i, f] = planar(kind, m0[i], p0[i], k, road, half_width, pos[i, f], vel[i, f], "
         "pcov[i, f])",
         "for t in range(f + 1, n_steps):",
     ]
     step = [
-        "transition(times[i, t] - times[i, t - 1], phi_coef, qd_coef, off_coef, h_max, phi, qd, "
-        "uo, tmp)",
-        *(f"F{a}_{b} = phi[{a}, {b}]" for a in range(n) for b in range(n)),
-        *(f"Q{a}_{b} = qd[{a}, {b}]" for a in range(n) for b in range(a, n)),
+        *transition,
         *predict,
         "if kind == ROAD and xp1 > 0.0:  # an approaching vehicle does not reverse",
         *(f"    if {a} < k:\n        xp{a} = 0.0" for a in range(1, n - 1)),
@@ -101,11 +158,25 @@ def _digest() -> str:
     return hashlib.sha1(text.encode()).hexdigest()[:12]
 
 
-@cache
-def ekf_kernel(n: int) -> Any:
-    """Return the EKF kernel for state size ``n`` (generated up to ``GENERATED_MAX_STATES``)."""
+def ekf_kernel(n: int, phi_coef: FloatArray, qd_coef: FloatArray) -> Any:
+    """Return the EKF kernel for state size ``n`` and the series table's non-zero pattern.
+
+    Generated up to ``GENERATED_MAX_STATES`` states (one compilation per pattern: per model
+    structure, not per parameter value); the generic kernel beyond.
+    """
     if n > GENERATED_MAX_STATES:
         from ._ekf_kernels import ekf_kernel as generic
 
         return generic
-    return load(f"ekf_v{_VERSION}_n{n}", _ekf_source(n)).ekf
+
+    def nonzero(coef: FloatArray) -> Pattern:
+        return tuple(
+            tuple(tuple(bool(v) for v in coef[:, a, b]) for b in range(n)) for a in range(n)
+        )
+
+    return _generated(n, (nonzero(phi_coef), nonzero(qd_coef)))
+
+
+@cache
+def _generated(n: int, pattern: tuple[Pattern, Pattern]) -> Any:
+    return load(f"ekf_v{_VERSION}_n{n}", _ekf_source(n, pattern)).ekf

@@ -18,11 +18,11 @@ from typing import Any
 
 import numpy as np
 
-from .._typing import BoolArray
+from .._typing import BoolArray, FloatArray
 from ..models.adaptive import InverseDynamics, ShapingFilter, singer_accel_std
 from ..models.continuous import ConstantAcceleration, ConstantVelocity, MotionModel
 from ..parallel import TaskPool
-from .radar_sim import CrossingRuns, simulate_site_case
+from .radar_sim import CrossingRuns, simulate_site_case, site_scan_count
 from .site import Site
 from .tracking import (
     TrackEstimates,
@@ -154,15 +154,29 @@ def default_trackers(tuned_m1: tuple[float, float] | None = None) -> dict[str, T
 
 
 BOUND_MODEL = ConstantAcceleration(jerk_psd=3.0)
+RUN_BLOCK_STEPS = 1_000_000  # run-steps simulated and tracked together (one task, ~250 MB)
 
 
-def case_bound(
-    runs: CrossingRuns, site: Site, case: Case, veh: VehicleClass
-) -> tuple[float, float]:
-    """Road-aligned PCRLB (constant-acceleration model, jerk PSD 3 m^2/s^5) over the zone.
+@dataclass(frozen=True)
+class _Sum:
+    """Sum of squares over scored epochs and their count (mergeable across run blocks)."""
 
-    Returns RMS position [m] and speed [km/h, true speed <= 100 km/h] bounds of the case.
-    """
+    total: float = 0.0
+    count: int = 0
+
+    def __add__(self, other: _Sum) -> _Sum:
+        return _Sum(self.total + other.total, self.count + other.count)
+
+    def rms(self) -> float:
+        return math.sqrt(self.total / self.count) if self.count else math.nan
+
+
+def _sum(values: FloatArray) -> _Sum:
+    return _Sum(float(np.sum(values)), int(values.size))
+
+
+def _bound_sums(runs: CrossingRuns, site: Site, case: Case, veh: VehicleClass) -> tuple[_Sum, _Sum]:
+    """Road-aligned PCRLB variances of position [m^2] and speed [m^2/s^2] over the zone."""
     pos_var, spd_var = road_pcrlb(
         runs.times,
         runs.detected,
@@ -176,9 +190,18 @@ def case_bound(
     )
     zone = scored_epochs(np.isfinite(pos_var), runs, site.zone_m)
     slow = zone & (3.6 * runs.speed <= SPEED_SPLIT_KMH)
-    pos = math.sqrt(float(np.mean(pos_var[zone]))) if zone.any() else math.nan
-    spd = 3.6 * math.sqrt(float(np.mean(spd_var[slow]))) if slow.any() else math.nan
-    return pos, spd
+    return _sum(pos_var[zone]), _sum(spd_var[slow])
+
+
+def case_bound(
+    runs: CrossingRuns, site: Site, case: Case, veh: VehicleClass
+) -> tuple[float, float]:
+    """Road-aligned PCRLB (constant-acceleration model, jerk PSD 3 m^2/s^5) over the zone.
+
+    Returns RMS position [m] and speed [km/h, true speed <= 100 km/h] bounds of the case.
+    """
+    pos, spd = _bound_sums(runs, site, case, veh)
+    return pos.rms(), 3.6 * spd.rms()
 
 
 def scored_epochs(started: BoolArray, runs: CrossingRuns, zone_m: float) -> BoolArray:
@@ -194,23 +217,80 @@ def scored_epochs(started: BoolArray, runs: CrossingRuns, zone_m: float) -> Bool
     )
 
 
+def _score_sums(est: TrackEstimates, runs: CrossingRuns, zone_m: float) -> tuple[_Sum, _Sum, _Sum]:
+    """Sum squared errors: position [m^2], speed [(km/h)^2] (<= 100 km/h), relative speed."""
+    zone = scored_epochs(np.isfinite(est.speed), runs, zone_m)
+    ep = np.sum((est.position - runs.position) ** 2, axis=-1)[zone]
+    ev = (est.speed - runs.speed)[zone]
+    slow = 3.6 * runs.speed[zone] <= SPEED_SPLIT_KMH
+    return _sum(ep), _sum((3.6 * ev[slow]) ** 2), _sum((ev[~slow] / runs.speed[zone][~slow]) ** 2)
+
+
 def score(
     est: TrackEstimates, runs: CrossingRuns, zone_m: float
 ) -> tuple[float, float, float, int]:
     """Position RMS [m], speed RMS [km/h] (<= 100 km/h), relative speed RMS (> 100), epochs."""
-    zone = scored_epochs(np.isfinite(est.speed), runs, zone_m)
-    ep = np.sum((est.position - runs.position) ** 2, axis=-1)[zone]
-    ev = (est.speed - runs.speed)[zone]
-    true_kmh = 3.6 * runs.speed[zone]
-    slow = true_kmh <= SPEED_SPLIT_KMH
-    pos = math.sqrt(float(np.mean(ep))) if ep.size else math.nan
-    spd = math.sqrt(float(np.mean((3.6 * ev[slow]) ** 2))) if slow.any() else math.nan
-    rel = (
-        math.sqrt(float(np.mean((ev[~slow] / runs.speed[zone][~slow]) ** 2)))
-        if (~slow).any()
-        else math.nan
-    )
-    return pos, spd, rel, int(zone.sum())
+    pos, spd, rel = _score_sums(est, runs, zone_m)
+    return pos.rms(), spd.rms(), rel.rms(), pos.count
+
+
+BlockSums = tuple[dict[str, tuple[_Sum, _Sum, _Sum]], tuple[_Sum, _Sum]]
+
+
+def _block(
+    site: Site,
+    case: Case,
+    veh: VehicleClass,
+    n_runs: int,
+    seed: np.random.SeedSequence,
+    trackers: dict[str, Tracker],
+    bound: bool,
+) -> BlockSums:
+    """Simulate one block of runs of a class x case; sums of every tracker (and the bound)."""
+    runs = simulate_site_case(site, case, veh, n_runs=n_runs, rng=np.random.default_rng(seed))
+    sums = {
+        name: _score_sums(tracker(runs, site, case, veh), runs, site.zone_m)
+        for name, tracker in trackers.items()
+    }
+    return sums, _bound_sums(runs, site, case, veh) if bound else (_Sum(), _Sum())
+
+
+def _blocks(
+    n_runs: int, n_steps: int, seed: np.random.SeedSequence
+) -> list[tuple[int, np.random.SeedSequence]]:
+    """Run blocks of a class x case of ``n_steps`` scans, with their seeds.
+
+    Up to ``RUN_BLOCK_STEPS`` run-steps per block (memory per task stays bounded); the first
+    block uses ``seed`` itself, so a case that fits one block is simulated as before blocks.
+    """
+    block = max(1, RUN_BLOCK_STEPS // n_steps)
+    sizes = [min(block, n_runs - i) for i in range(0, n_runs, block)]
+    seeds = [seed] + [
+        np.random.SeedSequence(seed.entropy, spawn_key=(*seed.spawn_key, j))
+        for j in range(len(sizes) - 1)
+    ]
+    return list(zip(sizes, seeds, strict=True))
+
+
+def _rows(case: Case, veh: VehicleClass, blocks: list[BlockSums]) -> list[ComplianceRow]:
+    """Merge the blocks of a class x case into one row per tracker."""
+    bound_p = sum((b[1][0] for b in blocks), _Sum()).rms()
+    bound_s = 3.6 * sum((b[1][1] for b in blocks), _Sum()).rms()
+    rows = []
+    for name in blocks[0][0]:
+        pos_s, spd_s, rel_s = (sum((b[0][name][j] for b in blocks), _Sum()) for j in range(3))
+        pos, spd, rel = pos_s.rms(), spd_s.rms(), rel_s.rms()
+        ok = (
+            pos <= POSITION_LIMIT_M
+            and (math.isnan(spd) or spd <= SPEED_LIMIT_KMH)
+            and (math.isnan(rel) or rel <= SPEED_LIMIT_REL)
+        )
+        rows.append(
+            ComplianceRow(
+                name, veh.name, case.name, pos, spd, 100 * rel, ok, pos_s.count, bound_p, bound_s
+            )
+        )
+    return rows
 
 
 def evaluate_pair(
@@ -225,23 +305,15 @@ def evaluate_pair(
 ) -> list[ComplianceRow]:
     """Simulate one class x case ``n_runs`` times and score every tracker on the same runs.
 
+    Runs go in blocks of up to ``RUN_BLOCK_STEPS`` run-steps with their own seed streams.
     ``bound=False`` skips the PCRLB (NaN in the rows).
     """
     trackers = default_trackers(tuned_m1) if trackers is None else trackers
-    runs = simulate_site_case(site, case, veh, n_runs=n_runs, rng=np.random.default_rng(seed))
-    bound_p, bound_s = case_bound(runs, site, case, veh) if bound else (math.nan, math.nan)
-    rows = []
-    for name, tracker in trackers.items():
-        pos, spd, rel, n = score(tracker(runs, site, case, veh), runs, site.zone_m)
-        ok = (
-            pos <= POSITION_LIMIT_M
-            and (math.isnan(spd) or spd <= SPEED_LIMIT_KMH)
-            and (math.isnan(rel) or rel <= SPEED_LIMIT_REL)
-        )
-        rows.append(
-            ComplianceRow(name, veh.name, case.name, pos, spd, 100 * rel, ok, n, bound_p, bound_s)
-        )
-    return rows
+    blocks = [
+        _block(site, case, veh, size, ss, trackers, bound)
+        for size, ss in _blocks(n_runs, site_scan_count(site, case, veh), seed)
+    ]
+    return _rows(case, veh, blocks)
 
 
 def evaluate_site(
@@ -262,9 +334,10 @@ def evaluate_site(
     ``bound=False`` leaves out the road-aligned PCRLB of each case (a diagnostic; the verdict
     does not use it).
 
-    The (class, case) pairs are tasks of ``pool`` (in-process when None, e.g. a Dask cluster
-    from :func:`adaptrack.parallel.task_pool`); every pair has its own seed stream, so the
-    result does not depend on the pool.
+    Blocks of up to ``RUN_BLOCK_STEPS`` run-steps of each (class, case) pair are the tasks of
+    ``pool`` (in-process when None, e.g. a Dask cluster from
+    :func:`adaptrack.parallel.task_pool`); every block has its own seed stream, so the result
+    does not depend on the pool.
     """
     start = time.perf_counter()
     classes = VEHICLES if classes is None else classes
@@ -272,16 +345,25 @@ def evaluate_site(
     seeds = np.random.SeedSequence(seed).spawn(len(pairs))
     trackers = default_trackers(tuned_m1) if trackers is None else trackers
     pool = TaskPool() if pool is None else pool
-    per_pair = pool.map(
-        evaluate_pair,
-        [
-            (site, c, v, n_runs, ss, trackers, None, bound)
-            for (c, v), ss in zip(pairs, seeds, strict=True)
-        ],
-        progress=(lambda i: progress(f"{pairs[i][1].name} / {pairs[i][0].name}"))
-        if progress
-        else None,
-    )
+    site_handle = pool.share(site)
+    tasks = [
+        (pair, (site_handle, c, v, size, ss, trackers, bound))
+        for pair, ((c, v), pair_seed) in enumerate(zip(pairs, seeds, strict=True))
+        for size, ss in _blocks(n_runs, site_scan_count(site, c, v), pair_seed)
+    ]
+    left = [sum(1 for p, _ in tasks if p == i) for i in range(len(pairs))]
+
+    def done(k: int) -> None:
+        i = tasks[k][0]
+        left[i] -= 1
+        if progress and not left[i]:
+            progress(f"{pairs[i][1].name} / {pairs[i][0].name}")
+
+    results = pool.map(_block, [args for _, args in tasks], progress=done)
+    per_pair = [
+        _rows(c, v, [r for (p, _), r in zip(tasks, results, strict=True) if p == i])
+        for i, (c, v) in enumerate(pairs)
+    ]
     rows = [row for pair_rows in per_pair for row in pair_rows]
     names = list(trackers)
     worst = {}

@@ -50,6 +50,13 @@ def radial_geometry(
     return rng_m, az, vr
 
 
+def scan_count(
+    radar: RadarSpec, vehicle: VehicleClass, case: Case, start_m: float, stop_line_m: float
+) -> int:
+    """Radar scans of one approach of ``case`` (the length T of its runs)."""
+    return int(case_duration(case, vehicle, start_m, stop_line_m) / radar.period_s) + 1
+
+
 def simulate_case(
     road: Road,
     radar: RadarSpec,
@@ -64,8 +71,7 @@ def simulate_case(
     lateral_offset_std_m: float,
 ) -> CrossingRuns:
     """Simulate ``n_runs`` approaches of one vehicle class in one case."""
-    duration = case_duration(case, vehicle, start_m, stop_line_m)
-    n = int(duration / radar.period_s) + 1
+    n = scan_count(radar, vehicle, case, start_m, stop_line_m)
     t_true = radar.period_s * np.arange(n)
     if case.kind == "random":
         s, v, _ = random_profiles(case, vehicle, start_m, t_true, n_runs, rng)
@@ -127,6 +133,13 @@ def simulate_case(
     )
 
 
+def site_scan_count(site: Site, case: Case, vehicle: VehicleClass) -> int:
+    """:func:`scan_count` with the site's geometry and radar."""
+    return scan_count(
+        site.radar_for(case.road), vehicle, case, site.zone_m + site.run_in_m, site.stop_line_m
+    )
+
+
 def simulate_site_case(
     site: Site, case: Case, vehicle: VehicleClass, *, n_runs: int, rng: np.random.Generator
 ) -> CrossingRuns:
@@ -147,4 +160,11 @@ def simulate_site_case(
     )
 
 
-__all__ = ["CrossingRuns", "radial_geometry", "simulate_case", "simulate_site_case"]
+__all__ = [
+    "CrossingRuns",
+    "radial_geometry",
+    "scan_count",
+    "simulate_case",
+    "simulate_site_case",
+    "site_scan_count",
+]

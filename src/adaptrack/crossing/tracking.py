@@ -19,6 +19,7 @@ the radial speed along the line of sight); before that its estimates are NaN.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -172,11 +173,15 @@ def _run(
 def _series(
     model: MotionModel, times: FloatArray, extra_random_walk_psd: tuple[float, ...] = ()
 ) -> SeriesTable:
-    """Series table of ``model`` covering the longest step of ``times`` without doublings."""
+    """Series table of ``model`` covering the longest step of ``times`` without doublings.
+
+    The step bound is rounded up to a power of two, so that runs sampled alike share one
+    table shape (and one generated kernel).
+    """
     steps = np.diff(times, axis=1)
-    return model_series_table(
-        model, float(steps.max()) if steps.size else 1.0, extra_random_walk_psd
-    )
+    longest = float(steps.max()) if steps.size else 1.0
+    bound = 2.0 ** math.ceil(math.log2(longest)) if longest > 0 else 1.0
+    return model_series_table(model, bound, extra_random_walk_psd)
 
 
 def _run_compiled(
@@ -205,7 +210,7 @@ def _run_compiled(
         np.full((n_runs, n_steps, 2, 2), np.nan),
     )
     c = np.ascontiguousarray
-    ekf_kernel(n)(
+    ekf_kernel(n, table.phi_coef, table.qd_coef)(
         spec.kind,
         c(times, dtype=float),
         *table,

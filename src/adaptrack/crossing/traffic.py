@@ -11,6 +11,7 @@ stopped (the pull-away after the dwell is not scripted yet).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -137,8 +138,28 @@ def along_road_profile(
 
     Integrated exactly with piecewise-constant jerk on a grid 10x finer than ``times``. The
     vehicle drives until the end of ``times`` (past the crossing for passes; stopped, then
-    pulling away for stops).
+    pulling away for stops). Results are cached (read-only arrays): every block of Monte-Carlo
+    runs of a scripted case drives the same profile.
     """
+    times = np.asarray(times, dtype=float)
+    return _profile(case, vehicle, float(start_m), float(stop_line_m), times.tobytes())
+
+
+@lru_cache(maxsize=256)
+def _profile(
+    case: Case, vehicle: VehicleClass, start_m: float, stop_line_m: float, times_bytes: bytes
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    out = _integrate_profile(
+        case, vehicle, start_m, stop_line_m, np.frombuffer(times_bytes, dtype=float)
+    )
+    for a in out:
+        a.setflags(write=False)
+    return out
+
+
+def _integrate_profile(
+    case: Case, vehicle: VehicleClass, start_m: float, stop_line_m: float, times: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray]:
     v0 = case.speed_kmh * KMH
     if case.kind == "pass":
         return start_m - v0 * times, np.full(times.shape, v0), np.zeros(times.shape)
