@@ -306,26 +306,41 @@ def _bank_miss(
 Layout = tuple[int, int, int, int, int, int]
 
 
-def _online_source(n: int, m: int, layout: Layout, series: Layout | None) -> str:
-    """``online_step(ws, bank, t, z) -> status`` on the work buffer of ``OnlineFilter``."""
+def _bank_view(n: int, bank: tuple[int, int]) -> str:
+    """Statement making the transition bank (rows ``[dt, Phi, Qd, u]``) a work-buffer view."""
+    offset, rows = bank
+    width = 1 + 2 * n * n + n
+    return f"bank = ws[{offset}:{offset + rows * width}].reshape(({rows}, {width}))"
+
+
+def _online_source(
+    n: int, m: int, layout: Layout, series: Layout | None, bank: tuple[int, int]
+) -> str:
+    """``online_step(ws, t, z) -> nis`` on the work buffer of ``OnlineFilter``.
+
+    A failed step returns ``-status`` and changes nothing: 1 non-finite measurement, 2 ``S``
+    not positive definite, 3 a step length not in the bank (no series table), 4 wrong shape,
+    5 a time before the filter's.
+    """
     hdr_time, xo, po, ho, ro, oo = layout
     body = [
         f"if z.shape[0] != {m}:",
-        "    return 4",
+        "    return -4.0",
+        _bank_view(n, bank),
         f"dt = t - ws[{hdr_time}]",
         "if not (dt >= 0.0 and math.isfinite(t)):",
-        "    return 5",
+        "    return -5.0",
         "row = -1",
         "for j in range(bank.shape[0]):",
         f"    if abs(bank[j, 0] - dt) <= {DT_TOLERANCE_S!r}:",
         "        row = j",
         "        break",
-        *_bank_miss(n, series, ["return 3"]),
+        *_bank_miss(n, series, ["return -3.0"]),
     ]
     body += [f"z{a} = z[{a}]" for a in range(m)]
     body += [
         "if not (" + " and ".join(f"math.isfinite(z{a})" for a in range(m)) + "):",
-        "    return 1",
+        "    return -1.0",
     ]
     body += [f"x{i} = ws[{xo + i}]" for i in range(n)]
     body += [f"P{i}_{j} = ws[{po + i * n + j}]" for i in range(n) for j in range(i, n)]
@@ -335,7 +350,7 @@ def _online_source(n: int, m: int, layout: Layout, series: Layout | None) -> str
     body += [f"H{a}_{j} = ws[{ho + a * n + j}]" for a in range(m) for j in range(n)]
     body += [f"R{a}_{b} = ws[{ro + a * m + b}]" for a in range(m) for b in range(a, m)]
     body += [f"o{a} = ws[{oo + a}]" for a in range(m)]
-    body += kf_step_lines(n, m)
+    body += [line.replace("return 2", "return -2.0") for line in kf_step_lines(n, m)]
     body += [f"ws[{xo + i}] = x{i}" for i in range(n)]
     for i in range(n):
         for j in range(i, n):
@@ -347,10 +362,10 @@ def _online_source(n: int, m: int, layout: Layout, series: Layout | None) -> str
         f"ws[{hdr_time - 2}] = -0.5 * (logdet + nis + {m} * {math.log(2 * math.pi)!r})",
         f"ws[{hdr_time - 1}] = {float(m)}",
         f"ws[{hdr_time}] = t",
-        "return 0",
+        "return nis",
     ]
     return module_source(
-        "online_step(ws, bank, t, z)",
+        "online_step(ws, t, z)",
         f"One online Joseph-form step, every component present; n = {n}, m = {m}.",
         body,
         parallel=False,
@@ -358,8 +373,10 @@ def _online_source(n: int, m: int, layout: Layout, series: Layout | None) -> str
     )
 
 
-def _online_run_source(n: int, m: int, layout: Layout, series: Layout | None) -> str:
-    """``online_run(ws, bank, times, z, k, means, variances, nis) -> (status, k)``.
+def _online_run_source(
+    n: int, m: int, layout: Layout, series: Layout | None, bank: tuple[int, int]
+) -> str:
+    """``online_run(ws, times, z, k, means, variances, nis) -> (status, k)``.
 
     The steps of ``online_step`` for rows ``k, k + 1, ...`` of validated ``times`` (T,) and
     ``z`` (T, m), the state in locals between steps; stops at the end (status 0), at a step
@@ -367,7 +384,8 @@ def _online_run_source(n: int, m: int, layout: Layout, series: Layout | None) ->
     before ``k`` written back to ``ws``.
     """
     hdr_time, xo, po, ho, ro, oo = layout
-    body = [f"x{i} = ws[{xo + i}]" for i in range(n)]
+    body = [_bank_view(n, bank)]
+    body += [f"x{i} = ws[{xo + i}]" for i in range(n)]
     body += [f"P{i}_{j} = ws[{po + i * n + j}]" for i in range(n) for j in range(i, n)]
     body += [f"H{a}_{j} = ws[{ho + a * n + j}]" for a in range(m) for j in range(n)]
     body += [f"R{a}_{b} = ws[{ro + a * m + b}]" for a in range(m) for b in range(a, m)]
@@ -423,7 +441,7 @@ def _online_run_source(n: int, m: int, layout: Layout, series: Layout | None) ->
         "return status, k",
     ]
     return module_source(
-        "online_run(ws, bank, times, z, k, means, variances, nis_out)",
+        "online_run(ws, times, z, k, means, variances, nis_out)",
         f"Online Joseph-form steps over a sequence, every component present; n = {n}, m = {m}.",
         body,
         parallel=False,
@@ -432,21 +450,26 @@ def _online_run_source(n: int, m: int, layout: Layout, series: Layout | None) ->
 
 
 @cache
-def online_run_kernel(n: int, m: int, layout: Layout, series: Layout | None) -> Any:
-    """``online_run(ws, bank, times, z, k, means, variances, nis)`` for ``OnlineFilter``."""
-    source = _online_run_source(n, m, layout, series)
+def online_run_kernel(
+    n: int, m: int, layout: Layout, series: Layout | None, bank: tuple[int, int]
+) -> Any:
+    """``online_run(ws, times, z, k, means, variances, nis)`` for ``OnlineFilter``."""
+    source = _online_run_source(n, m, layout, series, bank)
     return load(f"online_run_v{_VERSION}_n{n}_m{m}", source).online_run
 
 
 @cache
-def online_kernel(n: int, m: int, layout: Layout, series: Layout | None) -> Any:
-    """``online_step(ws, bank, t, z)`` for ``OnlineFilter``.
+def online_kernel(
+    n: int, m: int, layout: Layout, series: Layout | None, bank: tuple[int, int]
+) -> Any:
+    """``online_step(ws, t, z)`` for ``OnlineFilter``.
 
     ``layout``: the header's time index and the offsets of x, P, H, R and the noise mean in the
     work buffer; ``series``: offsets and term counts of the series-table blocks (None: a new
-    step length returns status 3 and is discretised in Python).
+    step length returns status 3 and is discretised in Python); ``bank``: offset and rows of
+    the transition bank in the work buffer.
     """
-    source = _online_source(n, m, layout, series)
+    source = _online_source(n, m, layout, series, bank)
     return load(f"online_v{_VERSION}_n{n}_m{m}", source).online_step
 
 

@@ -41,9 +41,12 @@ _TIME = 6
 _SERIES_BLOCKS = ("series_phi", "series_qd", "series_off")
 
 
-def _offsets(n: int, m: int, series: SeriesTable | None) -> dict[str, tuple[int, tuple[int, ...]]]:
+def _offsets(
+    n: int, m: int, bank_rows: int, series: SeriesTable | None
+) -> dict[str, tuple[int, tuple[int, ...]]]:
     """Offset and shape of every block of the work buffer (the series table's last)."""
     shapes: dict[str, tuple[int, ...]] = {
+        "bank": (bank_rows, 1 + 2 * n * n + n),  # transitions by step: [dt, Phi, Qd, u]
         "x": (n,),
         "p": (n, n),
         "h": (m, n),
@@ -156,9 +159,10 @@ class OnlineFilter:
         # stream meets one per update) instead of a matrix exponential in NumPy
         exact = method in ("expm", "analytic", "auto") and noise == "white"
         series = model_series_table(self.model) if exact else None
-        self._bank = np.full((int(cache_size), 1 + 2 * n * n + n), np.nan)  # [dt, Phi, Qd, u]
-        self._layout = _offsets(n, m, series)
+        self._layout = _offsets(n, m, int(cache_size), series)
         self._ws = np.zeros(self._layout["end"][0])
+        self._bank = self._block("bank")
+        self._bank[:] = np.nan
         self._series = None
         if series is not None:
             self._ws[WS_H_MAX] = series.h_max
@@ -184,8 +188,9 @@ class OnlineFilter:
                 if series is None
                 else tuple(v for name in _SERIES_BLOCKS for v in (at[name][0], at[name][1][0]))
             )
-            self._fast = online_kernel(n, m, offsets, table)
-            self._fast_run = online_run_kernel(n, m, offsets, table)
+            bank = (at["bank"][0], int(cache_size))
+            self._fast = online_kernel(n, m, offsets, table, bank)
+            self._fast_run = online_run_kernel(n, m, offsets, table, bank)
 
     def _block(self, name: str) -> FloatArray:
         pos, shape = self._layout[name]
@@ -222,11 +227,11 @@ class OnlineFilter:
         """
         z = measurement if type(measurement) is np.ndarray else np.asarray(measurement, float)
         if mask is None and self._fast is not None:
-            status = self._fast(self._ws, self._bank, time, z)
-            if status == 0:
-                return self._ws[3]
-            if status != 3:  # 3: a step length not in the bank yet
-                self._raise(status, time, z)
+            nis = self._fast(self._ws, time, z)
+            if nis >= 0.0:
+                return nis
+            if nis != -3.0:  # -3: a step length not in the bank yet (no series table)
+                self._raise(int(-nis), time, z)
         return self._update_slow(float(time), np.asarray(z, dtype=np.float64), mask)
 
     def update_many(self, times: ArrayLike, measurements: ArrayLike) -> StreamEstimates:
@@ -269,7 +274,7 @@ class OnlineFilter:
             return out
         k = 0
         while True:
-            status, k = self._fast_run(self._ws, self._bank, t, z, k, *out)
+            status, k = self._fast_run(self._ws, t, z, k, *out)
             if status == 0:
                 return out
             if status != 3:
