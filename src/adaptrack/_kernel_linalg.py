@@ -43,3 +43,14 @@ def cholesky_solve_into(lo, rhs, out):  # type: ignore[no-untyped-def]
             for c in range(a + 1, k):
                 acc -= lo[c, a] * out[c, col]
             out[a, col] = acc / lo[a, a]
+
+
+@numba.njit(cache=True, inline="always")
+def matmul_into(a, b, out):  # type: ignore[no-untyped-def]
+    """``out = a @ b`` for small matrices (``out`` distinct from ``a`` and ``b``)."""
+    for i in range(a.shape[0]):
+        for j in range(b.shape[1]):
+            acc = 0.0
+            for c in range(a.shape[1]):
+                acc += a[i, c] * b[c, j]
+            out[i, j] = acc

@@ -313,6 +313,30 @@ def _bank_view(n: int, bank: tuple[int, int]) -> str:
     return f"bank = ws[{offset}:{offset + rows * width}].reshape(({rows}, {width}))"
 
 
+def _load_state(n: int, m: int, layout: Layout) -> list[str]:
+    """Locals ``x``, ``P`` (upper), ``H``, ``R`` (upper), ``o`` from the work buffer."""
+    _, xo, po, ho, ro, oo = layout
+    return [
+        *(f"x{i} = ws[{xo + i}]" for i in range(n)),
+        *(f"P{i}_{j} = ws[{po + i * n + j}]" for i in range(n) for j in range(i, n)),
+        *(f"H{a}_{j} = ws[{ho + a * n + j}]" for a in range(m) for j in range(n)),
+        *(f"R{a}_{b} = ws[{ro + a * m + b}]" for a in range(m) for b in range(a, m)),
+        *(f"o{a} = ws[{oo + a}]" for a in range(m)),
+    ]
+
+
+def _store_state(n: int, layout: Layout) -> list[str]:
+    """Write the locals ``x``, ``P`` back to the work buffer (``P`` in full)."""
+    _, xo, po, _, _, _ = layout
+    out = [f"ws[{xo + i}] = x{i}" for i in range(n)]
+    for i in range(n):
+        for j in range(i, n):
+            out.append(f"ws[{po + i * n + j}] = P{i}_{j}")
+            if j != i:
+                out.append(f"ws[{po + j * n + i}] = P{i}_{j}")
+    return out
+
+
 def _online_source(
     n: int, m: int, layout: Layout, series: Layout | None, bank: tuple[int, int]
 ) -> str:
@@ -322,7 +346,7 @@ def _online_source(
     not positive definite, 3 a step length not in the bank (no series table), 4 wrong shape,
     5 a time before the filter's.
     """
-    hdr_time, xo, po, ho, ro, oo = layout
+    hdr_time = layout[0]
     body = [
         f"if z.shape[0] != {m}:",
         "    return -4.0",
@@ -342,21 +366,12 @@ def _online_source(
         "if not (" + " and ".join(f"math.isfinite(z{a})" for a in range(m)) + "):",
         "    return -1.0",
     ]
-    body += [f"x{i} = ws[{xo + i}]" for i in range(n)]
-    body += [f"P{i}_{j} = ws[{po + i * n + j}]" for i in range(n) for j in range(i, n)]
+    body += _load_state(n, m, layout)
     body += [f"F{i}_{j} = bank[row, {1 + i * n + j}]" for i in range(n) for j in range(n)]
     body += [f"Q{i}_{j} = bank[row, {1 + n * n + i * n + j}]" for i in range(n) for j in range(n)]
     body += [f"u{i} = bank[row, {1 + 2 * n * n + i}]" for i in range(n)]
-    body += [f"H{a}_{j} = ws[{ho + a * n + j}]" for a in range(m) for j in range(n)]
-    body += [f"R{a}_{b} = ws[{ro + a * m + b}]" for a in range(m) for b in range(a, m)]
-    body += [f"o{a} = ws[{oo + a}]" for a in range(m)]
     body += [line.replace("return 2", "return -2.0") for line in kf_step_lines(n, m)]
-    body += [f"ws[{xo + i}] = x{i}" for i in range(n)]
-    for i in range(n):
-        for j in range(i, n):
-            body.append(f"ws[{po + i * n + j}] = P{i}_{j}")
-            if j != i:
-                body.append(f"ws[{po + j * n + i}] = P{i}_{j}")
+    body += _store_state(n, layout)
     body += [
         f"ws[{hdr_time - 3}] = nis",
         f"ws[{hdr_time - 2}] = -0.5 * (logdet + nis + {m} * {math.log(2 * math.pi)!r})",
@@ -383,13 +398,8 @@ def _online_run_source(
     length not in the bank (3) or a non-positive-definite ``S`` (2), with the state of the rows
     before ``k`` written back to ``ws``.
     """
-    hdr_time, xo, po, ho, ro, oo = layout
-    body = [_bank_view(n, bank)]
-    body += [f"x{i} = ws[{xo + i}]" for i in range(n)]
-    body += [f"P{i}_{j} = ws[{po + i * n + j}]" for i in range(n) for j in range(i, n)]
-    body += [f"H{a}_{j} = ws[{ho + a * n + j}]" for a in range(m) for j in range(n)]
-    body += [f"R{a}_{b} = ws[{ro + a * m + b}]" for a in range(m) for b in range(a, m)]
-    body += [f"o{a} = ws[{oo + a}]" for a in range(m)]
+    hdr_time = layout[0]
+    body = [_bank_view(n, bank), *_load_state(n, m, layout)]
     body += [
         f"t_prev, last_nis, last_ll = ws[{hdr_time}], ws[{hdr_time - 3}], ws[{hdr_time - 2}]",
         f"last_nobs = ws[{hdr_time - 1}]",
@@ -428,12 +438,7 @@ def _online_run_source(
         f"    last_ll = -0.5 * (logdet + last_nis + {m} * {math.log(2 * math.pi)!r})",
         f"    last_nobs = {float(m)}",
     ]
-    body += [f"ws[{xo + i}] = x{i}" for i in range(n)]
-    for i in range(n):
-        for j in range(i, n):
-            body.append(f"ws[{po + i * n + j}] = P{i}_{j}")
-            if j != i:
-                body.append(f"ws[{po + j * n + i}] = P{i}_{j}")
+    body += _store_state(n, layout)
     body += [
         f"ws[{hdr_time - 3}], ws[{hdr_time - 2}], ws[{hdr_time - 1}] = last_nis, last_ll, "
         "last_nobs",

@@ -14,7 +14,7 @@ import numba
 import numpy as np
 from numba import prange
 
-from .._kernel_linalg import cholesky_into, cholesky_solve_into
+from .._kernel_linalg import cholesky_into, cholesky_solve_into, matmul_into
 from ._codegen import GENERATED_MAX_STATES
 
 _LOG_2PI = math.log(2.0 * math.pi)
@@ -29,12 +29,7 @@ def predict_into(x, p, phi, qd, u, xp, pp, tmp):  # type: ignore[no-untyped-def]
         for b in range(n):
             acc += phi[a, b] * x[b]
         xp[a] = acc + u[a]
-    for a in range(n):
-        for b in range(n):
-            acc = 0.0
-            for c in range(n):
-                acc += phi[a, c] * p[c, b]
-            tmp[a, b] = acc
+    matmul_into(phi, p, tmp)
     for a in range(n):
         for b in range(n):
             acc = 0.0
@@ -361,12 +356,7 @@ def series_transition_into(dt, phi_coef, qd_coef, off_coef, h_max, phi, qd, u, t
             acc = acc * h + off_coef[i, a]
         u[a] = acc * h
     for _ in range(s):  # Qd(2h) = Phi Qd Phi^T + Qd, u(2h) = Phi u + u, Phi(2h) = Phi Phi
-        for a in range(n):
-            for b in range(n):
-                acc = 0.0
-                for c in range(n):
-                    acc += phi[a, c] * qd[c, b]
-                tmp[a, b] = acc
+        matmul_into(phi, qd, tmp)
         for a in range(n):
             for b in range(a, n):
                 acc = qd[a, b]
@@ -382,12 +372,7 @@ def series_transition_into(dt, phi_coef, qd_coef, off_coef, h_max, phi, qd, u, t
                 tmp[a, 0] = acc
             for a in range(n):
                 u[a] = tmp[a, 0]
-        for a in range(n):
-            for b in range(n):
-                acc = 0.0
-                for c in range(n):
-                    acc += phi[a, c] * phi[c, b]
-                tmp[a, b] = acc
+        matmul_into(phi, phi, tmp)
         phi[:, :] = tmp
 
 
