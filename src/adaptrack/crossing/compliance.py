@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections import Counter, defaultdict
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from typing import Any
@@ -351,7 +352,7 @@ def evaluate_site(
         for pair, ((c, v), pair_seed) in enumerate(zip(pairs, seeds, strict=True))
         for size, ss in _blocks(n_runs, site_scan_count(site, c, v), pair_seed)
     ]
-    left = [sum(1 for p, _ in tasks if p == i) for i in range(len(pairs))]
+    left = Counter(pair for pair, _ in tasks)  # blocks still running per pair
 
     def done(k: int) -> None:
         i = tasks[k][0]
@@ -360,10 +361,10 @@ def evaluate_site(
             progress(f"{pairs[i][1].name} / {pairs[i][0].name}")
 
     results = pool.map(_block, [args for _, args in tasks], progress=done)
-    per_pair = [
-        _rows(c, v, [r for (p, _), r in zip(tasks, results, strict=True) if p == i])
-        for i, (c, v) in enumerate(pairs)
-    ]
+    by_pair: dict[int, list[BlockSums]] = defaultdict(list)
+    for (pair, _), result in zip(tasks, results, strict=True):
+        by_pair[pair].append(result)
+    per_pair = [_rows(c, v, by_pair[i]) for i, (c, v) in enumerate(pairs)]
     rows = [row for pair_rows in per_pair for row in pair_rows]
     names = list(trackers)
     worst = {}
