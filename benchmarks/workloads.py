@@ -224,14 +224,14 @@ def crossing(quick: bool, workers: int) -> list[Result]:
     estimator (road EKF with constant acceleration, the demo's best) on 1,000 runs; the
     demo's comparison table (6 estimators + the PCRLB) runs 100 and is extrapolated.
     """
-    from adaptrack.crossing.compliance import RoadTracker, evaluate_site
+    from adaptrack.crossing.compliance import evaluate_site
     from adaptrack.crossing.site import load_site
-    from adaptrack.crossing.traffic import DEFAULT_CASES, VEHICLES
+    from adaptrack.crossing.trackers import RoadTracker
     from adaptrack.models import ConstantAcceleration
     from adaptrack.parallel import task_pool
 
     site = load_site("lx_default")
-    subset = {"cases": DEFAULT_CASES[:1], "classes": {"car": VEHICLES["car"]}} if quick else {}
+    subset = {"cases": site.cases[:1], "classes": ("car",)} if quick else {}
     deployed = {"road EKF (CA)": RoadTracker(ConstantAcceleration(jerk_psd=3.0))}
     configs = [
         ("adaptrack", 2 if quick else 1_000, deployed, False),  # the deployed estimator

@@ -9,6 +9,7 @@ import os
 from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
 from pathlib import Path
+from typing import NoReturn
 
 import numpy as np
 import pandas as pd
@@ -20,21 +21,25 @@ from rich.table import Table
 from .analysis.evaluation import Evaluation, evaluate_scenario
 from .analysis.flights import FlightRow, evaluate_flight, smooth_kalman, smooth_lsq
 from .coords.geodetic import enu_to_ecef, enu_to_ecef_rotation
-from .crossing.compliance import ComplianceResult, ComplianceRow, evaluate_site
+from .crossing.compliance import ComplianceResult, default_trackers, evaluate_site
+from .crossing.families import FAMILIES
 from .crossing.measurements_io import detections_frame, read_detections
 from .crossing.radar_sim import simulate_site_case
 from .crossing.report import build_report, render_html, sample_tracks
-from .crossing.site import load_site
-from .crossing.tracking import track_on_road
-from .crossing.traffic import DEFAULT_CASES, VEHICLES, applicable
-from .crossing.tuning import load_tuning, tune_road_model, tune_road_shaping
+from .crossing.selection import (
+    CRITERIA,
+    CRITERION_TEXT,
+    SiteTuning,
+    load_tuning,
+    select_estimator,
+)
+from .crossing.site import Site, load_site, site_from_mapping
+from .crossing.trackers import RoadTracker, Tracker
 from .io.navigation import read_navigation_measurements
 from .io.tables import DataFormatError, read_flight_csv, write_table_atomic
 from .models.continuous import ConstantAcceleration, Singer
 from .parallel import TaskPool, task_pool
 from .simulation.scenario import load_scenario
-
-DEMO_LAMBDAS = (1e-3, 3e-2, 1.0)  # coarse M1 profile of the demo (lambda = 0 is always in)
 
 WORKERS = typer.Option(
     None,
@@ -57,76 +62,163 @@ def _main() -> None:
     """Adaptive motion estimation from noisy measurements."""
 
 
+CRITERION = typer.Option(
+    "tail",
+    "--criterion",
+    help="Selection criterion: tail (mean ratio of the worst 10 % of class x case pairs), "
+    "worst, pooled_position (the seed's J_pos) or pooled_requirement (J_req).",
+)
+TRAINING_RUNS = typer.Option(3, "--training-runs", min=1, help="Tuning runs per class x case.")
+VALIDATION_RUNS = typer.Option(
+    10, "--validation-runs", min=2, help="Validation runs per class x case (model choice)."
+)
+
+
 @app.command()
 def demo(
-    runs: int = typer.Option(10, "--runs", min=1, help="Monte-Carlo runs per class and case."),
+    runs: int = typer.Option(
+        10, "--runs", min=2, help="Test runs per class and case (the compliance verdict)."
+    ),
     seed: int = typer.Option(0, "--seed", help="Random seed."),
     out: Path = typer.Option(
-        Path("out"), "--out", help="Directory for summary.json and report.html."
+        Path("out"), "--out", help="Directory for summary.json, tuned.toml and report.html."
     ),
     site: str = typer.Option("lx_default", "--site", help="Built-in site name or a .toml."),
+    training_runs: int = TRAINING_RUNS,
+    validation_runs: int = VALIDATION_RUNS,
+    criterion: str = CRITERION,
     workers: int | None = WORKERS,
     scheduler: str | None = SCHEDULER,
 ) -> None:
-    """Level-crossing compliance demo: simulate a site, track, check the requirements."""
-    try:
-        st = load_site(site)
-    except ValueError as exc:
-        _fail(str(exc))
+    """Level-crossing demo: adapt the estimator to a site, then prove compliance on new runs.
+
+    Every candidate family is tuned on training runs and scored on validation runs; the best
+    is deployed and checked, with the references, on test runs that neither step has seen.
+    """
+    st = _load_site(site)
+    criterion = _criterion(criterion)
     console = Console()
-    n_pairs = sum(1 for v in VEHICLES.values() for c in DEFAULT_CASES if applicable(c, v))
-    train_seed, eval_seed = (
-        int(x.generate_state(1)[0]) for x in np.random.SeedSequence(seed).spawn(2)
-    )
+    test_seed = int(np.random.SeedSequence([seed, 13]).generate_state(1)[0])
+    n_pairs = len(st.pairs())
     with _pool(workers, scheduler) as pool, Progress(console=console, transient=True) as progress:
-        task = progress.add_task("tuning", total=n_pairs + len(DEMO_LAMBDAS) + 1)
+        task = progress.add_task("tuning", total=len(FAMILIES) + 2 * n_pairs)
 
         def step(msg: str) -> None:
             progress.update(task, advance=1, description=msg)
 
-        tuning = tune_road_model(
-            st, n_runs=3, seed=train_seed, pool=pool, lambdas=DEMO_LAMBDAS, progress=step
-        )
-        result = evaluate_site(
+        tuning, validation = select_estimator(
             st,
-            runs,
-            eval_seed,
+            seed=seed,
+            training_runs=training_runs,
+            validation_runs=validation_runs,
+            criterion=criterion,  # type: ignore[arg-type]
             pool=pool,
             progress=step,
-            tuned_m1=(tuning.lambda_per_s2, tuning.accel_psd),
         )
-    result = dataclasses.replace(result, seed=seed)
-    table = Table(
-        title=f"{st.name}: worst case over classes and cases, {runs} runs, seed {seed}"
-        f" (requirement 0.7 m, 2 km/h)"
-    )
-    for col in ("estimator", "position RMS [m]", "speed RMS [km/h]", "all pass"):
-        table.add_column(col, justify="left" if col == "estimator" else "right")
-    for name, w in result.worst.items():
-        table.add_row(
-            name,
-            f"{w['position_rms_m']:.3f}",
-            f"{w['speed_rms_kmh']:.3f}",
-            "yes" if w["all_pass"] else "NO",
-        )
-    console.print(table)
-    for name, g in result.gain_pct.items():
+        winner = tuning.winner
+        trackers: dict[str, Tracker] = {winner.label: winner.tracker()}
+        baseline = tuning.candidate("cv")
+        if winner.family != "cv":
+            trackers[baseline.label] = baseline.tracker()
+        trackers.update({k: v for k, v in default_trackers().items() if not k.startswith("road")})
+        test = evaluate_site(
+            st, runs, test_seed, trackers=trackers, pool=pool, progress=step,
+            baseline=baseline.label,
+        )  # fmt: skip
+    test = dataclasses.replace(test, seed=seed)
+    console.print(_candidates_table(tuning))
+    console.print(f"deployed: {tuning.reason}")
+    console.print(_verdict_table(test, winner.label))
+    for name, g in test.gain_pct.items():
         console.print(
-            f"{name} vs road EKF (CV): position {g['position']:+.1f} %, speed {g['speed']:+.1f} %"
+            f"{name} vs {baseline.label}: position {g['position']:+.1f} %, speed "
+            f"{g['speed']:+.1f} %"
         )
-    summary = {**result.to_json(), "tuning": dataclasses.asdict(tuning)}
+    summary = {
+        "site": st.source,
+        "seed": seed,
+        "deployed": winner.label,
+        "selection": tuning.to_json(),
+        "validation": validation.to_json(),
+        "test": test.to_json(),
+    }
     _write_json(out / "summary.json", summary)
     _write_text(out / "tuned.toml", tuning.to_toml())
-    _write_text(
-        out / "report.html",
-        render_html(
-            build_report(result, st, samples=sample_tracks(st, seed), profile=tuning.profile)
-        ),
+    report_data = build_report(
+        test,
+        st,
+        samples=sample_tracks(st, seed, winner.tracker()),
+        deployed=winner.label,
+        tuning=tuning,
+        validation=validation,
     )
+    _write_text(out / "report.html", render_html(report_data))
     console.print(
-        f"wrote {out / 'summary.json'} and {out / 'report.html'} "
-        f"(Monte Carlo {result.elapsed_s:.1f} s)"
+        f"wrote {out / 'summary.json'}, {out / 'tuned.toml'} and {out / 'report.html'} "
+        f"(test Monte Carlo {test.elapsed_s:.1f} s)"
     )
+
+
+def _load_site(site: str) -> Site:
+    try:
+        return load_site(site)
+    except ValueError as exc:
+        _fail(str(exc))
+
+
+def _criterion(text: str) -> str:
+    if text not in CRITERIA:
+        raise typer.BadParameter(f"--criterion must be one of {', '.join(CRITERIA)}")
+    return text
+
+
+def _candidates_table(tuning: SiteTuning) -> Table:
+    table = Table(
+        title=f"{tuning.site}: candidates on {tuning.validation_runs} validation runs per class "
+        f"and case (criterion: {CRITERION_TEXT[tuning.criterion]})"
+    )
+    for col in ("candidate", "parameters", "training", "validation", "worst ratio", "worst case"):
+        table.add_column(col, justify="left" if col in ("candidate", "parameters") else "right")
+    for c in sorted(tuning.candidates, key=lambda c: c.validation_criterion):
+        mark = " *" if c.family == tuning.deployed else ""
+        table.add_row(
+            c.label + mark,
+            ", ".join(f"{k}={v:.3g}" for k, v in c.parameters.items()),
+            f"{c.training_criterion:.3f}",
+            f"{c.validation_criterion:.3f}",
+            f"{c.worst_ratio:.3f}",
+            c.worst_case,
+        )
+    return table
+
+
+def _verdict_table(test: ComplianceResult, deployed: str) -> Table:
+    conf = f"{100 * test.confidence:.0f} %"
+    table = Table(
+        title=f"{test.site}: verdict on {test.runs} test runs per class and case, seed "
+        f"{test.seed} (requirement 0.7 m, 2 km/h; pass when the {conf} upper bounds are within)"
+    )
+    for col in (
+        "estimator",
+        "position RMS [m]",
+        f"{conf} bound",
+        "speed RMS [km/h]",
+        f"{conf} bound",
+        "pass/fail/undecided",
+        "verdict",
+    ):
+        table.add_column(col, justify="left" if col == "estimator" else "right")
+    for name, w in test.summary().items():
+        table.add_row(
+            name + (" (deployed)" if name == deployed else ""),
+            f"{w['position_rms_m']:.3f}",
+            f"{w['position_upper_m']:.3f}",
+            f"{w['speed_rms_kmh']:.3f}",
+            f"{w['speed_upper_kmh']:.3f}",
+            f"{w['pass']}/{w['fail']}/{w['undecided']}",
+            w["verdict"],
+        )
+    return table
 
 
 @app.command()
@@ -134,36 +226,28 @@ def report(
     summary: Path = typer.Argument(..., help="summary.json written by 'adaptrack demo'."),
     out: Path = typer.Option(..., "--out", help="Output HTML file."),
 ) -> None:
-    """Render the HTML compliance report of a demo summary (sample tracks re-simulated)."""
+    """Render the HTML compliance report of a demo summary (sample tracks re-simulated).
+
+    The summary carries the site it was computed for, so any site works, built-in or a file.
+    """
     try:
         data = json.loads(summary.read_text())
-        st = load_site(data["site"])
-        result = ComplianceResult(
-            data["site"],
-            int(data["runs"]),
-            int(data["seed"]),
-            [
-                ComplianceRow(
-                    r["filter"],
-                    r["vehicle_class"],
-                    r["case"],
-                    r["position_rms_m"],
-                    r["speed_rms_kmh"],
-                    r["speed_rel_rms_pct"],
-                    r["pass"],
-                    r["n_epochs"],
-                    r.get("pcrlb_position_m", math.nan),
-                    r.get("pcrlb_speed_kmh", math.nan),
-                )
-                for r in data["rows"]
-            ],
-            float(data["elapsed_s"]),
-            data["worst_case"],
-            data["gain_over_cv_pct"],
-        )
+        st = site_from_mapping(data["site"], f"{summary}: site")
+        test = ComplianceResult.from_json(data["test"])
+        tuning = SiteTuning.from_json(data["selection"])
+        validation = ComplianceResult.from_json(data["validation"])
+        seed = int(data["seed"])
     except (OSError, ValueError, KeyError, TypeError) as exc:
         _fail(f"{summary}: not a demo summary ({exc})")
-    _write_text(out, render_html(build_report(result, st, samples=sample_tracks(st, result.seed))))
+    report_data = build_report(
+        test,
+        st,
+        samples=sample_tracks(st, seed, tuning.tracker()),
+        deployed=str(data["deployed"]),
+        tuning=tuning,
+        validation=validation,
+    )
+    _write_text(out, render_html(report_data))
     Console().print(f"wrote {out}")
 
 
@@ -176,11 +260,8 @@ def simulate(
     seed: int = typer.Option(0, "--seed", help="Random seed."),
 ) -> None:
     """Simulate radar detections of traffic at a site, as a radar object list."""
-    try:
-        st = load_site(site)
-    except ValueError as exc:
-        _fail(str(exc))
-    pairs = [(c, v) for v in VEHICLES.values() for c in DEFAULT_CASES if applicable(c, v)]
+    st = _load_site(site)
+    pairs = st.pairs()
     seeds = np.random.SeedSequence(seed).spawn(len(pairs))
     frames, truths = [], []
     next_id, clock = 1, 0.0
@@ -205,37 +286,39 @@ def simulate(
 def tune(
     site: str = typer.Argument("lx_default", help="Built-in site name or a site .toml."),
     out: Path = typer.Option(..., "--out", help="Tuned configuration (TOML)."),
-    runs: int = typer.Option(3, "--runs", min=1, help="Training runs per approach."),
-    seed: int = typer.Option(0, "--seed", help="Random seed of the training runs."),
+    seed: int = typer.Option(0, "--seed", help="Random seed of the training and validation runs."),
+    training_runs: int = TRAINING_RUNS,
+    validation_runs: int = VALIDATION_RUNS,
+    criterion: str = CRITERION,
+    families: str = typer.Option(
+        ",".join(FAMILIES), "--families", help="Comma-separated candidate families."
+    ),
     workers: int | None = WORKERS,
     scheduler: str | None = SCHEDULER,
-    model: str = typer.Option("m1", "--model", help="m1, or m2 (also tunes M2; slower)."),
 ) -> None:
-    """Tune the road-constrained model (M1: lambda, accel_psd) to a site's training runs."""
-    if model not in ("m1", "m2"):
-        raise typer.BadParameter("--model must be 'm1' or 'm2'")
-    try:
-        st = load_site(site)
-    except ValueError as exc:
-        _fail(str(exc))
+    """Adapt the road estimator to a site: tune every family, choose on validation runs."""
+    st = _load_site(site)
+    criterion = _criterion(criterion)
+    keys = tuple(f.strip() for f in families.split(",") if f.strip())
+    unknown = [k for k in keys if k not in FAMILIES]
+    if unknown or not keys:
+        raise typer.BadParameter(f"--families: unknown {unknown}; known: {', '.join(FAMILIES)}")
     with _pool(workers, scheduler) as pool, Progress(transient=True) as progress:
-        task = progress.add_task("tuning", total=7)
-        tuning = tune_road_model(
+        task = progress.add_task("tuning", total=len(keys) + len(st.pairs()))
+        tuning, _ = select_estimator(
             st,
-            n_runs=runs,
             seed=seed,
+            training_runs=training_runs,
+            validation_runs=validation_runs,
+            criterion=criterion,  # type: ignore[arg-type]
+            families=keys,
             pool=pool,
             progress=lambda m: progress.update(task, advance=1, description=m),
         )
-    if model == "m2":
-        tuning = tune_road_shaping(st, tuning, n_runs=runs, seed=seed)
-        Console().print(f"M2: {tuning.shaping}")
     _write_text(out, tuning.to_toml())
-    Console().print(
-        f"lambda = {tuning.lambda_per_s2:g} 1/s^2, accel_psd = "
-        f"{tuning.accel_psd:.4g} m^2/s^3, J_req = {tuning.criterion:.4f} "
-        f"(CV baseline {tuning.baseline_criterion:.4f}); wrote {out}"
-    )
+    console = Console()
+    console.print(_candidates_table(tuning))
+    console.print(f"deployed: {tuning.reason} Wrote {out}")
 
 
 @app.command()
@@ -247,33 +330,31 @@ def track(
         None, "--config", help="Tuned configuration from 'adaptrack tune' or 'demo'."
     ),
 ) -> None:
-    """Track every radar object with the road-constrained EKF; write per-object estimates.
+    """Track every radar object with the site's road estimator; write per-object estimates.
 
-    The reflection-point scatter follows the ``vehicle_class`` column (a car when absent).
+    The estimator is the deployed one of ``--config`` (the road EKF with constant
+    acceleration without it). The reflection-point scatter follows the ``vehicle_class``
+    column (a car when absent).
     """
+    st = _load_site(site)
     try:
-        st = load_site(site)
         objects = read_detections(measurements, st)
-        model = (
-            load_tuning(config).model()
+        estimator = (
+            load_tuning(config).tracker()
             if config is not None
-            else ConstantAcceleration(jerk_psd=3.0)
+            else RoadTracker(ConstantAcceleration(jerk_psd=3.0))
         )
     except ValueError as exc:
         _fail(str(exc))
-    road_of_radar = {v: k for k, v in st.settings.get("radar_of_road", {}).items()}
     frames = []
     for obj in objects:
-        road_name = road_of_radar.get(obj.radar, next(iter(st.roads)))
-        radar = next(r for r in st.radars if r.name == obj.radar)
-        est = track_on_road(
+        est = estimator.estimate(  # type: ignore[attr-defined]
             obj.times[None],
             obj.measurements[None],
             np.ones((1, obj.times.size), dtype=bool),
-            radar,
-            st.roads[road_name],
-            model=model,
-            scatter_std_m=VEHICLES[obj.vehicle_class or "car"].scatter_std_m,
+            st.radar(obj.radar),
+            st.roads[st.road_of_radar(obj.radar)],
+            st.classes[obj.vehicle_class or "car"].scatter_std_m,
         )
         frames.append(
             pd.DataFrame(
@@ -307,7 +388,7 @@ def _pool(workers: int | None, scheduler: str | None) -> Iterator[TaskPool]:
         yield pool
 
 
-def _fail(message: str) -> None:
+def _fail(message: str) -> NoReturn:
     _err.print(f"error: {message}", markup=False, highlight=False)
     raise typer.Exit(code=1)
 

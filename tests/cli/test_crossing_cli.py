@@ -9,6 +9,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from adaptrack.crossing.selection import Candidate, SiteTuning
+
+IMM_PARAMS = {"accel_psd": 0.1, "jerk_psd": 3.0, "sojourn_s": 10.0}
+
 
 def run(*args):
     return subprocess.run(
@@ -42,16 +46,14 @@ def test_simulate_then_track_meets_the_requirement(simulated):
     assert {"object_id", "radar", "time_s", "range_m", "azimuth_rad", "radial_speed_mps"} <= set(
         meas.columns
     )
-    one = meas[meas.case == "pass_60"]
+    one = meas[meas.case == "B/pass_60"]
     obj = one.object_id.unique()[:2]
     sub = meas[meas.object_id.isin(obj)]
     sub.to_csv(simulated / "two.csv", index=False)
     tuned = simulated / "tuned.toml"
-    tuned.write_text(
-        'site = "lx_default"\n[road_model]\nkind = "inverse_dynamics"\n'
-        "lambda_per_s2 = 0.0\naccel_psd = 0.5\ncriterion = 0.2\n"
-        "baseline_criterion = 0.2\n"
-    )
+    imm = Candidate("imm", "road IMM (CV + CA)", IMM_PARAMS, 0.4, 10, 0.41, 0.5, "car / x")
+    cv = Candidate("cv", "road EKF (CV)", {"accel_psd": 0.5}, 0.4, 10, 0.42, 0.5, "car / x")
+    tuned.write_text(SiteTuning("lx_default", "tail", 0, 1, 2, (imm, cv), "imm", "test").to_toml())
     proc = run(
         "track",
         str(simulated / "two.csv"),
@@ -88,6 +90,7 @@ def test_simulate_then_track_meets_the_requirement(simulated):
         ),
         (lambda f: f.assign(time_s=f.time_s[::-1].to_numpy()), "not strictly increasing"),
         (lambda f: f.assign(vehicle_class="tank"), "unknown class 'tank'"),
+        (lambda f: f.iloc[:0], "no detections"),
     ],
 )
 def test_track_bad_input(simulated, change, message):

@@ -17,7 +17,7 @@ from typing import Any
 from .._typing import FloatArray
 from ..filters._codegen import GENERATED_MAX_STATES, kf_step_lines, load, module_source
 
-_VERSION = 2
+_VERSION = 4
 _M = 3  # range, azimuth, radial speed
 
 
@@ -92,6 +92,11 @@ def _ekf_source(n: int, pattern: tuple[Pattern, Pattern]) -> str:
         f"xa, pa, uo = np.empty({n}), np.empty(({n}, {n})), np.empty({n})",
         f"zp, h, rm = np.empty(3), np.zeros((3, {n})), np.empty((3, 3))",
         "jp, jv = np.empty((3, 2)), np.empty((3, 2))",
+        f"gate_x, gate_p = np.empty({n}), np.empty(({n}, {n}))",
+        f"gate_ikh, gate_hp, gate_kt = np.empty(({n}, {n})), np.empty((1, {n})), "
+        f"np.empty((1, {n}))",
+        "gate_s, gate_lo, gate_r = np.empty((1, 1)), np.empty((1, 1)), np.empty((1, 1))",
+        "gate_w, gate_nu = np.empty(1), np.empty(1)",
         *(f"x{j} = m0[i, {j}]" for j in range(n)),
         *(f"P{a}_{b} = p0[i, {a}, {b}]" for a in range(n) for b in range(a, n)),
         *(f"u{j} = 0.0" for j in range(n)),
@@ -107,7 +112,8 @@ def _ekf_source(n: int, pattern: tuple[Pattern, Pattern]) -> str:
         *(f"    if {a} < k:\n        xp{a} = 0.0" for a in range(1, n - 1)),
         "if detected[i, t]:",
         *(f"    xa[{j}] = xp{j}" for j in range(n)),
-        "    measure(kind, xa, k, radar, road, half_width, scatter_std, zp, h, rm, jp, jv)",
+        "    measure(kind, xa, k, radar, noise_tab, noise_cnt, road, half_width, scatter_std, "
+        "zp, h, rm, jp, jv)",
         *(f"    H{a}_{j} = h[{a}, {j}]" for a in range(_M) for j in range(n)),
         *(f"    R{a}_{b} = rm[{a}, {b}]" for a in range(_M) for b in range(a, _M)),
         "    nu0 = z[i, t, 0] - zp[0]",
@@ -120,9 +126,14 @@ def _ekf_source(n: int, pattern: tuple[Pattern, Pattern]) -> str:
         else:
             step.append("    " + line)
     step += [
-        "else:",
-        *(f"    x{j} = xp{j}" for j in range(n)),
-        *(f"    P{a}_{b} = pp{a}_{b}" for a in range(n) for b in range(a, n)),
+        "else:  # a missed detection: the Doppler gate may explain it",
+        *(f"    xa[{j}] = xp{j}" for j in range(n)),
+        *(f"    pa[{a}, {b}] = pa[{b}, {a}] = pp{a}_{b}" for a in range(n) for b in range(a, n)),
+        "    gate_update(kind, xa, pa, k, radar, noise_tab, noise_cnt, fields, pd_tab, pd_cnt, "
+        "road, half_width, scatter_std, gate_x, gate_p, zp, h, rm, jp, jv, gate_hp, gate_s, "
+        "gate_lo, gate_kt, gate_w, gate_ikh, tmp, gate_nu, gate_r)",
+        *(f"    x{j} = gate_x[{j}]" for j in range(n)),
+        *(f"    P{a}_{b} = gate_p[{a}, {b}]" for a in range(n) for b in range(a, n)),
         *(f"xa[{j}] = x{j}" for j in range(n)),
         *(f"pa[{a}, {b}] = pa[{b}, {a}] = P{a}_{b}" for a in range(n) for b in range(a, n)),
         "speed[i, t] = planar(kind, xa, pa, k, road, half_width, pos[i, t], vel[i, t], pcov[i, t])",
@@ -136,13 +147,14 @@ def _ekf_source(n: int, pattern: tuple[Pattern, Pattern]) -> str:
     ]
     return module_source(
         "ekf(kind, times, phi_coef, qd_coef, off_coef, h_max, z, detected, first, m0, p0, k, "
-        "radar, road, "
-        "half_width, scatter_std, pos, vel, speed, pcov, status)",
+        "radar, noise_tab, noise_cnt, fields, pd_tab, pd_cnt, road, half_width, scatter_std, "
+        "pos, vel, speed, pcov, status)",
         f"Road or free EKF with {n} states (see adaptrack.crossing._ekf_kernels.ekf_kernel).",
         body,
         parallel=True,
         imports=(
             "from adaptrack.crossing._ekf_kernels import ROAD, measure",
+            "from adaptrack.crossing._ekf_kernels import gate_update_into as gate_update",
             "from adaptrack.crossing._ekf_kernels import _planar_into as planar",
             "from adaptrack.filters._kernels import series_transition_into as transition",
         ),
@@ -152,9 +164,10 @@ def _ekf_source(n: int, pattern: tuple[Pattern, Pattern]) -> str:
 def _digest() -> str:
     """Digest of the modules whose jitted functions the generated kernel inlines."""
     from ..filters import _kernels
-    from . import _ekf_kernels
+    from . import _ekf_kernels, _radar_kernel
 
-    text = "".join(Path(m.__file__ or "").read_text() for m in (_kernels, _ekf_kernels))
+    modules = (_kernels, _ekf_kernels, _radar_kernel)
+    text = "".join(Path(m.__file__ or "").read_text() for m in modules)
     return hashlib.sha1(text.encode()).hexdigest()[:12]
 
 

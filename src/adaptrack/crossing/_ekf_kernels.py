@@ -17,6 +17,7 @@ import numpy as np
 from numba import prange
 
 from ..filters._kernels import predict_into, series_transition_into, update_into
+from ._radar_kernel import curve_at, in_view
 
 ROAD, FREE = 0, 1  # measurement models
 
@@ -38,13 +39,21 @@ def _polar_into(px, py, vx, vy, radar, zp, jp, jv):  # type: ignore[no-untyped-d
 
 
 @numba.njit(cache=True, inline="always")
-def _noise_into(radar, jp, ux, uy, scatter_std, rm):  # type: ignore[no-untyped-def]
-    """Measurement noise with the rank-one reflection-point scatter along ``u``."""
+def _noise_into(radar, noise_tab, noise_cnt, zp, jp, ux, uy, scatter_std, rm):  # type: ignore[no-untyped-def]
+    """Fill the measurement noise at the predicted geometry ``zp`` (with body scatter).
+
+    The radar's sigma curves ``noise_tab``/``noise_cnt`` (range and radial speed against
+    range, azimuth against the angle off boresight ``radar[3]``) plus the rank-one
+    reflection-point scatter along ``u``.
+    """
     b0 = jp[0, 0] * ux + jp[0, 1] * uy
     b1 = jp[1, 0] * ux + jp[1, 1] * uy
     b2 = jp[2, 0] * ux + jp[2, 1] * uy
     s2 = scatter_std * scatter_std
-    rm[0, 0], rm[1, 1], rm[2, 2] = radar[3] ** 2, radar[4] ** 2, radar[5] ** 2
+    off = abs((zp[1] - radar[3] + math.pi) % (2.0 * math.pi) - math.pi)
+    rm[0, 0] = curve_at(noise_tab, noise_cnt, 0, zp[0]) ** 2
+    rm[1, 1] = curve_at(noise_tab, noise_cnt, 1, off) ** 2
+    rm[2, 2] = curve_at(noise_tab, noise_cnt, 2, zp[0]) ** 2
     rm[0, 1] = rm[1, 0] = rm[0, 2] = rm[2, 0] = rm[1, 2] = rm[2, 1] = 0.0
     bb = (b0, b1, b2)
     for a in range(3):
@@ -73,11 +82,14 @@ def _centreline(road, s):  # type: ignore[no-untyped-def]
     return cx, cy, th, kappa
 
 
-@numba.njit(cache=True, inline="always")
-def measure(kind, x, k, radar, road, half_width, scatter_std, zp, h, rm, jp, jv):  # type: ignore[no-untyped-def]
+@numba.njit(cache=True)
+def measure(  # type: ignore[no-untyped-def]
+    kind, x, k, radar, noise_tab, noise_cnt, road, half_width, scatter_std, zp, h, rm, jp, jv
+):
     """Fill predicted detection ``zp``, Jacobian ``h`` (3, n) and noise ``rm`` at state ``x``.
 
-    ``road`` (4, S): sampled centreline ``s``, ``x``, ``y``, heading and curvature rows.
+    ``radar``: x, y, height, boresight; ``noise_tab``/``noise_cnt`` its sigma curves;
+    ``road`` (5, S): sampled centreline ``s``, ``x``, ``y``, heading and curvature rows.
     """
     h[:, :] = 0.0
     if kind == FREE:
@@ -92,7 +104,7 @@ def measure(kind, x, k, radar, road, half_width, scatter_std, zp, h, rm, jp, jv)
             ex, ey = x[0] - radar[0], x[1] - radar[1]
             dist = math.sqrt(ex * ex + ey * ey)
             ux, uy = -ex / dist, -ey / dist
-        _noise_into(radar, jp, ux, uy, scatter_std, rm)
+        _noise_into(radar, noise_tab, noise_cnt, zp, jp, ux, uy, scatter_std, rm)
         return
     s, vs, d = x[0], x[1], x[k]
     cx, cy, th, kappa = _centreline(road, s)
@@ -107,10 +119,10 @@ def measure(kind, x, k, radar, road, half_width, scatter_std, zp, h, rm, jp, jv)
         h[a, 0] = jp[a, 0] * dpx + jp[a, 1] * dpy + jv[a, 0] * dvx + jv[a, 1] * dvy
         h[a, 1] = jv[a, 0] * tx + jv[a, 1] * ty
         h[a, k] = jp[a, 0] * rx + jp[a, 1] * ry
-    _noise_into(radar, jp, -tx, -ty, scatter_std, rm)
+    _noise_into(radar, noise_tab, noise_cnt, zp, jp, -tx, -ty, scatter_std, rm)
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def _planar_into(kind, x, p, k, road, half_width, pos, vel, pcov):  # type: ignore[no-untyped-def]
     """Planar position, velocity and position covariance (2, 2) of state ``x``, ``p``.
 
@@ -136,6 +148,50 @@ def _planar_into(kind, x, p, k, road, half_width, pos, vel, pcov):  # type: igno
     return abs(vs)
 
 
+@numba.njit(cache=True, inline="always")
+def _normal_cdf(x):  # type: ignore[no-untyped-def]
+    return 0.5 * math.erfc(-x / math.sqrt(2.0))
+
+
+@numba.njit(cache=True)
+def gate_update_into(  # type: ignore[no-untyped-def]
+    kind, xp, pp, k, radar, noise_tab, noise_cnt, fields, pd_tab, pd_cnt, road, half_width,
+    scatter_std, x, p, zp, h, rm, jp, jv, hp, s, lo, kt, w, ikh, tmp, nu1, r1,
+):  # fmt: skip
+    """Posterior ``x``, ``p`` of the prior ``xp``, ``pp`` after a scan without a detection.
+
+    Inside the field of view, where the Doppler gate ``g = radar[5]`` explains the miss better
+    than ``1 - P_D`` (:mod:`adaptrack.crossing.tracking`), the pseudo-measurement ``v_r = 0``
+    with variance ``g^2 / 3`` is applied. Returns ``log P(no detection)`` (0 outside the
+    view). ``hp``/``kt`` (1, n), ``s``/``lo``/``r1`` (1, 1), ``w``/``nu1`` (1,) are scratch.
+    """
+    measure(
+        kind, xp, k, radar, noise_tab, noise_cnt, road, half_width, scatter_std, zp, h, rm, jp, jv
+    )
+    n = xp.shape[0]
+    for a in range(n):
+        x[a] = xp[a]
+        for b in range(n):
+            p[a, b] = pp[a, b]
+    off = abs((zp[1] - radar[3] + math.pi) % (2.0 * math.pi) - math.pi)
+    if not in_view(zp[0], off, fields, radar[4]):
+        return 0.0
+    var = 0.0
+    for a in range(n):
+        for b in range(n):
+            var += h[2, a] * pp[a, b] * h[2, b]
+    sd = math.sqrt(max(var, 1e-24))
+    gate, mu = radar[5], zp[2]
+    p_gate = _normal_cdf((gate - mu) / sd) - _normal_cdf((-gate - mu) / sd)
+    p_det = curve_at(pd_tab, pd_cnt, 0, zp[0])
+    p_miss = p_gate + (1.0 - p_det) * (1.0 - p_gate)
+    if gate > 0.0 and p_gate > 0.5 * p_miss:
+        nu1[0] = -mu
+        r1[0, 0] = gate * gate / 3.0
+        update_into(xp, pp, nu1, h[2:3], r1, True, x, p, hp, s, lo, kt, w, ikh, tmp)
+    return math.log(p_miss) if p_miss > 0.0 else -math.inf
+
+
 @numba.njit(cache=True, parallel=True)
 def ekf_kernel(  # type: ignore[no-untyped-def]
     kind,
@@ -151,6 +207,11 @@ def ekf_kernel(  # type: ignore[no-untyped-def]
     p0,
     k,
     radar,
+    noise_tab,
+    noise_cnt,
+    fields,
+    pd_tab,
+    pd_cnt,
     road,
     half_width,
     scatter_std,
@@ -165,10 +226,12 @@ def ekf_kernel(  # type: ignore[no-untyped-def]
     ``times`` (N, T) [s]; the transitions come from the series table ``phi_coef``,
     ``qd_coef``, ``off_coef``, ``h_max`` (:mod:`adaptrack.models.series_table`); ``z``
     (N, T, 3); ``first`` (N,) first detection (-1: none); ``m0``/``p0`` the initial state
-    there; ``k`` the along-road model size (ROAD). ``radar``: x, y, height, range / azimuth /
-    radial-speed standard deviations. ``pos``/``vel`` (N, T, 2), ``speed`` (N, T), ``pcov``
-    (N, T, 2, 2) (pre-filled with NaN) receive the planar estimates; ``status[i] = t + 1`` if
-    run ``i`` stops at step ``t`` (S not positive definite). Generic loops:
+    there; ``k`` the along-road model size (ROAD). ``radar``: x, y, height, boresight, min
+    range, Doppler gate; ``noise_tab``/``noise_cnt``: its sigma curves; ``fields`` its fields of
+    view and ``pd_tab``/``pd_cnt`` the class's P_D (the meaning of a missed detection).
+    ``pos``/``vel`` (N, T, 2), ``speed`` (N, T), ``pcov`` (N, T, 2, 2) (pre-filled with
+    NaN) receive the planar estimates; ``status[i] = t + 1`` if run ``i`` stops at step ``t``
+    (S not positive definite). Generic loops:
     :mod:`._ekf_codegen` generates the same recursion in straight-line code per state size.
     """
     n_runs, n_steps = detected.shape
@@ -186,6 +249,7 @@ def ekf_kernel(  # type: ignore[no-untyped-def]
         h, hp, kt = np.zeros((3, n)), np.empty((3, n)), np.empty((3, n))
         jp, jv = np.empty((3, 2)), np.empty((3, 2))
         s, lo = np.empty((3, 3)), np.empty((3, 3))
+        nu1, r1 = np.empty(1), np.empty((1, 1))
         speed[i, f] = _planar_into(
             kind, x, p, k, road, half_width, pos[i, f], vel[i, f], pcov[i, f]
         )
@@ -198,7 +262,10 @@ def ekf_kernel(  # type: ignore[no-untyped-def]
                 for a in range(1, k):
                     xp[a] = 0.0
             if detected[i, t]:
-                measure(kind, xp, k, radar, road, half_width, scatter_std, zp, h, rm, jp, jv)
+                measure(
+                    kind, xp, k, radar, noise_tab, noise_cnt, road, half_width, scatter_std,
+                    zp, h, rm, jp, jv,
+                )  # fmt: skip
                 for a in range(3):
                     resid[a] = z[i, t, a] - zp[a]
                 resid[1] = (resid[1] + np.pi) % (2 * np.pi) - np.pi
@@ -207,8 +274,11 @@ def ekf_kernel(  # type: ignore[no-untyped-def]
                     status[i] = t + 1
                     break
             else:
-                x[:] = xp
-                p[:, :] = pp
+                gate_update_into(
+                    kind, xp, pp, k, radar, noise_tab, noise_cnt, fields, pd_tab, pd_cnt, road,
+                    half_width, scatter_std, x, p, zp, h, rm, jp, jv, hp[:1], s[:1, :1],
+                    lo[:1, :1], kt[:1], w[:1], ikh, tmp, nu1, r1,
+                )  # fmt: skip
             speed[i, t] = _planar_into(
                 kind, x, p, k, road, half_width, pos[i, t], vel[i, t], pcov[i, t]
             )
@@ -226,6 +296,8 @@ def pcrlb_kernel(  # type: ignore[no-untyped-def]
     p0,
     k,
     radar,
+    noise_tab,
+    noise_cnt,
     road,
     half_width,
     scatter_std,
@@ -268,7 +340,10 @@ def pcrlb_kernel(  # type: ignore[no-untyped-def]
                 pp[:, :] = p0
             if detected[i, t]:
                 xp[:] = truth[i, t]
-                measure(ROAD, xp, k, radar, road, half_width, scatter_std, zp, h, rm, jp, jv)
+                measure(
+                    ROAD, xp, k, radar, noise_tab, noise_cnt, road, half_width, scatter_std,
+                    zp, h, rm, jp, jv,
+                )  # fmt: skip
                 ok, _, _ = update_into(xp, pp, resid, h, rm, True, x, p, hp, s, lo, kt, w, ikh, tmp)
                 if not ok:
                     break

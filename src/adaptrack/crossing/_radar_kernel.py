@@ -1,9 +1,11 @@
 """Compiled (numba) detection geometry of :func:`adaptrack.crossing.radar_sim.simulate_case`.
 
-Given the drawn noise, scatter and detection draws (NumPy, in the simulation's order), computes
-the noisy (range, azimuth, radial speed) of the reflection point and the detection mask in one
-pass over (run, scan) instead of a dozen (N, T) temporaries. Same formulas and operation order
-as the NumPy expressions it replaces (tests compare them).
+Given the drawn unit noise, scatter and detection draws (NumPy, in the simulation's order),
+computes the noisy (range, azimuth, radial speed) of the reflection point and the detection
+mask in one pass over (run, scan) instead of a dozen (N, T) temporaries. The noise standard
+deviations and the detection probability are the radar's curves
+(:class:`adaptrack.crossing.sensor.Curve`) at the true geometry. Same formulas and operation
+order as the NumPy expressions they replace (tests compare them).
 """
 
 from __future__ import annotations
@@ -20,20 +22,63 @@ def _wrap(a, half):  # type: ignore[no-untyped-def]
     return (a + half) % (2.0 * half) - half
 
 
+@numba.njit(cache=True, inline="always")
+def curve_at(table, counts, row, x):  # type: ignore[no-untyped-def]
+    """Value of curve ``row`` of a packed table (``curve_tables``) at ``x``, as ``np.interp``."""
+    n = counts[row]
+    xs = table[row, 0]
+    ys = table[row, 1]
+    if x <= xs[0] or n == 1:
+        return ys[0]
+    if x >= xs[n - 1]:
+        return ys[n - 1]
+    j = 0
+    while xs[j + 1] < x:
+        j += 1
+    slope = (ys[j + 1] - ys[j]) / (xs[j + 1] - xs[j])
+    return slope * (x - xs[j]) + ys[j]
+
+
+@numba.njit(cache=True, inline="always")
+def in_view(rng_m, off_axis, fields, min_range):  # type: ignore[no-untyped-def]
+    """Whether a slant range and absolute off-boresight angle lie in a field of view."""
+    if rng_m < min_range:
+        return False
+    for f in range(fields.shape[0]):
+        if rng_m <= fields[f, 0] and off_axis <= fields[f, 1]:
+            return True
+    return False
+
+
 @numba.njit(cache=True, parallel=True)
 def detections_kernel(  # type: ignore[no-untyped-def]
-    pos, direction, speed, scatter, noise, draw, radar, p_detect, meas, detected
+    pos,
+    direction,
+    speed,
+    scatter,
+    noise,
+    draw,
+    radar,
+    fields,
+    noise_tab,
+    noise_cnt,
+    pd_tab,
+    pd_cnt,
+    meas,
+    detected,
 ):
     """Fill ``meas`` (N, T, 3; NaN where not detected) and ``detected`` (N, T).
 
     ``pos`` (N, T, 2) lane point, ``direction`` (N, T, 2) unit travel direction, ``speed``
-    (N, T), ``scatter`` (N, T) reflection offset behind the front, ``noise`` (N, T, 3) scaled
-    measurement noise, ``draw`` (N, T) uniform detection draws; ``radar``: x, y, height,
-    azimuth bias, boresight, field-of-view half width, min/max range, Doppler gate, folding
-    speed (0: none) (arrays may be broadcast views).
+    (N, T), ``scatter`` (N, T) reflection offset behind the front, ``noise`` (N, T, 3) unit
+    normal draws, ``draw`` (N, T) uniform detection draws; ``radar``: x, y, height, azimuth
+    bias, boresight, min range, Doppler gate, folding speed (0: none); ``fields`` (F, 2) max
+    range and half angle; ``noise_tab``/``noise_cnt`` the range, azimuth (against the angle off
+    boresight) and radial-speed sigma curves; ``pd_tab``/``pd_cnt`` the detection probability
+    against range (arrays may be broadcast views).
     """
     n_runs, n_steps = speed.shape
-    vmax = radar[9]
+    vmax = radar[7]
     for i in prange(n_runs):
         for t in range(n_steps):
             dx, dy = direction[i, t, 0], direction[i, t, 1]
@@ -42,19 +87,18 @@ def detections_kernel(  # type: ignore[no-untyped-def]
             rng_m = math.hypot(math.hypot(ex, ey), radar[2])
             az = math.atan2(ex, ey)
             vr = (ex * (speed[i, t] * dx) + ey * (speed[i, t] * dy)) / rng_m
-            off_axis = _wrap(az - radar[4], math.pi)
+            off_axis = abs(_wrap(az - radar[4], math.pi))
             det = (
-                abs(off_axis) <= radar[5]
-                and rng_m <= radar[7]
-                and rng_m >= radar[6]
-                and abs(vr) >= radar[8]
-                and draw[i, t] < p_detect
+                in_view(rng_m, off_axis, fields, radar[5])
+                and abs(vr) >= radar[6]
+                and draw[i, t] < curve_at(pd_tab, pd_cnt, 0, rng_m)
             )
             detected[i, t] = det
             if det:
-                meas[i, t, 0] = rng_m + noise[i, t, 0]
-                meas[i, t, 1] = _wrap(az + radar[3] + noise[i, t, 1], math.pi)
-                m2 = vr + noise[i, t, 2]
+                meas[i, t, 0] = rng_m + noise[i, t, 0] * curve_at(noise_tab, noise_cnt, 0, rng_m)
+                sig_az = curve_at(noise_tab, noise_cnt, 1, off_axis)
+                meas[i, t, 1] = _wrap(az + radar[3] + noise[i, t, 1] * sig_az, math.pi)
+                m2 = vr + noise[i, t, 2] * curve_at(noise_tab, noise_cnt, 2, rng_m)
                 meas[i, t, 2] = _wrap(m2, vmax) if vmax > 0.0 else m2
             else:
                 meas[i, t, 0] = meas[i, t, 1] = meas[i, t, 2] = math.nan

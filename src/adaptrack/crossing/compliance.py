@@ -1,11 +1,18 @@
 """Monte-Carlo evidence of compliance with the operator requirements (seed 001, table 1.1).
 
-Per estimator x vehicle class x case: RMS of the planar position error [m] and of the speed
-error ``|v_hat| - |v|`` [km/h] over all runs and epochs in the controlled zone (front of the
-vehicle 0-150 m from the crossing), from 1 s after the track starts, while the vehicle moves
-(true speed > 0.2 m/s; a stopped vehicle vanishes behind the Doppler gate). Speed RMS is
-restricted to true speeds <= 100 km/h; above that the relative speed error RMS is compared with
-2 %. Runs of a case are one batch; every (class, case) has its own seed stream.
+Scoring (spec 5.1), per estimator x vehicle class x case: the RMS of the planar position
+error [m] and of the speed error ``|v_hat| - |v|`` [km/h] over all runs and every epoch with
+the vehicle's front in the controlled zone (0 to ``zone_m`` from the crossing centre),
+stopped epochs included, from 1 s after the track starts (the warm-up). Speed RMS is restricted
+to true speeds <= 100 km/h; above that the relative speed error RMS is compared with 2 %.
+Zone epochs before a track has started (and warmed up) have no estimate: their share is
+reported as *untracked* (a blind zone at the far end shows up there).
+
+Verdict: every RMS carries one-sided bounds at ``confidence`` (default 95 %) from the spread
+between runs (:func:`adaptrack.analysis.confidence.rms_with_bounds`). A row *passes* when every
+upper bound is within its limit, *fails* when a lower bound is beyond it, and is *undecided*
+otherwise (more runs would decide it). Runs of a case are one batch; every (class, case) has
+its own seed stream, blocks of runs have their own sub-streams.
 """
 
 from __future__ import annotations
@@ -20,29 +27,34 @@ from typing import Any
 import numpy as np
 
 from .._typing import BoolArray, FloatArray
-from ..models.adaptive import InverseDynamics, ShapingFilter, singer_accel_std
-from ..models.continuous import ConstantAcceleration, ConstantVelocity, MotionModel
+from ..analysis.confidence import rms_with_bounds
+from ..models.adaptive import ShapingFilter, singer_accel_std
+from ..models.continuous import ConstantAcceleration, ConstantVelocity
 from ..parallel import TaskPool
 from .radar_sim import CrossingRuns, simulate_site_case, site_scan_count
 from .site import Site
-from .tracking import (
-    TrackEstimates,
-    road_pcrlb,
-    track_converted,
-    track_free_2d,
-    track_on_road,
-)
-from .traffic import DEFAULT_CASES, VEHICLES, Case, VehicleClass, applicable
+from .trackers import PlanarTracker, RoadTracker, Tracker
+from .tracking import TrackEstimates, road_pcrlb, track_converted, track_free_2d
+from .traffic import Case, VehicleClass
 
 POSITION_LIMIT_M = 0.7
 SPEED_LIMIT_KMH = 2.0
 SPEED_LIMIT_REL = 0.02
 SPEED_SPLIT_KMH = 100.0
+WARM_UP_S = 1.0
+CONFIDENCE = 0.95
+LIMITS = np.array([POSITION_LIMIT_M, SPEED_LIMIT_KMH, SPEED_LIMIT_REL])
 
 
 @dataclass(frozen=True)
 class ComplianceRow:
-    """Accuracy of one estimator on one class and case, and the verdict."""
+    """Accuracy of one estimator on one class and case, its bounds and the verdict.
+
+    ``*_upper``/``*_lower``: one-sided bounds at the result's confidence; ``verdict`` is
+    ``"pass"``, ``"fail"`` or ``"undecided"``; ``n_epochs``/``n_speed_epochs``: scored epochs
+    of position / of speed (true speed <= 100 km/h); ``untracked_pct``: share of the zone
+    epochs without an estimate (before the track started and warmed up).
+    """
 
     filter: str
     vehicle_class: str
@@ -50,23 +62,76 @@ class ComplianceRow:
     position_rms_m: float
     speed_rms_kmh: float
     speed_rel_rms_pct: float
-    passed: bool
+    position_upper_m: float
+    speed_upper_kmh: float
+    speed_rel_upper_pct: float
+    position_lower_m: float
+    speed_lower_kmh: float
+    speed_rel_lower_pct: float
+    verdict: str
     n_epochs: int
+    n_speed_epochs: int
+    untracked_pct: float
     pcrlb_position_m: float = math.nan
     pcrlb_speed_kmh: float = math.nan
+
+    @property
+    def passed(self) -> bool:
+        """Whether every upper bound is within its limit."""
+        return self.verdict == "pass"
+
+    @property
+    def requirement_ratio(self) -> float:
+        """``max(position / 0.7 m, speed / 2 km/h, relative speed / 2 %)`` (point estimates)."""
+        return requirement_ratio(self.position_rms_m, self.speed_rms_kmh, self.speed_rel_rms_pct)
+
+
+def requirement_ratio(position_m: float, speed_kmh: float, speed_rel_pct: float) -> float:
+    """Largest ratio of an RMS to its limit (1 is the requirement; NaN RMS are not scored)."""
+    ratios = np.array([position_m, speed_kmh, speed_rel_pct / 100]) / LIMITS
+    return float(np.nanmax(ratios)) if np.any(np.isfinite(ratios)) else math.nan
 
 
 @dataclass(frozen=True)
 class ComplianceResult:
-    """All rows, the run configuration and summaries."""
+    """All rows, the run configuration, and per estimator summaries (:meth:`summary`)."""
 
     site: str
     runs: int
     seed: int
     rows: list[ComplianceRow]
     elapsed_s: float
-    worst: dict[str, dict[str, float]] = field(default_factory=dict)
+    confidence: float = CONFIDENCE
     gain_pct: dict[str, dict[str, float]] = field(default_factory=dict)
+
+    def estimators(self) -> list[str]:
+        """Estimator names in row order."""
+        return list(dict.fromkeys(r.filter for r in self.rows))
+
+    def summary(self) -> dict[str, dict[str, Any]]:
+        """Per estimator: worst RMS and upper bounds, verdict counts, criterion, worst case."""
+        out = {}
+        for name in self.estimators():
+            mine = [r for r in self.rows if r.filter == name]
+            worst = max(mine, key=lambda r: r.requirement_ratio)
+            counts = Counter(r.verdict for r in mine)
+            out[name] = {
+                "position_rms_m": max(r.position_rms_m for r in mine),
+                "speed_rms_kmh": _nanmax(r.speed_rms_kmh for r in mine),
+                "position_upper_m": max(r.position_upper_m for r in mine),
+                "speed_upper_kmh": _nanmax(r.speed_upper_kmh for r in mine),
+                "criterion": worst.requirement_ratio,
+                "worst_case": f"{worst.vehicle_class} / {worst.case}",
+                "pass": counts["pass"],
+                "fail": counts["fail"],
+                "undecided": counts["undecided"],
+                "verdict": (
+                    "pass"
+                    if counts["pass"] == len(mine)
+                    else ("fail" if counts["fail"] else "undecided")
+                ),
+            }
+        return out
 
     def to_json(self) -> dict[str, Any]:
         """Plain data for ``summary.json``."""
@@ -74,74 +139,41 @@ class ComplianceResult:
             "site": self.site,
             "runs": self.runs,
             "seed": self.seed,
+            "confidence": self.confidence,
             "requirements": {
                 "position_rms_m": POSITION_LIMIT_M,
                 "speed_rms_kmh": SPEED_LIMIT_KMH,
                 "speed_rel_rms_pct_above_100_kmh": 100 * SPEED_LIMIT_REL,
             },
-            "rows": [{**asdict(r), "pass": r.passed} for r in self.rows],
-            "worst_case": self.worst,
-            "gain_over_cv_pct": self.gain_pct,
+            "rows": [asdict(r) for r in self.rows],
+            "summary": self.summary(),
+            "gain_pct": self.gain_pct,
             "elapsed_s": self.elapsed_s,
         }
 
-
-Tracker = Callable[[CrossingRuns, Site, Case, VehicleClass], TrackEstimates]
-
-
-@dataclass(frozen=True)
-class PlanarTracker:
-    """A planar tracker (:func:`track_free_2d`, :func:`track_converted`) on a case's radar."""
-
-    track: Callable[..., TrackEstimates]
-
-    def __call__(
-        self, runs: CrossingRuns, site: Site, case: Case, veh: VehicleClass
-    ) -> TrackEstimates:
-        """Track the runs of one class x case."""
-        return self.track(
-            runs.times,
-            runs.measurements,
-            runs.detected,
-            site.radar_for(case.road),
-            scatter_std_m=veh.scatter_std_m,
+    @classmethod
+    def from_json(cls, data: dict[str, Any]) -> ComplianceResult:
+        """Read back :meth:`to_json` output."""
+        return cls(
+            str(data["site"]),
+            int(data["runs"]),
+            int(data["seed"]),
+            [ComplianceRow(**r) for r in data["rows"]],
+            float(data["elapsed_s"]),
+            float(data["confidence"]),
+            dict(data.get("gain_pct", {})),
         )
 
 
-@dataclass(frozen=True)
-class RoadTracker:
-    """The road-constrained EKF with ``model`` along the case's road."""
-
-    model: MotionModel
-
-    def __call__(
-        self, runs: CrossingRuns, site: Site, case: Case, veh: VehicleClass
-    ) -> TrackEstimates:
-        """Track the runs of one class x case."""
-        return track_on_road(
-            runs.times,
-            runs.measurements,
-            runs.detected,
-            site.radar_for(case.road),
-            site.roads[case.road],
-            model=self.model,
-            scatter_std_m=veh.scatter_std_m,
-        )
+def _nanmax(values: Any) -> float:
+    vals = [v for v in values if not math.isnan(v)]
+    return max(vals) if vals else math.nan
 
 
-def default_trackers(tuned_m1: tuple[float, float] | None = None) -> dict[str, Tracker]:
-    """Free 2-D EKF and CMKF, road-constrained CV (the rectilinear baseline), CA, M2.
-
-    ``tuned_m1 = (lambda_per_s2, accel_psd)`` adds the road EKF with the site-tuned M1.
-    """
+def default_trackers() -> dict[str, Tracker]:
+    """Untuned reference estimators: free 2-D EKF, CMKF, road-constrained CV, CA and M2."""
     sig_a = singer_accel_std(9.0, 0.05, 0.5)
-    tuned: dict[str, Tracker] = {}
-    if tuned_m1 is not None:
-        tuned["road EKF (M1, tuned)"] = RoadTracker(
-            InverseDynamics(lambda_per_s2=tuned_m1[0], accel_psd=tuned_m1[1])
-        )
     return {
-        **tuned,
         "free 2-D EKF (CV)": PlanarTracker(track_free_2d),
         "CMKF (2-D, no Doppler)": PlanarTracker(track_converted),
         "road EKF (CV)": RoadTracker(ConstantVelocity(accel_psd=3.0)),
@@ -159,25 +191,84 @@ RUN_BLOCK_STEPS = 1_000_000  # run-steps simulated and tracked together (one tas
 
 
 @dataclass(frozen=True)
-class _Sum:
-    """Sum of squares over scored epochs and their count (mergeable across run blocks)."""
+class RunSums:
+    """Per-run sums of one estimator on one class x case (mergeable across run blocks).
 
-    total: float = 0.0
-    count: int = 0
+    ``squares`` (N, 3): squared position error [m^2], speed error [(km/h)^2] (true speed
+    <= 100 km/h), relative speed error [1] (above); ``counts`` (N, 3): their epochs;
+    ``untracked`` (N,): zone epochs without an estimate; ``zone`` (N,): all zone epochs.
+    """
 
-    def __add__(self, other: _Sum) -> _Sum:
-        return _Sum(self.total + other.total, self.count + other.count)
+    squares: FloatArray
+    counts: FloatArray
+    untracked: FloatArray
+    zone: FloatArray
 
-    def rms(self) -> float:
-        return math.sqrt(self.total / self.count) if self.count else math.nan
+    def __add__(self, other: RunSums) -> RunSums:
+        return RunSums(
+            *(np.concatenate([a, b]) for a, b in zip(_fields(self), _fields(other), strict=True))
+        )
+
+    def rms(self) -> FloatArray:
+        """Pooled RMS (3,): position [m], speed [km/h], relative speed [1] (NaN: none)."""
+        total = self.counts.sum(axis=0)
+        with np.errstate(invalid="ignore"):
+            return np.sqrt(self.squares.sum(axis=0) / total)
 
 
-def _sum(values: FloatArray) -> _Sum:
-    return _Sum(float(np.sum(values)), int(values.size))
+def _fields(s: RunSums) -> tuple[FloatArray, ...]:
+    return (s.squares, s.counts, s.untracked, s.zone)
 
 
-def _bound_sums(runs: CrossingRuns, site: Site, case: Case, veh: VehicleClass) -> tuple[_Sum, _Sum]:
-    """Road-aligned PCRLB variances of position [m^2] and speed [m^2/s^2] over the zone."""
+def zone_epochs(runs: CrossingRuns, zone_m: float) -> BoolArray:
+    """Epochs with the vehicle's front in the controlled zone (stopped or moving)."""
+    return (runs.along_road_m >= 0) & (runs.along_road_m <= zone_m)
+
+
+def scored_epochs(started: BoolArray, runs: CrossingRuns, zone_m: float) -> BoolArray:
+    """Scored epochs: in the zone, from ``WARM_UP_S`` after the track start (``started``)."""
+    first = np.argmax(started, axis=1)
+    t0 = np.take_along_axis(runs.true_times, first[:, None], axis=1)
+    warm = started & (runs.true_times >= t0 + WARM_UP_S)
+    return warm & zone_epochs(runs, zone_m)
+
+
+def run_sums(est: TrackEstimates, runs: CrossingRuns, zone_m: float) -> RunSums:
+    """Per-run squared errors of a tracker's estimates over the scored epochs."""
+    scored = scored_epochs(np.isfinite(est.speed), runs, zone_m)
+    zone = zone_epochs(runs, zone_m)
+    slow = runs.speed * 3.6 <= SPEED_SPLIT_KMH
+    pos_err = np.where(scored, np.sum((est.position - runs.position) ** 2, axis=-1), 0.0)
+    spd_err = np.where(scored, est.speed - runs.speed, 0.0)
+    rel_err = np.where(scored & ~slow, spd_err / np.where(slow, 1.0, runs.speed), 0.0)
+    return RunSums(
+        np.stack(
+            [
+                pos_err.sum(axis=1),
+                np.where(slow, (3.6 * spd_err) ** 2, 0.0).sum(axis=1),
+                (rel_err**2).sum(axis=1),
+            ],
+            -1,
+        ),
+        np.stack(
+            [scored.sum(axis=1), (scored & slow).sum(axis=1), (scored & ~slow).sum(axis=1)], -1
+        ).astype(float),
+        (zone & ~scored).sum(axis=1).astype(float),
+        zone.sum(axis=1).astype(float),
+    )
+
+
+def score(
+    est: TrackEstimates, runs: CrossingRuns, zone_m: float
+) -> tuple[float, float, float, int]:
+    """Position RMS [m], speed RMS [km/h] (<= 100 km/h), relative speed RMS (> 100), epochs."""
+    sums = run_sums(est, runs, zone_m)
+    pos, spd, rel = sums.rms()
+    return float(pos), float(spd), float(rel), int(sums.counts[:, 0].sum())
+
+
+def _bound_sums(runs: CrossingRuns, site: Site, case: Case, veh: VehicleClass) -> RunSums:
+    """Road-aligned PCRLB variances as per-run sums (position [m^2], speed [(km/h)^2])."""
     pos_var, spd_var = road_pcrlb(
         runs.times,
         runs.detected,
@@ -189,9 +280,17 @@ def _bound_sums(runs: CrossingRuns, site: Site, case: Case, veh: VehicleClass) -
         model=BOUND_MODEL,
         scatter_std_m=veh.scatter_std_m,
     )
-    zone = scored_epochs(np.isfinite(pos_var), runs, site.zone_m)
-    slow = zone & (3.6 * runs.speed <= SPEED_SPLIT_KMH)
-    return _sum(pos_var[zone]), _sum(spd_var[slow])
+    scored = scored_epochs(np.isfinite(pos_var), runs, site.zone_m)
+    slow = scored & (3.6 * runs.speed <= SPEED_SPLIT_KMH)
+    zeros = np.zeros(runs.speed.shape[0])
+    pos_sum = np.where(scored, pos_var, 0.0).sum(axis=1)
+    spd_sum = np.where(slow, 3.6**2 * spd_var, 0.0).sum(axis=1)
+    return RunSums(
+        np.stack([pos_sum, spd_sum, zeros], -1),
+        np.stack([scored.sum(1), slow.sum(1), zeros], -1).astype(float),
+        zeros,
+        zeros,
+    )
 
 
 def case_bound(
@@ -201,41 +300,11 @@ def case_bound(
 
     Returns RMS position [m] and speed [km/h, true speed <= 100 km/h] bounds of the case.
     """
-    pos, spd = _bound_sums(runs, site, case, veh)
-    return pos.rms(), 3.6 * spd.rms()
+    pos, spd, _ = _bound_sums(runs, site, case, veh).rms()
+    return float(pos), float(spd)
 
 
-def scored_epochs(started: BoolArray, runs: CrossingRuns, zone_m: float) -> BoolArray:
-    """Scored epochs: in the zone, 1 s after the track start, while moving."""
-    first = np.argmax(started, axis=1)
-    t0 = np.take_along_axis(runs.true_times, first[:, None], axis=1)
-    return (
-        started
-        & (runs.along_road_m >= 0)
-        & (runs.along_road_m <= zone_m)
-        & (runs.speed > 0.2)
-        & (runs.true_times >= t0 + 1.0)
-    )
-
-
-def _score_sums(est: TrackEstimates, runs: CrossingRuns, zone_m: float) -> tuple[_Sum, _Sum, _Sum]:
-    """Sum squared errors: position [m^2], speed [(km/h)^2] (<= 100 km/h), relative speed."""
-    zone = scored_epochs(np.isfinite(est.speed), runs, zone_m)
-    ep = np.sum((est.position - runs.position) ** 2, axis=-1)[zone]
-    ev = (est.speed - runs.speed)[zone]
-    slow = 3.6 * runs.speed[zone] <= SPEED_SPLIT_KMH
-    return _sum(ep), _sum((3.6 * ev[slow]) ** 2), _sum((ev[~slow] / runs.speed[zone][~slow]) ** 2)
-
-
-def score(
-    est: TrackEstimates, runs: CrossingRuns, zone_m: float
-) -> tuple[float, float, float, int]:
-    """Position RMS [m], speed RMS [km/h] (<= 100 km/h), relative speed RMS (> 100), epochs."""
-    pos, spd, rel = _score_sums(est, runs, zone_m)
-    return pos.rms(), spd.rms(), rel.rms(), pos.count
-
-
-BlockSums = tuple[dict[str, tuple[_Sum, _Sum, _Sum]], tuple[_Sum, _Sum]]
+BlockSums = tuple[dict[str, RunSums], RunSums | None]
 
 
 def _block(
@@ -250,10 +319,10 @@ def _block(
     """Simulate one block of runs of a class x case; sums of every tracker (and the bound)."""
     runs = simulate_site_case(site, case, veh, n_runs=n_runs, rng=np.random.default_rng(seed))
     sums = {
-        name: _score_sums(tracker(runs, site, case, veh), runs, site.zone_m)
+        name: run_sums(tracker(runs, site, case, veh), runs, site.zone_m)
         for name, tracker in trackers.items()
     }
-    return sums, _bound_sums(runs, site, case, veh) if bound else (_Sum(), _Sum())
+    return sums, _bound_sums(runs, site, case, veh) if bound else None
 
 
 def _blocks(
@@ -273,22 +342,45 @@ def _blocks(
     return list(zip(sizes, seeds, strict=True))
 
 
-def _rows(case: Case, veh: VehicleClass, blocks: list[BlockSums]) -> list[ComplianceRow]:
-    """Merge the blocks of a class x case into one row per tracker."""
-    bound_p = sum((b[1][0] for b in blocks), _Sum()).rms()
-    bound_s = 3.6 * sum((b[1][1] for b in blocks), _Sum()).rms()
+def rows_of_pair(
+    case: Case, veh: VehicleClass, blocks: list[BlockSums], confidence: float = CONFIDENCE
+) -> list[ComplianceRow]:
+    """Merge the blocks of a class x case into one row per tracker, with bounds and verdict."""
+    bound = [b[1] for b in blocks if b[1] is not None]
+    pcrlb = sum(bound[1:], bound[0]).rms() if bound else np.full(3, np.nan)
     rows = []
     for name in blocks[0][0]:
-        pos_s, spd_s, rel_s = (sum((b[0][name][j] for b in blocks), _Sum()) for j in range(3))
-        pos, spd, rel = pos_s.rms(), spd_s.rms(), rel_s.rms()
-        ok = (
-            pos <= POSITION_LIMIT_M
-            and (math.isnan(spd) or spd <= SPEED_LIMIT_KMH)
-            and (math.isnan(rel) or rel <= SPEED_LIMIT_REL)
-        )
+        parts = [b[0][name] for b in blocks]
+        sums = sum(parts[1:], parts[0])
+        rms, lower, upper = rms_with_bounds(sums.squares, sums.counts, confidence)
+        scored = np.asarray(np.isfinite(rms), dtype=bool)
+        if np.any(lower[scored] > LIMITS[scored]):
+            verdict = "fail"
+        elif np.all(upper[scored] <= LIMITS[scored]) and scored[0]:
+            verdict = "pass"
+        else:
+            verdict = "undecided"
+        zone = float(sums.zone.sum())
         rows.append(
             ComplianceRow(
-                name, veh.name, case.name, pos, spd, 100 * rel, ok, pos_s.count, bound_p, bound_s
+                name,
+                veh.name,
+                case.name,
+                float(rms[0]),
+                float(rms[1]),
+                float(100 * rms[2]),
+                float(upper[0]),
+                float(upper[1]),
+                float(100 * upper[2]),
+                float(lower[0]),
+                float(lower[1]),
+                float(100 * lower[2]),
+                verdict,
+                int(sums.counts[:, 0].sum()),
+                int(sums.counts[:, 1].sum()),
+                100 * float(sums.untracked.sum()) / zone if zone else math.nan,
+                float(pcrlb[0]),
+                float(pcrlb[1]),
             )
         )
     return rows
@@ -301,20 +393,20 @@ def evaluate_pair(
     n_runs: int,
     seed: np.random.SeedSequence,
     trackers: dict[str, Tracker] | None = None,
-    tuned_m1: tuple[float, float] | None = None,
     bound: bool = True,
+    confidence: float = CONFIDENCE,
 ) -> list[ComplianceRow]:
     """Simulate one class x case ``n_runs`` times and score every tracker on the same runs.
 
     Runs go in blocks of up to ``RUN_BLOCK_STEPS`` run-steps with their own seed streams.
     ``bound=False`` skips the PCRLB (NaN in the rows).
     """
-    trackers = default_trackers(tuned_m1) if trackers is None else trackers
+    trackers = default_trackers() if trackers is None else trackers
     blocks = [
         _block(site, case, veh, size, ss, trackers, bound)
         for size, ss in _blocks(n_runs, site_scan_count(site, case, veh), seed)
     ]
-    return _rows(case, veh, blocks)
+    return rows_of_pair(case, veh, blocks, confidence)
 
 
 def evaluate_site(
@@ -322,18 +414,21 @@ def evaluate_site(
     n_runs: int,
     seed: int,
     *,
-    cases: tuple[Case, ...] = DEFAULT_CASES,
-    classes: dict[str, VehicleClass] | None = None,
+    cases: tuple[Case, ...] | None = None,
+    classes: tuple[str, ...] | None = None,
     trackers: dict[str, Tracker] | None = None,
     pool: TaskPool | None = None,
-    tuned_m1: tuple[float, float] | None = None,
     progress: Callable[[str], None] | None = None,
     bound: bool = True,
+    baseline: str | None = "road EKF (CV)",
+    confidence: float = CONFIDENCE,
 ) -> ComplianceResult:
     """Simulate every applicable class x case ``n_runs`` times and score every tracker.
 
-    ``bound=False`` leaves out the road-aligned PCRLB of each case (a diagnostic; the verdict
-    does not use it).
+    ``cases``/``classes`` restrict the site's (class, case) pairs; ``bound=False`` leaves out
+    the road-aligned PCRLB of each case (a diagnostic; the verdict does not use it);
+    ``baseline`` names the tracker the gains are computed against (the rectilinear model of
+    seed 001's claims), if present.
 
     Blocks of up to ``RUN_BLOCK_STEPS`` run-steps of each (class, case) pair are the tasks of
     ``pool`` (in-process when None, e.g. a Dask cluster from
@@ -341,10 +436,13 @@ def evaluate_site(
     does not depend on the pool.
     """
     start = time.perf_counter()
-    classes = VEHICLES if classes is None else classes
-    pairs = [(c, v) for v in classes.values() for c in cases if applicable(c, v)]
+    pairs = [
+        (c, v)
+        for c, v in site.pairs()
+        if (cases is None or c in cases) and (classes is None or v.name in classes)
+    ]
     seeds = np.random.SeedSequence(seed).spawn(len(pairs))
-    trackers = default_trackers(tuned_m1) if trackers is None else trackers
+    trackers = default_trackers() if trackers is None else trackers
     pool = TaskPool() if pool is None else pool
     site_handle = pool.share(site)
     tasks = [
@@ -362,25 +460,33 @@ def evaluate_site(
 
     results = pool.map(_block, [args for _, args in tasks], progress=done)
     by_pair: dict[int, list[BlockSums]] = defaultdict(list)
-    for (pair, _), result in zip(tasks, results, strict=True):
-        by_pair[pair].append(result)
-    per_pair = [_rows(c, v, by_pair[i]) for i, (c, v) in enumerate(pairs)]
-    rows = [row for pair_rows in per_pair for row in pair_rows]
-    names = list(trackers)
-    worst = {}
-    for name in names:
-        mine = [r for r in rows if r.filter == name]
-        worst[name] = {
-            "position_rms_m": max(r.position_rms_m for r in mine),
-            "speed_rms_kmh": max(
-                (r.speed_rms_kmh for r in mine if not math.isnan(r.speed_rms_kmh)), default=math.nan
-            ),
-            "all_pass": float(all(r.passed for r in mine)),
-        }
+    for (pair, _), block in zip(tasks, results, strict=True):
+        by_pair[pair].append(block)
+    rows = [
+        row for i, (c, v) in enumerate(pairs) for row in rows_of_pair(c, v, by_pair[i], confidence)
+    ]
+    result = ComplianceResult(
+        site.name, n_runs, seed, rows, time.perf_counter() - start, confidence
+    )
+    if baseline is None or baseline not in trackers:
+        return result
+    return ComplianceResult(
+        result.site,
+        n_runs,
+        seed,
+        rows,
+        result.elapsed_s,
+        confidence,
+        gains_over(rows, baseline),
+    )
+
+
+def gains_over(rows: list[ComplianceRow], baseline: str) -> dict[str, dict[str, float]]:
+    """Pooled RMS gain [%] of every estimator over ``baseline`` (seed 001's claim: +3 % / +9 %)."""
+    base = {(r.vehicle_class, r.case): r for r in rows if r.filter == baseline}
     gain = {}
-    base = {(r.vehicle_class, r.case): r for r in rows if r.filter == "road EKF (CV)"}
-    for name in names:
-        if name == "road EKF (CV)" or not base:
+    for name in dict.fromkeys(r.filter for r in rows):
+        if name == baseline:
             continue
         mine = [r for r in rows if r.filter == name]
         p0 = math.sqrt(np.mean([base[(r.vehicle_class, r.case)].position_rms_m ** 2 for r in mine]))
@@ -393,17 +499,22 @@ def evaluate_site(
         s0 = math.sqrt(np.mean([a**2 for a, _ in s_pairs]))
         s1 = math.sqrt(np.mean([b**2 for _, b in s_pairs]))
         gain[name] = {"position": 100 * (1 - p1 / p0), "speed": 100 * (1 - s1 / s0)}
-    return ComplianceResult(site.name, n_runs, seed, rows, time.perf_counter() - start, worst, gain)
+    return gain
 
 
 __all__ = [
+    "CONFIDENCE",
     "ComplianceResult",
     "ComplianceRow",
-    "PlanarTracker",
-    "RoadTracker",
+    "RunSums",
     "default_trackers",
     "evaluate_pair",
     "evaluate_site",
+    "gains_over",
+    "requirement_ratio",
+    "rows_of_pair",
+    "run_sums",
     "score",
     "scored_epochs",
+    "zone_epochs",
 ]

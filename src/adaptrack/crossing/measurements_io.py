@@ -18,7 +18,6 @@ from .._typing import FloatArray
 from ..io.tables import DataFormatError, numeric_column, read_table, require_columns
 from .radar_sim import CrossingRuns
 from .site import Site
-from .traffic import VEHICLES
 
 COLUMNS = ["object_id", "radar", "time_s", "range_m", "azimuth_rad", "radial_speed_mps"]
 
@@ -80,6 +79,8 @@ def read_detections(path: str | Path, site: Site) -> list[ObjectDetections]:
     require_columns(
         frame, ["object_id", "radar", "time_s", "range_m", az_col, "radial_speed_mps"], p
     )
+    if frame.empty:
+        raise DataFormatError(f"{p}: no detections (the table has a header but no rows)")
     oid = numeric_column(frame, "object_id", p)
     if np.any(oid != np.round(oid)):
         row = int(np.argmax(oid != np.round(oid)))
@@ -127,10 +128,10 @@ def read_detections(path: str | Path, site: Site) -> list[ObjectDetections]:
         cls = None
         if "vehicle_class" in frame.columns:
             cls = str(frame["vehicle_class"].iloc[sel[0]])
-            if cls not in VEHICLES:
+            if cls not in site.classes:
                 raise DataFormatError(
                     f"{p}: row {sel[0] + 1}, column 'vehicle_class': unknown "
-                    f"class {cls!r}; expected one of {sorted(VEHICLES)}"
+                    f"class {cls!r}; expected one of {sorted(site.classes)}"
                 )
         out.append(
             ObjectDetections(

@@ -2,12 +2,15 @@
 
 Per scan (period ``T``, timestamps jittered by up to ``time_jitter_s``) a detection gives
 slant range, azimuth (clockwise from north, with the radar's calibration bias) and radial
-speed (positive receding), with Gaussian noise. Effects that decide accuracy in practice are
-simulated: the reflection point wanders along the body (``N(0, (0.15 L)^2)`` about the front
-face), the vehicle drives off the lane centre (a constant offset per run), detections are lost
-with probability ``1 - P_D``, outside the field of view and range, and below the Doppler gate
-(a vehicle stopped at the barrier vanishes); radial speed optionally folds at
-``+-max_unambiguous_speed_mps``. Truth is the front reference point at the lane offset.
+speed (positive receding), with Gaussian noise whose standard deviations are the radar's
+curves at the true geometry (range and radial-speed sigma against range, azimuth sigma against
+the angle off boresight). Effects that decide accuracy in practice are simulated: the
+reflection point wanders along the body (``N(0, sigma_b^2)`` about the front face, ``sigma_b``
+the class's scatter), the vehicle drives off the lane centre (a constant offset per run, the
+vehicle kept inside its lane), detections are lost with probability ``1 - P_D(class, range)``,
+outside every field of view and below the Doppler gate (a vehicle stopped at the barrier
+vanishes); radial speed optionally folds at ``+-max_unambiguous_speed_mps``. Truth is the
+front reference point at the lane offset.
 """
 
 from __future__ import annotations
@@ -19,7 +22,8 @@ import numpy as np
 from .._typing import BoolArray, FloatArray
 from ._radar_kernel import detections_kernel
 from .road import Road
-from .site import RadarSpec, Site
+from .sensor import RadarSpec, curve_tables
+from .site import Site
 from .traffic import Case, VehicleClass, along_road_profile, case_duration, random_profiles
 
 
@@ -67,7 +71,6 @@ def simulate_case(
     rng: np.random.Generator,
     start_m: float,
     stop_line_m: float,
-    detection_probability: float,
     lateral_offset_std_m: float,
 ) -> CrossingRuns:
     """Simulate ``n_runs`` approaches of one vehicle class in one case."""
@@ -79,18 +82,14 @@ def simulate_case(
     else:  # one profile for every run: the road geometry once (broadcast below)
         on_road, v, _ = along_road_profile(case, vehicle, start_m, stop_line_m, t_true)
         s, v = np.broadcast_to(on_road, (n_runs, n)), np.broadcast_to(v, (n_runs, n))
-    half = 0.5 * road.lane_width_m - 0.5 * 2.0  # keep a 2 m wide vehicle inside its lane
+    half = max(0.5 * (road.lane_width_m - vehicle.width_m), 0.0)  # the vehicle stays in lane
     offset = np.clip(rng.normal(0.0, lateral_offset_std_m, n_runs), -half, half)
     pos = road.lane_point(on_road, offset[:, None])
     direction = road.inbound_direction(on_road)
     vel = v[..., None] * direction
     # reflection point: along the body about the front face
     scatter = rng.normal(0.0, vehicle.scatter_std_m, (n_runs, n))
-    noise = rng.standard_normal((n_runs, n, 3)) * [
-        radar.range_std_m,
-        radar.azimuth_std_rad,
-        radar.radial_speed_std_mps,
-    ]
+    noise = rng.standard_normal((n_runs, n, 3))  # scaled by the noise curves in the kernel
     draw = rng.uniform(size=(n_runs, n))
     jitter = rng.uniform(-radar.time_jitter_s, radar.time_jitter_s, (n_runs, n))
     radar_arr = np.array(
@@ -99,9 +98,7 @@ def simulate_case(
             radar.height_m,
             radar.azimuth_bias_rad,
             radar.boresight_rad,
-            radar.fov_half_rad,
             radar.min_range_m,
-            radar.max_range_m,
             radar.min_radial_speed_mps,
             radar.max_unambiguous_speed_mps or 0.0,
         ]
@@ -116,7 +113,9 @@ def simulate_case(
         noise,
         draw,
         radar_arr,
-        detection_probability,
+        radar.field_table(),
+        *radar.noise_table(),
+        *curve_tables((radar.detection_curve(vehicle.name),)),
         meas,
         detected,
     )
@@ -153,10 +152,7 @@ def simulate_site_case(
         rng=rng,
         start_m=site.zone_m + site.run_in_m,
         stop_line_m=site.stop_line_m,
-        detection_probability=float(
-            site.settings.get("detection_probability", {}).get(vehicle.name, 0.95)
-        ),
-        lateral_offset_std_m=float(site.settings.get("lateral_offset_std_m", 0.3)),
+        lateral_offset_std_m=site.lateral_offset_std_m,
     )
 
 

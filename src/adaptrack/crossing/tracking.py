@@ -15,17 +15,28 @@ The measurement noise knows the class-dependent wander of the reflection point a
 (a rank-one term ``sigma_b^2 J u u^T J^T``, ``u`` the direction of travel). A track starts at
 its first detection (position from range and azimuth with the known radar height, speed from
 the radial speed along the line of sight); before that its estimates are NaN.
+
+A missed detection is information too. Inside the radar's field of view a scan without a
+detection is either a miss (probability ``1 - P_D``) or a target below the Doppler gate ``g``
+(``|v_r| < g``: a stopped or crossing vehicle). With the predicted radial speed
+``N(mu, sigma^2)``, ``p_g = P(|v_r| < g)`` and ``P(no detection) = p_g + (1 - P_D)(1 - p_g)``;
+where the gate is the likelier explanation (``p_g > P(no detection) / 2``) the filter applies
+it as a pseudo-measurement of the radial speed, 0 with variance ``g^2 / 3`` (uniform on
+``(-g, g)``). A vehicle stopped behind the gate is thus held, with a bounded covariance,
+instead of coasting away; the IMM uses ``P(no detection | mode)`` as the mode likelihood.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.special import ndtr
 
 from .._backend import Backend, use_compiled
+from .._linalg import symmetrize
 from .._typing import BoolArray, FloatArray
 from ..filters.kalman import CovarianceError, _update, predict
 from ..models.continuous import ConstantVelocity, MotionModel
@@ -34,10 +45,10 @@ from ..models.series_table import SeriesTable, model_series_table
 from ..types import GaussianState, _trusted
 from ._ekf_kernels import FREE, ROAD
 from .road import Road
-from .site import RadarSpec
+from .sensor import Curve, RadarSpec, curve_tables
 
 CROSS_LOS_SPEED_STD_MPS = 10.0
-COMPILED_MIN_RUN_STEPS = 5_000  # "auto" runs the compiled EKF from this many run-steps on
+COMPILED_MIN_RUN_STEPS = 0  # "auto" always runs the compiled EKFs (the kernel wins at any size)
 
 
 @dataclass(frozen=True, eq=False)
@@ -73,16 +84,22 @@ def _polar_jacobian(
     return z, jp, jv
 
 
+def _polar_cov(jac: FloatArray, range_var: FloatArray, azimuth_var: FloatArray) -> FloatArray:
+    """Planar covariance ``J diag(range_var, azimuth_var) J^T`` (..., 2, 2) of a detection."""
+    return np.einsum("...ik,...k,...jk->...ij", jac, np.stack([range_var, azimuth_var], -1), jac)
+
+
 def _wrap(a: FloatArray) -> FloatArray:
     return (a + np.pi) % (2 * np.pi) - np.pi
 
 
 def _measurement_cov(
-    radar: RadarSpec, jp: FloatArray, direction: FloatArray, scatter_std_m: float
+    radar: RadarSpec, zp: FloatArray, jp: FloatArray, direction: FloatArray, scatter_std_m: float
 ) -> FloatArray:
-    r0 = np.diag([radar.range_std_m**2, radar.azimuth_std_rad**2, radar.radial_speed_std_mps**2])
+    """Radar noise at the predicted geometry ``zp`` (N, 3) plus the rank-one body scatter."""
+    std = np.stack(radar.noise_std(zp[..., 0], zp[..., 1]), -1)
     b = np.einsum("...ij,...j->...i", jp, direction)
-    return r0 + scatter_std_m**2 * b[..., :, None] * b[..., None, :]
+    return std[..., :, None] ** 2 * np.eye(3) + scatter_std_m**2 * b[..., :, None] * b[..., None, :]
 
 
 def _initial_point(z: FloatArray, radar: RadarSpec) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -98,28 +115,95 @@ class _Compiled:
 
     kind: int  # _ekf_kernels.ROAD or FREE
     k: int  # along-road model size (ROAD)
-    radar: FloatArray  # x, y, height, range / azimuth / radial-speed standard deviations
+    radar: FloatArray  # x, y, height, boresight, min range, Doppler gate
+    noise_tab: FloatArray  # (3, 2, K) range / azimuth / radial-speed sigma curves
+    noise_cnt: np.ndarray  # (3,) their point counts
+    fields: FloatArray  # (F, 2) fields of view: max range, half angle
+    pd_tab: FloatArray  # (1, 2, K) detection probability against range
+    pd_cnt: np.ndarray  # (1,)
     road: FloatArray  # (5, S) centreline s, x, y, heading, curvature (ROAD)
     half_width_m: float
     scatter_std_m: float
 
 
 def _compiled_spec(
-    kind: int, radar: RadarSpec, scatter_std_m: float, k: int = 0, road: Road | None = None
+    kind: int, misses: _Misses, scatter_std_m: float, k: int = 0, road: Road | None = None
 ) -> _Compiled:
+    radar = misses.radar
     radar_arr = np.array(
         [
             *radar.position_m,
             radar.height_m,
-            radar.range_std_m,
-            radar.azimuth_std_rad,
-            radar.radial_speed_std_mps,
+            radar.boresight_rad,
+            radar.min_range_m,
+            radar.min_radial_speed_mps,
         ]
     )
+    sensor = (*radar.noise_table(), radar.field_table(), *curve_tables((misses.detection,)))
     if road is None:
-        return _Compiled(kind, k, radar_arr, np.zeros((5, 2)), 0.0, scatter_std_m)
+        return _Compiled(kind, k, radar_arr, *sensor, np.zeros((5, 2)), 0.0, scatter_std_m)
     table = np.stack([road.s, road.xy[:, 0], road.xy[:, 1], road.heading, road.curvature])
-    return _Compiled(kind, k, radar_arr, table, 0.5 * road.lane_width_m, scatter_std_m)
+    return _Compiled(kind, k, radar_arr, *sensor, table, 0.5 * road.lane_width_m, scatter_std_m)
+
+
+@dataclass(frozen=True)
+class _Misses:
+    """What a scan without a detection tells: the radar's view and Doppler gate, and P_D."""
+
+    radar: RadarSpec
+    detection: Curve
+
+
+def _misses(radar: RadarSpec, detection_probability: Curve | None) -> _Misses:
+    curve = (
+        radar.detection_curve("default") if detection_probability is None else detection_probability
+    )
+    return _Misses(radar, curve)
+
+
+def _detection_step(
+    prior: GaussianState,
+    zpred: FloatArray,
+    h: FloatArray,
+    r: FloatArray,
+    z: FloatArray,
+    detected: BoolArray,
+    started: BoolArray,
+    misses: _Misses,
+) -> tuple[GaussianState, FloatArray]:
+    """Update tracks on their detections (N, 3), or on the Doppler gate where it explains a miss.
+
+    ``zpred``, ``h`` (N, 3, n), ``r`` are the measurement model at the prior mean. Returns
+    the posterior and the log-likelihood of the scan per run (of the detection, or of the
+    miss inside the field of view; 0 otherwise).
+    """
+    n_runs = detected.shape[0]
+    upd = detected & started
+    z_eff = np.where(upd[:, None], np.nan_to_num(z), zpred)
+    resid = z_eff - zpred
+    resid[:, 1] = _wrap(resid[:, 1])
+    lin = resid + np.einsum("nij,nj->ni", h, prior.mean)
+    post, info = _update(prior, lin, h, r, np.broadcast_to(upd[:, None], (n_runs, 3)), "joseph")
+    loglik = np.where(upd, info.log_likelihood, 0.0)
+    miss = started & ~detected & misses.radar.in_view(zpred[:, 0], zpred[:, 1])
+    if not miss.any():
+        return post, loglik
+    h_vr = h[:, 2, :]
+    var = np.einsum("na,nab,nb->n", h_vr, prior.cov, h_vr)
+    sd = np.sqrt(np.maximum(var, 1e-24))
+    gate = misses.radar.min_radial_speed_mps
+    mu = zpred[:, 2]
+    p_gate = ndtr((gate - mu) / sd) - ndtr((-gate - mu) / sd)
+    p_det = misses.detection(zpred[:, 0])
+    p_miss = p_gate + (1.0 - p_det) * (1.0 - p_gate)
+    gated = miss & (p_gate > 0.5 * p_miss) & (gate > 0)
+    lin1 = -mu + np.einsum("na,na->n", h_vr, prior.mean)  # pseudo-measurement v_r = 0
+    post, _ = _update(
+        post, lin1[:, None], h[:, 2:3, :], np.full((n_runs, 1, 1), gate**2 / 3), gated[:, None],
+        "joseph",
+    )  # fmt: skip
+    with np.errstate(divide="ignore"):
+        return post, np.where(miss, np.log(p_miss), loglik)
 
 
 def _run(
@@ -130,6 +214,7 @@ def _run(
     transition: Callable[[FloatArray], tuple[FloatArray, FloatArray]],
     measure: Callable[[FloatArray], tuple[FloatArray, FloatArray, FloatArray]],
     initial: Callable[[FloatArray], tuple[FloatArray, FloatArray]],
+    misses: _Misses,
     constrain: Callable[[FloatArray], FloatArray] | None = None,
 ) -> tuple[FloatArray, FloatArray]:
     """Run the batched EKF loop (NumPy reference); each run starts at its first detection.
@@ -152,13 +237,7 @@ def _run(
         if constrain is not None:
             state = _trusted(GaussianState, mean=constrain(state.mean), cov=state.cov, time=t)
         zpred, h, r = measure(state.mean)
-        upd = detected[:, k] & started
-        z_eff = z[:, k].copy()
-        z_eff[~upd] = zpred[~upd]
-        resid = z_eff - zpred
-        resid[:, 1] = _wrap(resid[:, 1])
-        lin = resid + np.einsum("nij,nj->ni", h, state.mean)
-        post, _ = _update(state, lin, h, r, np.broadcast_to(upd[:, None], (n_runs, 3)), "joseph")
+        post, _ = _detection_step(state, zpred, h, r, z[:, k], detected[:, k], started, misses)
         mean, cov = np.array(post.mean), np.array(post.cov)
         new = detected[:, k] & ~started
         if new.any():
@@ -221,6 +300,11 @@ def _run_compiled(
         p0,
         spec.k,
         spec.radar,
+        spec.noise_tab,
+        spec.noise_cnt,
+        spec.fields,
+        spec.pd_tab,
+        spec.pd_cnt,
         c(spec.road),
         spec.half_width_m,
         spec.scatter_std_m,
@@ -252,12 +336,15 @@ def track_free_2d(
     *,
     model: MotionModel | None = None,
     scatter_std_m: float = 0.0,
+    detection_probability: Curve | None = None,
     backend: Backend = "auto",
 ) -> TrackEstimates:
     """Planar EKF ``[x, y, vx, vy]`` on (range, azimuth, radial speed) detections.
 
-    ``backend``: ``"numpy"`` (reference), ``"numba"`` (compiled, same numbers to rounding) or
-    ``"auto"`` (compiled from 5,000 run-steps on).
+    ``detection_probability``: P_D against range of the tracked class (default: the radar's
+    ``default`` curve), for the meaning of a missed detection. ``backend``: ``"numpy"``
+    (reference), ``"numba"`` (compiled, same numbers to rounding) or ``"auto"`` (the
+    compiled kernel, once numba has compiled and cached it).
     """
     model = ConstantVelocity(accel_psd=10.0, n_axes=2) if model is None else model
     if model.state_names[:4] != ("x", "y", "vx", "vy"):
@@ -279,7 +366,7 @@ def track_free_2d(
             x[:, 2:4] / np.maximum(speed, 1e-9),
             -rel / np.linalg.norm(rel, axis=-1, keepdims=True),
         )
-        return zp, h, _measurement_cov(radar, jp, u, scatter_std_m)
+        return zp, h, _measurement_cov(radar, zp, jp, u, scatter_std_m)
 
     def initial(zk: FloatArray) -> tuple[FloatArray, FloatArray]:
         p, los, rho = _initial_point(zk, radar)
@@ -289,24 +376,22 @@ def track_free_2d(
         mean[:, 2:4] = (zk[:, 2] * zk[:, 0] / rho)[:, None] * los
         perp = np.stack([los[:, 1], -los[:, 0]], -1)
         jac = np.stack([los * (zk[:, 0] / rho)[:, None], rho[:, None] * perp], -1)
-        pos_cov = (
-            jac
-            @ np.diag([radar.range_std_m**2 + scatter_std_m**2, radar.azimuth_std_rad**2])
-            @ np.swapaxes(jac, -1, -2)
-        )
+        sr, saz, svr = radar.noise_std(zk[:, 0], zk[:, 1])
+        pos_cov = _polar_cov(jac, sr**2 + scatter_std_m**2, saz**2)
         cov = np.zeros((m, n, n))
         cov[:, :2, :2] = pos_cov
-        cov[:, 2:4, 2:4] = ((radar.radial_speed_std_mps * zk[:, 0] / rho) ** 2)[:, None, None] * (
+        cov[:, 2:4, 2:4] = ((svr * zk[:, 0] / rho) ** 2)[:, None, None] * (
             los[:, :, None] * los[:, None, :]
         ) + CROSS_LOS_SPEED_STD_MPS**2 * (perp[:, :, None] * perp[:, None, :])
         for i in range(4, n):
             cov[:, i, i] = 9.0
         return mean, cov
 
+    misses = _misses(radar, detection_probability)
     if use_compiled(backend, detected.size, threshold=COMPILED_MIN_RUN_STEPS):
-        spec = _compiled_spec(FREE, radar, scatter_std_m)
+        spec = _compiled_spec(FREE, misses, scatter_std_m)
         return _run_compiled(times, z, detected, _series(model, times), initial, spec, n)
-    means, covs = _run(times, z, detected, n, transition, measure, initial)
+    means, covs = _run(times, z, detected, n, transition, measure, initial, misses)
     vel = means[..., 2:4]
     return TrackEstimates(means[..., :2], vel, np.linalg.norm(vel, axis=-1), covs[..., :2, :2])
 
@@ -352,9 +437,67 @@ def _road_measure(
         h[:, :, 0] = np.einsum("nij,nj->ni", jp, dpos_ds) + np.einsum("nij,nj->ni", jv, dvel_ds)
         h[:, :, 1] = np.einsum("nij,nj->ni", jv, tangent)
         h[:, :, k] = np.einsum("nij,nj->ni", jp, right)
-        return zp, h, _measurement_cov(radar, jp, -tangent, scatter_std_m)
+        return zp, h, _measurement_cov(radar, zp, jp, -tangent, scatter_std_m)
 
     return measure
+
+
+def _check_road_model(model: MotionModel) -> None:
+    if model.state_names[:2] != ("x", "vx"):
+        raise ValueError("the road trackers need one-axis models with states (x, vx, ...)")
+    _check_no_input(model)
+
+
+def _road_initial(
+    zk: FloatArray,
+    radar: RadarSpec,
+    road: Road,
+    model: MotionModel,
+    scatter_std_m: float,
+    lateral_std_m: float,
+) -> tuple[FloatArray, FloatArray]:
+    """Road state ``[model states, d]`` (m, k + 1) and covariance of first detections (m, 3).
+
+    Along-road position and lateral offset from the projected detection, speed from the
+    radial speed along the line of sight (vague where the road runs across it).
+    """
+    k = model.state_dim
+    n = k + 1
+    p, _, _ = _initial_point(zk, radar)
+    s0, d0 = road.project(p)
+    tangent = -road.inbound_direction(s0)
+    rel = road.lane_point(s0, d0) - np.asarray(radar.position_m)
+    r = np.sqrt(np.sum(rel**2, -1) + radar.height_m**2)
+    along = np.einsum("ni,ni->n", rel, tangent) / r
+    ok = np.abs(along) > 0.3
+    vs0 = np.where(ok, zk[:, 2] / np.where(ok, along, 1.0), 0.0)
+    m = zk.shape[0]
+    mean = np.zeros((m, n))
+    mean[:, 0], mean[:, 1], mean[:, k] = s0, vs0, np.clip(d0, -1.0, 1.0)
+    cov = np.zeros((m, n, n))
+    cov[:, 0, 0] = 1.0 + scatter_std_m**2
+    svr = radar.noise_std(zk[:, 0], zk[:, 1])[2]
+    cov[:, 1, 1] = np.where(ok, (svr / np.where(ok, np.abs(along), 1.0)) ** 2 + 1.0, 30.0**2)
+    for i in range(2, k):
+        cov[:, i, i] = 9.0 if model.state_names[i].startswith("a") else 25.0
+    cov[:, k, k] = lateral_std_m**2
+    return mean, cov
+
+
+def _no_reversal(k: int) -> Callable[[FloatArray], FloatArray]:
+    """Hold a track whose predicted along-road speed changes sign at standstill.
+
+    An approaching vehicle does not reverse: a track coasting through a stop hidden by the
+    Doppler gate would otherwise drive backwards.
+    """
+
+    def constrain(x: FloatArray) -> FloatArray:
+        out = np.array(x)
+        rev = out[:, 1] > 0
+        out[rev, 1:k] = 0.0
+        return out
+
+    return constrain
 
 
 def track_on_road(
@@ -366,6 +509,7 @@ def track_on_road(
     *,
     model: MotionModel,
     scatter_std_m: float = 0.0,
+    detection_probability: Curve | None = None,
     lateral_psd: float = 0.01,
     lateral_std_m: float = 0.5,
     backend: Backend = "auto",
@@ -373,53 +517,265 @@ def track_on_road(
     """Road-constrained EKF: one-axis ``model`` for the along-road coordinate + lateral offset.
 
     ``model`` states are ``[s, ds/dt, ...]`` (e.g. ``ConstantAcceleration()``,
-    ``ShapingFilter(...)``); ``ds/dt`` is negative while the vehicle approaches. ``backend`` as
-    in :func:`track_free_2d`.
+    ``ShapingFilter(...)``); ``ds/dt`` is negative while the vehicle approaches.
+    ``detection_probability`` and ``backend`` as in :func:`track_free_2d`.
     """
+    _check_road_model(model)
     k = model.state_dim
-    if model.state_names[:2] != ("x", "vx"):
-        raise ValueError("track_on_road needs a one-axis model with states (x, vx, ...)")
-    _check_no_input(model)
     n = k + 1
-    transition = _road_transition(model, lateral_psd)
-    measure = _road_measure(road, radar, k, scatter_std_m)
 
     def initial(zk: FloatArray) -> tuple[FloatArray, FloatArray]:
-        p, _, _ = _initial_point(zk, radar)
-        s0, d0 = road.project(p)
-        tangent = -road.inbound_direction(s0)
-        rel = road.lane_point(s0, d0) - np.asarray(radar.position_m)
-        r = np.sqrt(np.sum(rel**2, -1) + radar.height_m**2)
-        along = np.einsum("ni,ni->n", rel, tangent) / r
-        ok = np.abs(along) > 0.3
-        vs0 = np.where(ok, zk[:, 2] / np.where(ok, along, 1.0), 0.0)
-        m = zk.shape[0]
-        mean = np.zeros((m, n))
-        mean[:, 0], mean[:, 1], mean[:, k] = s0, vs0, np.clip(d0, -1.0, 1.0)
-        cov = np.zeros((m, n, n))
-        cov[:, 0, 0] = 1.0 + scatter_std_m**2
-        cov[:, 1, 1] = np.where(
-            ok, (radar.radial_speed_std_mps / np.where(ok, np.abs(along), 1.0)) ** 2 + 1.0, 30.0**2
-        )
-        for i in range(2, k):
-            cov[:, i, i] = 9.0 if model.state_names[i].startswith("a") else 25.0
-        cov[:, k, k] = lateral_std_m**2
-        return mean, cov
+        return _road_initial(zk, radar, road, model, scatter_std_m, lateral_std_m)
 
-    def no_reversal(x: FloatArray) -> FloatArray:
-        # an approaching vehicle does not reverse: a track whose predicted speed changes sign
-        # (coasting through a stop hidden by the Doppler gate) is held at standstill
-        out = np.array(x)
-        rev = out[:, 1] > 0
-        out[rev, 1:k] = 0.0
-        return out
-
+    misses = _misses(radar, detection_probability)
     if use_compiled(backend, detected.size, threshold=COMPILED_MIN_RUN_STEPS):
-        spec = _compiled_spec(ROAD, radar, scatter_std_m, k, road)
+        spec = _compiled_spec(ROAD, misses, scatter_std_m, k, road)
         table = _series(model, times, (lateral_psd,))
         return _run_compiled(times, z, detected, table, initial, spec, n)
-    means, covs = _run(times, z, detected, n, transition, measure, initial, no_reversal)
+    transition = _road_transition(model, lateral_psd)
+    measure = _road_measure(road, radar, k, scatter_std_m)
+    means, covs = _run(times, z, detected, n, transition, measure, initial, misses, _no_reversal(k))
     return _road_estimates(means, covs, road, k)
+
+
+@dataclass(frozen=True, eq=False)
+class RoadIMMEstimates(TrackEstimates):
+    """:class:`TrackEstimates` of the road IMM with its mode probabilities (N, T, M)."""
+
+    mode_probabilities: FloatArray = field(default_factory=lambda: np.zeros((0, 0, 0)))
+
+
+def switching_generator(sojourn_s: tuple[float, ...]) -> FloatArray:
+    """Return the generator ``L`` (M, M) of a mode chain with mean sojourn times [s].
+
+    Mode i is left at rate ``1 / sojourn_s[i]`` towards each other mode alike; over a step
+    ``dt`` the switching probabilities are ``expm(L dt)`` (so irregular steps keep their
+    meaning). The stationary probabilities are proportional to the sojourn times.
+    """
+    rates = 1.0 / np.asarray(sojourn_s, dtype=float)
+    m = rates.size
+    if m == 1:
+        return np.zeros((1, 1))
+    gen = np.repeat(rates[:, None] / (m - 1), m, axis=1)
+    np.fill_diagonal(gen, -rates)
+    return gen
+
+
+def track_on_road_imm(
+    times: FloatArray,
+    z: FloatArray,
+    detected: BoolArray,
+    radar: RadarSpec,
+    road: Road,
+    *,
+    models: tuple[MotionModel, ...],
+    sojourn_s: tuple[float, ...],
+    scatter_std_m: float = 0.0,
+    detection_probability: Curve | None = None,
+    lateral_psd: float = 0.01,
+    lateral_std_m: float = 0.5,
+    backend: Backend = "auto",
+) -> RoadIMMEstimates:
+    """Interacting multiple model (IMM) of road-constrained EKFs.
+
+    Each mode is an along-road model (e.g. constant velocity, constant acceleration) with the
+    lateral offset in the lane.
+
+    Modes switch as a continuous-time Markov chain (:func:`switching_generator`) with mean
+    sojourn times ``sojourn_s`` [s]; the chain starts in its stationary distribution at the
+    first detection. Modes with different states mix by state name (a state a mode lacks is
+    taken from the receiving mode, as :func:`adaptrack.filters.imm.imm_filter` does); the
+    output combines the common states ``[s, ds/dt, d]``. Every mode uses the no-reversal
+    hold of :func:`track_on_road`; a missed detection's likelihood under each mode weighs the
+    modes (module docstring). ``detection_probability`` and ``backend`` as in
+    :func:`track_free_2d`.
+    """
+    if len(models) < 1 or len(models) != len(sojourn_s):
+        raise ValueError("models and sojourn_s need one entry per mode (at least one)")
+    if not all(np.isfinite(v) and v > 0 for v in sojourn_s):
+        raise ValueError(f"sojourn_s must be > 0 [s]; got {tuple(sojourn_s)}")
+    for m in models:
+        _check_road_model(m)
+    names = [m.state_names + ("d",) for m in models]
+    common = tuple(v for v in names[0] if all(v in nm for nm in names))
+    gen = switching_generator(tuple(sojourn_s))
+    mu0 = np.asarray(sojourn_s, dtype=float) / float(np.sum(sojourn_s))
+
+    def initial(zk: FloatArray) -> list[tuple[FloatArray, FloatArray]]:
+        return [_road_initial(zk, radar, road, m, scatter_std_m, lateral_std_m) for m in models]
+
+    misses = _misses(radar, detection_probability)
+    if use_compiled(backend, detected.size, threshold=COMPILED_MIN_RUN_STEPS):
+        return _road_imm_compiled(
+            times, z, detected, misses, road, models, gen, mu0, names, common, initial,
+            scatter_std_m, lateral_psd,
+        )  # fmt: skip
+    return _road_imm_numpy(
+        times, z, detected, misses, road, models, gen, mu0, names, common, initial,
+        scatter_std_m, lateral_psd,
+    )  # fmt: skip
+
+
+def _road_imm_numpy(
+    times: FloatArray,
+    z: FloatArray,
+    detected: BoolArray,
+    misses: _Misses,
+    road: Road,
+    models: tuple[MotionModel, ...],
+    gen: FloatArray,
+    mu0: FloatArray,
+    names: list[tuple[str, ...]],
+    common: tuple[str, ...],
+    initial: Callable[[FloatArray], list[tuple[FloatArray, FloatArray]]],
+    scatter_std_m: float,
+    lateral_psd: float,
+) -> RoadIMMEstimates:
+    """NumPy reference of :func:`track_on_road_imm` (loop over scans, batched over runs)."""
+    from scipy.linalg import expm
+
+    from ..filters.imm import _embed, _mix
+
+    n_runs, n_steps = detected.shape
+    n_modes = len(models)
+    sizes = [len(nm) for nm in names]
+    emb = [[_embed(names[i], names[j]) for j in range(n_modes)] for i in range(n_modes)]
+    out_idx = [[nm.index(v) for v in common] for nm in names]
+    transitions = [_road_transition(m, lateral_psd) for m in models]
+    measures = [_road_measure(road, misses.radar, n - 1, scatter_std_m) for n in sizes]
+    dts = np.diff(times, axis=1, prepend=times[:, :1])
+    disc = [tr(dts) for tr in transitions]
+    states = [
+        _trusted(GaussianState, mean=np.zeros((n_runs, n)), cov=np.tile(np.eye(n), (n_runs, 1, 1)),
+                 time=times[:, 0])
+        for n in sizes
+    ]  # fmt: skip
+    log_mu = np.tile(np.log(mu0), (n_runs, 1))
+    started = np.zeros(n_runs, dtype=bool)
+    n_out = len(common)
+    means = np.full((n_runs, n_steps, n_out), np.nan)
+    covs = np.full((n_runs, n_steps, n_out, n_out), np.nan)
+    probs = np.full((n_runs, n_steps, n_modes), np.nan)
+    for k in range(n_steps):
+        t = times[:, k]
+        if k > 0:
+            chain = np.stack([expm(gen * dt) for dt in dts[:, k]])
+            with np.errstate(divide="ignore"):
+                log_pi = np.log(np.maximum(chain, 1e-300))
+            mixed, log_c = _mix(states, log_mu, log_pi, emb)
+        else:
+            mixed, log_c = states, log_mu
+        lls = []
+        for j in range(n_modes):
+            kj = sizes[j] - 1
+            prior = predict(mixed[j], disc[j][0][:, k], disc[j][1][:, k], time=t)
+            x = _no_reversal(kj)(prior.mean)
+            prior = _trusted(GaussianState, mean=x, cov=prior.cov, time=t)
+            zpred, h, r = measures[j](x)
+            states[j], ll = _detection_step(
+                prior, zpred, h, r, z[:, k], detected[:, k], started, misses
+            )
+            lls.append(ll)
+        joint = np.stack(lls, -1) + log_c
+        total = np.log(np.sum(np.exp(joint - joint.max(-1, keepdims=True)), -1)) + joint.max(-1)
+        log_mu = joint - total[:, None]
+        new = detected[:, k] & ~started
+        if new.any():
+            for j, (m0, p0) in enumerate(initial(z[new, k])):
+                mean, cov = np.array(states[j].mean), np.array(states[j].cov)
+                mean[new], cov[new] = m0, p0
+                states[j] = _trusted(GaussianState, mean=mean, cov=cov, time=t)
+            log_mu[new] = np.log(mu0)
+            started |= new
+        mu = np.exp(log_mu)
+        xs = np.stack([states[j].mean[:, out_idx[j]] for j in range(n_modes)], 1)
+        ps = np.stack([states[j].cov[:, out_idx[j]][:, :, out_idx[j]] for j in range(n_modes)], 1)
+        xm = np.einsum("nj,nja->na", mu, xs)
+        d = xs - xm[:, None]
+        pm = np.einsum("nj,njab->nab", mu, ps + d[..., :, None] * d[..., None, :])
+        means[started, k], covs[started, k] = xm[started], symmetrize(pm)[started]
+        probs[started, k] = mu[started]
+    est = _road_estimates(means, covs, road, n_out - 1)
+    return RoadIMMEstimates(
+        est.position, est.velocity, est.speed, est.position_cov, mode_probabilities=probs
+    )
+
+
+def _road_imm_compiled(
+    times: FloatArray,
+    z: FloatArray,
+    detected: BoolArray,
+    misses: _Misses,
+    road: Road,
+    models: tuple[MotionModel, ...],
+    gen: FloatArray,
+    mu0: FloatArray,
+    names: list[tuple[str, ...]],
+    common: tuple[str, ...],
+    initial: Callable[[FloatArray], list[tuple[FloatArray, FloatArray]]],
+    scatter_std_m: float,
+    lateral_psd: float,
+) -> RoadIMMEstimates:
+    """Run :func:`track_on_road_imm` in :mod:`._road_imm_kernel`."""
+    from ..filters.imm import _embed
+    from ..models.series_table import series_table
+    from ._road_imm_kernel import road_imm_kernel
+
+    n_runs, n_steps = detected.shape
+    n_modes = len(models)
+    sizes = np.array([len(nm) for nm in names], dtype=np.int64)
+    nmax = int(sizes.max())
+    tables = [_series(m, times, (lateral_psd,)) for m in models]
+    n_phi = max(t.phi_coef.shape[0] for t in tables)
+    n_qd = max(t.qd_coef.shape[0] for t in tables)
+    phi_coef = np.zeros((n_modes, n_phi, nmax, nmax))
+    qd_coef = np.zeros((n_modes, n_qd, nmax, nmax))
+    for j, t in enumerate(tables):  # leading zero terms leave Horner's sums unchanged
+        n = sizes[j]
+        phi_coef[j, : t.phi_coef.shape[0], :n, :n] = t.phi_coef
+        qd_coef[j, : t.qd_coef.shape[0], :n, :n] = t.qd_coef
+    steps = np.diff(times, axis=1)
+    chain = series_table(gen.T, np.zeros_like(gen), float(steps.max()) if steps.size else 1.0)
+    emb_dst = np.zeros((n_modes, n_modes, nmax), dtype=np.int64)
+    emb_src = np.zeros_like(emb_dst)
+    emb_cnt = np.zeros((n_modes, n_modes), dtype=np.int64)
+    for i in range(n_modes):
+        for j in range(n_modes):
+            dst, src = _embed(names[i], names[j])
+            emb_cnt[i, j] = dst.size
+            emb_dst[i, j, : dst.size], emb_src[i, j, : dst.size] = dst, src
+    out_idx = np.array([[nm.index(v) for v in common] for nm in names], dtype=np.int64)
+    started = np.asarray(detected.any(axis=1), dtype=bool)
+    first = np.where(started, np.argmax(detected, axis=1), -1)
+    m0 = np.zeros((n_modes, n_runs, nmax))
+    p0 = np.zeros((n_modes, n_runs, nmax, nmax))
+    if started.any():
+        for j, (mj, pj) in enumerate(initial(z[started, first[started]])):
+            m0[j, started, : sizes[j]], p0[j, started, : sizes[j], : sizes[j]] = mj, pj
+    spec = _compiled_spec(ROAD, misses, scatter_std_m, 0, road)
+    out = RoadIMMEstimates(
+        np.full((n_runs, n_steps, 2), np.nan),
+        np.full((n_runs, n_steps, 2), np.nan),
+        np.full((n_runs, n_steps), np.nan),
+        np.full((n_runs, n_steps, 2, 2), np.nan),
+        np.full((n_runs, n_steps, n_modes), np.nan),
+    )
+    status = np.zeros(n_runs, dtype=np.int64)
+    c = np.ascontiguousarray
+    road_imm_kernel(
+        c(times, dtype=float), sizes, phi_coef, qd_coef,
+        np.array([t.h_max for t in tables]), chain.phi_coef, chain.h_max, np.log(mu0),
+        emb_dst, emb_src, emb_cnt, out_idx, c(z, dtype=float), c(detected), first, m0, p0,
+        spec.radar, spec.noise_tab, spec.noise_cnt, spec.fields, spec.pd_tab, spec.pd_cnt,
+        c(spec.road), spec.half_width_m, spec.scatter_std_m, out.position, out.velocity,
+        out.speed, out.position_cov, out.mode_probabilities, status,
+    )  # fmt: skip
+    if status.any():
+        i = int(np.flatnonzero(status)[0])
+        raise CovarianceError(
+            f"innovation covariance is not positive definite at step {int(status[i]) - 1}, run {i}"
+        )
+    return out
 
 
 def _road_estimates(means: FloatArray, covs: FloatArray, road: Road, k: int) -> TrackEstimates:
@@ -459,16 +815,13 @@ def track_converted(
     n = model.state_dim
     zz = np.nan_to_num(z)
     rho = np.sqrt(np.maximum(zz[..., 0] ** 2 - radar.height_m**2, 0.01))
-    debias = np.exp(radar.azimuth_std_rad**2 / 2)
+    sr, saz, _ = radar.noise_std(zz[..., 0], zz[..., 1])
+    debias = np.exp(saz**2 / 2)
     los = np.stack([np.sin(zz[..., 1]), np.cos(zz[..., 1])], -1)
     perp = np.stack([los[..., 1], -los[..., 0]], -1)
     pos = np.asarray(radar.position_m) + (debias * rho)[..., None] * los
     jac = np.stack([los * (zz[..., 0] / rho)[..., None], rho[..., None] * perp], -1)
-    cov = (
-        jac
-        @ np.diag([radar.range_std_m**2 + scatter_std_m**2, radar.azimuth_std_rad**2])
-        @ np.swapaxes(jac, -1, -2)
-    )
+    cov = _polar_cov(jac, sr**2 + scatter_std_m**2, saz**2)
     cov = np.where(detected[..., None, None], cov, np.eye(2))
     h = np.zeros((2, n))
     h[0, 0] = h[1, 1] = 1.0
@@ -485,6 +838,7 @@ def track_converted(
         prior,
         mask=detected,
         method="auto",
+        backend="numba",
     )
     started = np.cumsum(detected, axis=1) > 0
     mean = np.where(started[..., None], res.filtered.mean, np.nan)
@@ -534,7 +888,7 @@ def road_pcrlb(
     if use_compiled(backend, detected.size, threshold=COMPILED_MIN_RUN_STEPS):
         from ._ekf_kernels import pcrlb_kernel
 
-        spec = _compiled_spec(ROAD, radar, scatter_std_m, k, road)
+        spec = _compiled_spec(ROAD, _misses(radar, None), scatter_std_m, k, road)
         c = np.ascontiguousarray
         pcrlb_kernel(
             c(runs_times, dtype=float),
@@ -544,6 +898,8 @@ def road_pcrlb(
             p0,
             k,
             spec.radar,
+            spec.noise_tab,
+            spec.noise_cnt,
             c(spec.road),
             spec.half_width_m,
             spec.scatter_std_m,
@@ -576,4 +932,13 @@ def road_pcrlb(
     return pos_var, spd_var
 
 
-__all__ = ["TrackEstimates", "road_pcrlb", "track_converted", "track_free_2d", "track_on_road"]
+__all__ = [
+    "RoadIMMEstimates",
+    "TrackEstimates",
+    "road_pcrlb",
+    "switching_generator",
+    "track_converted",
+    "track_free_2d",
+    "track_on_road",
+    "track_on_road_imm",
+]

@@ -30,6 +30,110 @@ def _logsumexp(a):  # type: ignore[no-untyped-def]
     return top + math.log(acc)
 
 
+@numba.njit(cache=True)
+def mix_into(  # type: ignore[no-untyped-def]
+    xs, ps, sizes, log_mu, log_pi, emb_dst, emb_src, emb_cnt, mx, mp, log_c, log_joint, w, em, ep
+):
+    """IMM interaction: mixed initial conditions ``mx``, ``mp`` of every model, and ``log_c``.
+
+    ``xs``/``ps`` (M, nmax[, nmax]) the models' estimates, ``log_mu`` (M,) their log
+    probabilities, ``log_pi`` (M, M) log switching probabilities; a model's states that
+    another lacks keep the receiving model's own values (``emb_*``: the (dst, src, count) of
+    the states model i shares with model j). ``log_c`` (M,) receives the predicted log
+    weights; ``log_joint``, ``w``, ``em``, ``ep`` are scratch.
+    """
+    n_models = xs.shape[0]
+    for a in range(n_models):
+        for b in range(n_models):
+            log_joint[a, b] = log_mu[a] + log_pi[a, b]
+    for b in range(n_models):
+        log_c[b] = _logsumexp(log_joint[:, b])
+        for a in range(n_models):
+            w[a, b] = math.exp(log_joint[a, b] - log_c[b])
+    for j in range(n_models):
+        nj = sizes[j]
+        mx[j, :] = 0.0
+        mp[j, :, :] = 0.0
+        for src_model in range(n_models):
+            # embed model src_model's estimate into model j's states
+            em[:nj] = xs[j, :nj]
+            ep[:nj, :nj] = ps[j, :nj, :nj]
+            cnt = emb_cnt[src_model, j]
+            for a in range(cnt):
+                da = emb_dst[src_model, j, a]
+                em[da] = xs[src_model, emb_src[src_model, j, a]]
+                for c in range(nj):
+                    ep[da, c] = 0.0
+                    ep[c, da] = 0.0
+            for a in range(cnt):
+                da, sa = emb_dst[src_model, j, a], emb_src[src_model, j, a]
+                for b in range(cnt):
+                    db, sb = emb_dst[src_model, j, b], emb_src[src_model, j, b]
+                    ep[da, db] = ps[src_model, sa, sb]
+            wij = w[src_model, j]
+            for a in range(nj):
+                mx[j, a] += wij * em[a]
+            for a in range(nj):
+                for b in range(nj):
+                    mp[j, a, b] += wij * ep[a, b]
+        # spread of the embedded means around the mixed mean
+        for src_model in range(n_models):
+            em[:nj] = xs[j, :nj]
+            for a in range(emb_cnt[src_model, j]):
+                em[emb_dst[src_model, j, a]] = xs[src_model, emb_src[src_model, j, a]]
+            wij = w[src_model, j]
+            for a in range(nj):
+                for b in range(nj):
+                    mp[j, a, b] += wij * (em[a] - mx[j, a]) * (em[b] - mx[j, b])
+        for a in range(nj):
+            for b in range(a + 1, nj):
+                v = 0.5 * (mp[j, a, b] + mp[j, b, a])
+                mp[j, a, b] = v
+                mp[j, b, a] = v
+
+
+@numba.njit(cache=True, inline="always")
+def mode_update_into(ll, log_c, joint, log_mu, mu):  # type: ignore[no-untyped-def]
+    """Posterior mode log probabilities ``log_mu`` and probabilities ``mu`` (M,).
+
+    ``ll`` (M,) measurement log-likelihoods, ``log_c`` (M,) predicted log weights; returns
+    the mixture's log-likelihood (``joint`` is scratch).
+    """
+    n_models = ll.shape[0]
+    for j in range(n_models):
+        joint[j] = ll[j] + log_c[j]
+    total = _logsumexp(joint)
+    for j in range(n_models):
+        log_mu[j] = joint[j] - total
+        mu[j] = math.exp(log_mu[j])
+    return total
+
+
+@numba.njit(cache=True)
+def combine_into(xs, ps, mu, out_idx, xm, cm):  # type: ignore[no-untyped-def]
+    """Fill the combined mean ``xm`` (n_out,) and covariance ``cm`` of the common states."""
+    n_models = xs.shape[0]
+    n_out = out_idx.shape[1]
+    for a in range(n_out):
+        acc = 0.0
+        for j in range(n_models):
+            acc += mu[j] * xs[j, out_idx[j, a]]
+        xm[a] = acc
+    for a in range(n_out):
+        for b in range(n_out):
+            acc = 0.0
+            for j in range(n_models):
+                ja, jb = out_idx[j, a], out_idx[j, b]
+                d = (xs[j, ja] - xm[a]) * (xs[j, jb] - xm[b])
+                acc += mu[j] * (ps[j, ja, jb] + d)
+            cm[a, b] = acc
+    for a in range(n_out):
+        for b in range(a + 1, n_out):
+            v = 0.5 * (cm[a, b] + cm[b, a])
+            cm[a, b] = v
+            cm[b, a] = v
+
+
 @numba.njit(cache=True, parallel=True)
 def imm_kernel(  # type: ignore[no-untyped-def]
     sizes,
@@ -70,7 +174,6 @@ def imm_kernel(  # type: ignore[no-untyped-def]
     """
     n_models, _, nmax = x0.shape
     n_tracks, n_steps, m = z.shape
-    n_out = out_idx.shape[1]
     off = np.zeros(m)
     for i in prange(n_tracks):
         ii = numba.int64(i)  # prange's index may be unsigned: min() with it gives a float
@@ -101,7 +204,6 @@ def imm_kernel(  # type: ignore[no-untyped-def]
         nu = np.empty(m)
         wv = np.empty(m)
         ikh = np.empty((nmax, nmax))
-        xm = np.empty(n_out)
         for j in range(n_models):
             for a in range(nmax):
                 xs[j, a] = x0[j, ix, a]
@@ -115,53 +217,10 @@ def imm_kernel(  # type: ignore[no-untyped-def]
                 mp[:, :, :] = ps
                 log_c[:] = log_mu
             else:
-                for a in range(n_models):
-                    for b in range(n_models):
-                        log_joint[a, b] = log_mu[a] + log_pi[a, b]
-                for b in range(n_models):
-                    log_c[b] = _logsumexp(log_joint[:, b])
-                    for a in range(n_models):
-                        w[a, b] = math.exp(log_joint[a, b] - log_c[b])
-                for j in range(n_models):
-                    nj = sizes[j]
-                    mx[j, :] = 0.0
-                    mp[j, :, :] = 0.0
-                    for src_model in range(n_models):
-                        # embed model src_model's estimate into model j's states
-                        em[:nj] = xs[j, :nj]
-                        ep[:nj, :nj] = ps[j, :nj, :nj]
-                        cnt = emb_cnt[src_model, j]
-                        for a in range(cnt):
-                            da = emb_dst[src_model, j, a]
-                            em[da] = xs[src_model, emb_src[src_model, j, a]]
-                            for c in range(nj):
-                                ep[da, c] = 0.0
-                                ep[c, da] = 0.0
-                        for a in range(cnt):
-                            da, sa = emb_dst[src_model, j, a], emb_src[src_model, j, a]
-                            for b in range(cnt):
-                                db, sb = emb_dst[src_model, j, b], emb_src[src_model, j, b]
-                                ep[da, db] = ps[src_model, sa, sb]
-                        wij = w[src_model, j]
-                        for a in range(nj):
-                            mx[j, a] += wij * em[a]
-                        for a in range(nj):
-                            for b in range(nj):
-                                mp[j, a, b] += wij * ep[a, b]
-                    # spread of the embedded means around the mixed mean
-                    for src_model in range(n_models):
-                        em[:nj] = xs[j, :nj]
-                        for a in range(emb_cnt[src_model, j]):
-                            em[emb_dst[src_model, j, a]] = xs[src_model, emb_src[src_model, j, a]]
-                        wij = w[src_model, j]
-                        for a in range(nj):
-                            for b in range(nj):
-                                mp[j, a, b] += wij * (em[a] - mx[j, a]) * (em[b] - mx[j, b])
-                    for a in range(nj):
-                        for b in range(a + 1, nj):
-                            v = 0.5 * (mp[j, a, b] + mp[j, b, a])
-                            mp[j, a, b] = v
-                            mp[j, b, a] = v
+                mix_into(
+                    xs, ps, sizes, log_mu, log_pi, emb_dst, emb_src, emb_cnt,
+                    mx, mp, log_c, log_joint, w, em, ep,
+                )  # fmt: skip
             for j in range(n_models):
                 nj = sizes[j]
                 xs[j, :nj] = mx[j, :nj]
@@ -201,29 +260,5 @@ def imm_kernel(  # type: ignore[no-untyped-def]
                         comp_cov[j, i, k, a, b] = ps[j, a, b]
             if status[i] != 0:
                 break
-            for j in range(n_models):
-                joint[j] = ll[j] + log_c[j]
-            total = _logsumexp(joint)
-            ll_mix[i, k] = total
-            for j in range(n_models):
-                log_mu[j] = joint[j] - total
-                probs[i, k, j] = math.exp(log_mu[j])
-            for a in range(n_out):
-                acc = 0.0
-                for j in range(n_models):
-                    acc += probs[i, k, j] * xs[j, out_idx[j, a]]
-                xm[a] = acc
-                comb_mean[i, k, a] = acc
-            for a in range(n_out):
-                for b in range(n_out):
-                    acc = 0.0
-                    for j in range(n_models):
-                        ja, jb = out_idx[j, a], out_idx[j, b]
-                        d = (xs[j, ja] - xm[a]) * (xs[j, jb] - xm[b])
-                        acc += probs[i, k, j] * (ps[j, ja, jb] + d)
-                    comb_cov[i, k, a, b] = acc
-            for a in range(n_out):
-                for b in range(a + 1, n_out):
-                    v = 0.5 * (comb_cov[i, k, a, b] + comb_cov[i, k, b, a])
-                    comb_cov[i, k, a, b] = v
-                    comb_cov[i, k, b, a] = v
+            ll_mix[i, k] = mode_update_into(ll, log_c, joint, log_mu, probs[i, k])
+            combine_into(xs, ps, probs[i, k], out_idx, comb_mean[i, k], comb_cov[i, k])

@@ -7,12 +7,13 @@ For ``h <= h_max`` the white-noise discretisation of ``dx = F x dt + G dbeta + b
 and the known-input offset ``u(h) = sum_i F^i b h^(i+1) / (i+1)!``,
 
 the Taylor recipe of spec 0.3.3 grouped by power of ``h``, truncated where the remaining terms
-are below ``1e-17`` of the leading one (``x = norm1(F) h_max <= 0.5``: at most 17 terms for
-``Phi``, 21 for ``Qd``; finite and exact for nilpotent ``F`` such as constant velocity or
-acceleration). Longer steps use ``h = dt / 2^s <= h_max`` and ``s`` doublings (spec 0.3.1). A
-kernel evaluates a step with :func:`adaptrack.filters._kernels.series_transition_into` (Horner,
-about 0.1 us for four states) instead of reading tabulated ``Phi``/``Qd`` per step, which is what
-irregular (jittered) sampling otherwise costs: one matrix exponential per distinct step.
+are below ``1e-17`` of the leading one at ``x = norm1(F) h_max = 0.5`` (16 terms for ``Phi``,
+19 for ``Qd``, for every parameter value; finite and exact for nilpotent ``F`` such as
+constant velocity or acceleration). Longer steps use ``h = dt / 2^s <= h_max`` and ``s``
+doublings (spec 0.3.1). A kernel evaluates a step with
+:func:`adaptrack.filters._kernels.series_transition_into` (Horner, about 0.1 us for four
+states) instead of reading tabulated ``Phi``/``Qd`` per step, which is what irregular
+(jittered) sampling otherwise costs: one matrix exponential per distinct step.
 """
 
 from __future__ import annotations
@@ -69,8 +70,10 @@ def series_table(
     else:
         norm1 = float(np.abs(f).sum(axis=0).max())
         h_max = min(float(max_dt), _SUBSTEP_NORM / norm1)
-        p = _terms(norm1 * h_max)
-        q = _terms(2.0 * norm1 * h_max)
+        # as many terms as the largest step allows (norm1 h_max <= 0.5), whatever the model's
+        # parameters: tables of one model structure share one shape (and generated kernel)
+        p = _terms(_SUBSTEP_NORM)
+        q = _terms(2.0 * _SUBSTEP_NORM)
         while len(powers) < q:
             powers.append(powers[-1] @ f)
     k = len(powers)

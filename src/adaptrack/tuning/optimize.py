@@ -28,6 +28,7 @@ from ..models.continuous import ConstantAcceleration, ConstantVelocity, MotionMo
 from ..models.discretize import Noise
 from ..parallel import TaskPool
 from ..types import GaussianState
+from .search import minimise_log
 
 Objective = Literal["position", "velocity", "requirement"]
 POSITION_LIMIT_M = 0.7
@@ -212,13 +213,8 @@ class _Scorer:
 
 
 def _brent_log(fn: Callable[[float], float], lo: float, hi: float) -> tuple[float, float]:
-    res = minimize_scalar(
-        lambda u: fn(math.exp(u)),
-        bounds=(math.log(lo), math.log(hi)),
-        method="bounded",
-        options={"xatol": 1e-3},
-    )
-    return math.exp(float(res.x)), float(res.fun)
+    res = minimise_log(lambda v: fn(v[0]), [lo], [(lo, hi)], max_evaluations=500)
+    return res.values[0], res.criterion
 
 
 def tune_constant_velocity(

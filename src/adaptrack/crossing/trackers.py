@@ -1,0 +1,127 @@
+"""Estimators of a crossing site as picklable callables: simulated runs of a case -> tracks.
+
+A tracker takes the runs of one class x case (:class:`~.radar_sim.CrossingRuns`) and the site,
+and returns :class:`~.tracking.TrackEstimates`; :meth:`estimate` runs it on detections of a
+known road and radar (a recorded file). The Monte Carlo (:mod:`.compliance`) and the
+design-time selection (:mod:`.selection`) run any mapping of names to trackers, in-process or
+on a cluster (the trackers are shipped with their parameters).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from .._backend import Backend
+from .._typing import BoolArray, FloatArray
+from ..models.continuous import MotionModel
+from .radar_sim import CrossingRuns
+from .road import Road
+from .sensor import RadarSpec
+from .site import Site
+from .tracking import TrackEstimates, track_on_road, track_on_road_imm
+from .traffic import Case, VehicleClass
+
+Tracker = Callable[[CrossingRuns, Site, Case, VehicleClass], TrackEstimates]
+
+
+@dataclass(frozen=True)
+class PlanarTracker:
+    """A planar tracker on the radar of the case's road.
+
+    ``track`` is :func:`~.tracking.track_free_2d` or :func:`~.tracking.track_converted`.
+    """
+
+    track: Callable[..., TrackEstimates]
+
+    def __call__(
+        self, runs: CrossingRuns, site: Site, case: Case, veh: VehicleClass
+    ) -> TrackEstimates:
+        """Track the runs of one class x case."""
+        return self.track(
+            runs.times,
+            runs.measurements,
+            runs.detected,
+            site.radar_for(case.road),
+            scatter_std_m=veh.scatter_std_m,
+        )
+
+
+@dataclass(frozen=True)
+class _RoadTrackerBase:
+    """Shared call of the road trackers: runs of a case -> :meth:`estimate` on its road."""
+
+    def estimate(
+        self,
+        times: FloatArray,
+        z: FloatArray,
+        detected: BoolArray,
+        radar: RadarSpec,
+        road: Road,
+        scatter_std_m: float,
+    ) -> TrackEstimates:
+        """Track detections (N, T, 3) of ``radar`` on ``road`` (overridden)."""
+        raise NotImplementedError
+
+    def __call__(
+        self, runs: CrossingRuns, site: Site, case: Case, veh: VehicleClass
+    ) -> TrackEstimates:
+        """Track the runs of one class x case."""
+        return self.estimate(
+            runs.times,
+            runs.measurements,
+            runs.detected,
+            site.radar_for(case.road),
+            site.roads[case.road],
+            veh.scatter_std_m,
+        )
+
+
+@dataclass(frozen=True)
+class RoadTracker(_RoadTrackerBase):
+    """The road-constrained EKF with ``model`` along the road."""
+
+    model: MotionModel
+    backend: Backend = "auto"
+
+    def estimate(
+        self,
+        times: FloatArray,
+        z: FloatArray,
+        detected: BoolArray,
+        radar: RadarSpec,
+        road: Road,
+        scatter_std_m: float,
+    ) -> TrackEstimates:
+        """Track detections (N, T, 3) of ``radar`` on ``road`` (:func:`track_on_road`)."""
+        return track_on_road(
+            times, z, detected, radar, road,
+            model=self.model, scatter_std_m=scatter_std_m, backend=self.backend,
+        )  # fmt: skip
+
+
+@dataclass(frozen=True)
+class IMMTracker(_RoadTrackerBase):
+    """The road IMM of ``models`` with mean sojourn times ``sojourn_s`` [s]."""
+
+    models: tuple[MotionModel, ...]
+    sojourn_s: tuple[float, ...]
+    backend: Backend = "auto"
+
+    def estimate(
+        self,
+        times: FloatArray,
+        z: FloatArray,
+        detected: BoolArray,
+        radar: RadarSpec,
+        road: Road,
+        scatter_std_m: float,
+    ) -> TrackEstimates:
+        """Track detections (N, T, 3) of ``radar`` on ``road`` (:func:`track_on_road_imm`)."""
+        return track_on_road_imm(
+            times, z, detected, radar, road, models=self.models, sojourn_s=self.sojourn_s,
+            scatter_std_m=scatter_std_m, backend=self.backend,
+        )  # fmt: skip
+
+
+__all__ = ["IMMTracker", "PlanarTracker", "RoadTracker", "Tracker"]
