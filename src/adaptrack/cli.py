@@ -21,7 +21,12 @@ from rich.table import Table
 from .analysis.evaluation import Evaluation, evaluate_scenario
 from .analysis.flights import FlightRow, evaluate_flight, smooth_kalman, smooth_lsq
 from .coords.geodetic import enu_to_ecef, enu_to_ecef_rotation
-from .crossing.compliance import ComplianceResult, default_trackers, evaluate_site
+from .crossing.compliance import (
+    ComplianceResult,
+    confirm_undecided,
+    default_trackers,
+    evaluate_site,
+)
 from .crossing.families import FAMILIES
 from .crossing.measurements_io import detections_frame, read_detections
 from .crossing.radar_sim import simulate_site_case
@@ -125,6 +130,9 @@ def demo(
             st, runs, test_seed, trackers=trackers, pool=pool, progress=step,
             baseline=baseline.label,
         )  # fmt: skip
+        test = confirm_undecided(
+            test, st, {winner.label: trackers[winner.label]}, pool=pool, progress=step
+        )
     test = dataclasses.replace(test, seed=seed)
     console.print(_candidates_table(tuning))
     console.print(f"deployed: {tuning.reason}")

@@ -17,7 +17,7 @@ from typing import Any
 from .._typing import FloatArray
 from ..filters._codegen import GENERATED_MAX_STATES, kf_step_lines, load, module_source
 
-_VERSION = 4
+_VERSION = 5
 _M = 3  # range, azimuth, radial speed
 
 
@@ -97,6 +97,7 @@ def _ekf_source(n: int, pattern: tuple[Pattern, Pattern]) -> str:
         f"np.empty((1, {n}))",
         "gate_s, gate_lo, gate_r = np.empty((1, 1)), np.empty((1, 1)), np.empty((1, 1))",
         "gate_w, gate_nu = np.empty(1), np.empty(1)",
+        "miss_run = 1.0",
         *(f"x{j} = m0[i, {j}]" for j in range(n)),
         *(f"P{a}_{b} = p0[i, {a}, {b}]" for a in range(n) for b in range(a, n)),
         *(f"u{j} = 0.0" for j in range(n)),
@@ -119,6 +120,7 @@ def _ekf_source(n: int, pattern: tuple[Pattern, Pattern]) -> str:
         "    nu0 = z[i, t, 0] - zp[0]",
         "    nu1 = (z[i, t, 1] - zp[1] + np.pi) % (2 * np.pi) - np.pi",
         "    nu2 = z[i, t, 2] - zp[2]",
+        "    miss_run = 1.0",
     ]
     for line in update:
         if line.strip() == "return 2":  # S not positive definite: flag the run, stop it
@@ -129,9 +131,9 @@ def _ekf_source(n: int, pattern: tuple[Pattern, Pattern]) -> str:
         "else:  # a missed detection: the Doppler gate may explain it",
         *(f"    xa[{j}] = xp{j}" for j in range(n)),
         *(f"    pa[{a}, {b}] = pa[{b}, {a}] = pp{a}_{b}" for a in range(n) for b in range(a, n)),
-        "    gate_update(kind, xa, pa, k, radar, noise_tab, noise_cnt, fields, pd_tab, pd_cnt, "
-        "road, half_width, scatter_std, gate_x, gate_p, zp, h, rm, jp, jv, gate_hp, gate_s, "
-        "gate_lo, gate_kt, gate_w, gate_ikh, tmp, gate_nu, gate_r)",
+        "    _, miss_run = gate_update(kind, xa, pa, k, radar, noise_tab, noise_cnt, fields, "
+        "pd_tab, pd_cnt, road, half_width, scatter_std, miss_run, gate_x, gate_p, zp, h, rm, "
+        "jp, jv, gate_hp, gate_s, gate_lo, gate_kt, gate_w, gate_ikh, tmp, gate_nu, gate_r)",
         *(f"    x{j} = gate_x[{j}]" for j in range(n)),
         *(f"    P{a}_{b} = gate_p[{a}, {b}]" for a in range(n) for b in range(a, n)),
         *(f"xa[{j}] = x{j}" for j in range(n)),

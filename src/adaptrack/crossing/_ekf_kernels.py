@@ -156,14 +156,16 @@ def _normal_cdf(x):  # type: ignore[no-untyped-def]
 @numba.njit(cache=True)
 def gate_update_into(  # type: ignore[no-untyped-def]
     kind, xp, pp, k, radar, noise_tab, noise_cnt, fields, pd_tab, pd_cnt, road, half_width,
-    scatter_std, x, p, zp, h, rm, jp, jv, hp, s, lo, kt, w, ikh, tmp, nu1, r1,
+    scatter_std, miss_run, x, p, zp, h, rm, jp, jv, hp, s, lo, kt, w, ikh, tmp, nu1, r1,
 ):  # fmt: skip
     """Posterior ``x``, ``p`` of the prior ``xp``, ``pp`` after a scan without a detection.
 
-    Inside the field of view, where the Doppler gate ``g = radar[5]`` explains the miss better
-    than ``1 - P_D`` (:mod:`adaptrack.crossing.tracking`), the pseudo-measurement ``v_r = 0``
-    with variance ``g^2 / 3`` is applied. Returns ``log P(no detection)`` (0 outside the
-    view). ``hp``/``kt`` (1, n), ``s``/``lo``/``r1`` (1, 1), ``w``/``nu1`` (1,) are scratch.
+    Inside the field of view, where the Doppler gate ``g = radar[5]`` explains the run of
+    misses better than ``1 - P_D`` (``miss_run``: its probability for a moving target so far;
+    :mod:`adaptrack.crossing.tracking`), the pseudo-measurement ``v_r = 0`` with variance
+    ``g^2 / 3`` is applied. Returns ``log P(no detection)`` (0 outside the view) and the
+    updated ``miss_run``. ``hp``/``kt`` (1, n), ``s``/``lo``/``r1`` (1, 1), ``w``/``nu1``
+    (1,) are scratch.
     """
     measure(
         kind, xp, k, radar, noise_tab, noise_cnt, road, half_width, scatter_std, zp, h, rm, jp, jv
@@ -175,7 +177,7 @@ def gate_update_into(  # type: ignore[no-untyped-def]
             p[a, b] = pp[a, b]
     off = abs((zp[1] - radar[3] + math.pi) % (2.0 * math.pi) - math.pi)
     if not in_view(zp[0], off, fields, radar[4]):
-        return 0.0
+        return 0.0, miss_run
     var = 0.0
     for a in range(n):
         for b in range(n):
@@ -185,11 +187,12 @@ def gate_update_into(  # type: ignore[no-untyped-def]
     p_gate = _normal_cdf((gate - mu) / sd) - _normal_cdf((-gate - mu) / sd)
     p_det = curve_at(pd_tab, pd_cnt, 0, zp[0])
     p_miss = p_gate + (1.0 - p_det) * (1.0 - p_gate)
-    if gate > 0.0 and p_gate > 0.5 * p_miss:
+    miss_run = miss_run * (1.0 - p_det)
+    if gate > 0.0 and p_gate > miss_run * (1.0 - p_gate):
         nu1[0] = -mu
         r1[0, 0] = gate * gate / 3.0
         update_into(xp, pp, nu1, h[2:3], r1, True, x, p, hp, s, lo, kt, w, ikh, tmp)
-    return math.log(p_miss) if p_miss > 0.0 else -math.inf
+    return (math.log(p_miss) if p_miss > 0.0 else -math.inf), miss_run
 
 
 @numba.njit(cache=True, parallel=True)
@@ -250,6 +253,7 @@ def ekf_kernel(  # type: ignore[no-untyped-def]
         jp, jv = np.empty((3, 2)), np.empty((3, 2))
         s, lo = np.empty((3, 3)), np.empty((3, 3))
         nu1, r1 = np.empty(1), np.empty((1, 1))
+        miss_run = 1.0
         speed[i, f] = _planar_into(
             kind, x, p, k, road, half_width, pos[i, f], vel[i, f], pcov[i, f]
         )
@@ -273,11 +277,12 @@ def ekf_kernel(  # type: ignore[no-untyped-def]
                 if not ok:
                     status[i] = t + 1
                     break
+                miss_run = 1.0
             else:
-                gate_update_into(
+                _, miss_run = gate_update_into(
                     kind, xp, pp, k, radar, noise_tab, noise_cnt, fields, pd_tab, pd_cnt, road,
-                    half_width, scatter_std, x, p, zp, h, rm, jp, jv, hp[:1], s[:1, :1],
-                    lo[:1, :1], kt[:1], w[:1], ikh, tmp, nu1, r1,
+                    half_width, scatter_std, miss_run, x, p, zp, h, rm, jp, jv, hp[:1],
+                    s[:1, :1], lo[:1, :1], kt[:1], w[:1], ikh, tmp, nu1, r1,
                 )  # fmt: skip
             speed[i, t] = _planar_into(
                 kind, x, p, k, road, half_width, pos[i, t], vel[i, t], pcov[i, t]
@@ -298,6 +303,7 @@ def pcrlb_kernel(  # type: ignore[no-untyped-def]
     radar,
     noise_tab,
     noise_cnt,
+    fields,
     road,
     half_width,
     scatter_std,
@@ -307,7 +313,9 @@ def pcrlb_kernel(  # type: ignore[no-untyped-def]
     """Bound covariance recursion of the road model along the true states ``truth`` (N, T, n).
 
     Transitions as in :func:`ekf_kernel`. The covariance stays at ``p0`` until the first
-    detection; ``pos_var``/``spd_var`` (N, T), pre-filled with NaN, receive
+    detection; a scan without a detection, in view and with the true radial speed below the
+    Doppler gate ``radar[5]``, adds the gate's information (``v_r`` with variance ``g^2 / 3``),
+    as the filters do. ``pos_var``/``spd_var`` (N, T), pre-filled with NaN, receive
     ``P[0, 0] + P[k, k]`` and ``P[1, 1]`` from then on.
     """
     n_runs, n_steps = detected.shape
@@ -321,6 +329,7 @@ def pcrlb_kernel(  # type: ignore[no-untyped-def]
         h, hp, kt = np.zeros((3, n)), np.empty((3, n)), np.empty((3, n))
         jp, jv = np.empty((3, 2)), np.empty((3, 2))
         s, lo = np.empty((3, 3)), np.empty((3, 3))
+        r1 = np.full((1, 1), radar[5] * radar[5] / 3.0)
         started = False
         for t in range(n_steps):
             if started:
@@ -350,6 +359,18 @@ def pcrlb_kernel(  # type: ignore[no-untyped-def]
                 started = True
             else:
                 p[:, :] = pp
+                if started and radar[5] > 0.0:
+                    xp[:] = truth[i, t]
+                    measure(
+                        ROAD, xp, k, radar, noise_tab, noise_cnt, road, half_width, scatter_std,
+                        zp, h, rm, jp, jv,
+                    )  # fmt: skip
+                    off = abs((zp[1] - radar[3] + math.pi) % (2.0 * math.pi) - math.pi)
+                    if in_view(zp[0], off, fields, radar[4]) and abs(zp[2]) < radar[5]:
+                        update_into(
+                            xp, pp, resid[:1], h[2:3], r1, True, x, p, hp[:1], s[:1, :1],
+                            lo[:1, :1], kt[:1], w[:1], ikh, tmp,
+                        )  # fmt: skip
             if started:
                 pos_var[i, t] = p[0, 0] + p[k, k]
                 spd_var[i, t] = p[1, 1]

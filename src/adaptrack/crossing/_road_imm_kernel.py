@@ -101,6 +101,7 @@ def road_imm_kernel(  # type: ignore[no-untyped-def]
         s, lo, jp, jv = np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 2)), np.empty((3, 2))
         xc, pc = np.empty(n_out), np.empty((n_out, n_out))
         nu1, r1 = np.empty(1), np.empty((1, 1))
+        miss_run = np.ones(n_modes)
         for j in range(n_modes):
             probs[i, f, j] = math.exp(log_mu[j])
         combine_into(xs, ps, probs[i, f], out_idx, xc, pc)
@@ -151,10 +152,11 @@ def road_imm_kernel(  # type: ignore[no-untyped-def]
                         status[i] = t + 1
                         break
                     ll[j] = -0.5 * (logdet + nis + 3.0 * _LOG_2PI)
+                    miss_run[j] = 1.0
                 else:  # a missed detection: its probability weighs the modes
-                    ll[j] = gate_update_into(
+                    ll[j], miss_run[j] = gate_update_into(
                         ROAD, xp[:nj], pp[:nj, :nj], k, radar, noise_tab, noise_cnt, fields,
-                        pd_tab, pd_cnt, road, half_width, scatter_std, xs[j, :nj],
+                        pd_tab, pd_cnt, road, half_width, scatter_std, miss_run[j], xs[j, :nj],
                         ps[j, :nj, :nj], zp, h[:, :nj], rm, jp, jv, hp[:1, :nj], s[:1, :1],
                         lo[:1, :1], kt[:1, :nj], wv[:1], ikh[:nj, :nj], tmp[:nj, :nj], nu1, r1,
                     )  # fmt: skip

@@ -12,11 +12,13 @@ Verdict: every RMS carries one-sided bounds at ``confidence`` (default 95 %) fro
 between runs (:func:`adaptrack.analysis.confidence.rms_with_bounds`). A row *passes* when every
 upper bound is within its limit, *fails* when a lower bound is beyond it, and is *undecided*
 otherwise (more runs would decide it). Runs of a case are one batch; every (class, case) has
-its own seed stream, blocks of runs have their own sub-streams.
+its own seed stream, blocks of runs have their own sub-streams. Random approaches vary by
+trajectory as well as by sensor noise, so they get ``RANDOM_RUNS_FACTOR`` times the runs.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections import Counter, defaultdict
@@ -43,6 +45,8 @@ SPEED_LIMIT_REL = 0.02
 SPEED_SPLIT_KMH = 100.0
 WARM_UP_S = 1.0
 CONFIDENCE = 0.95
+RANDOM_RUNS_FACTOR = 4  # runs of a random (Singer) approach per run of a scripted case
+CONFIRMATION_FACTOR = 4  # runs of a confirmation Monte Carlo per run of the first one
 LIMITS = np.array([POSITION_LIMIT_M, SPEED_LIMIT_KMH, SPEED_LIMIT_REL])
 
 
@@ -51,9 +55,11 @@ class ComplianceRow:
     """Accuracy of one estimator on one class and case, its bounds and the verdict.
 
     ``*_upper``/``*_lower``: one-sided bounds at the result's confidence; ``verdict`` is
-    ``"pass"``, ``"fail"`` or ``"undecided"``; ``n_epochs``/``n_speed_epochs``: scored epochs
-    of position / of speed (true speed <= 100 km/h); ``untracked_pct``: share of the zone
-    epochs without an estimate (before the track started and warmed up).
+    ``"pass"``, ``"fail"`` or ``"undecided"``; ``n_runs``: Monte-Carlo runs;
+    ``n_epochs``/``n_speed_epochs``: scored epochs of position / of speed (true speed <=
+    100 km/h); ``untracked_pct``: share of the zone epochs without an estimate (before the
+    track started and warmed up); ``confirmation``: the row comes from a confirmation Monte
+    Carlo of a first undecided one (:func:`confirm_undecided`).
     """
 
     filter: str
@@ -69,11 +75,13 @@ class ComplianceRow:
     speed_lower_kmh: float
     speed_rel_lower_pct: float
     verdict: str
+    n_runs: int
     n_epochs: int
     n_speed_epochs: int
     untracked_pct: float
     pcrlb_position_m: float = math.nan
     pcrlb_speed_kmh: float = math.nan
+    confirmation: bool = False
 
     @property
     def passed(self) -> bool:
@@ -376,6 +384,7 @@ def rows_of_pair(
                 float(lower[1]),
                 float(100 * lower[2]),
                 verdict,
+                int(sums.squares.shape[0]),
                 int(sums.counts[:, 0].sum()),
                 int(sums.counts[:, 1].sum()),
                 100 * float(sums.untracked.sum()) / zone if zone else math.nan,
@@ -437,48 +446,116 @@ def evaluate_site(
     """
     start = time.perf_counter()
     pairs = [
-        (c, v)
-        for c, v in site.pairs()
+        (i, c, v)
+        for i, (c, v) in enumerate(site.pairs())
         if (cases is None or c in cases) and (classes is None or v.name in classes)
     ]
-    seeds = np.random.SeedSequence(seed).spawn(len(pairs))
     trackers = default_trackers() if trackers is None else trackers
+    rows = _monte_carlo(site, pairs, n_runs, seed, trackers, bound, pool, progress, confidence)
+    gain = gains_over(rows, baseline) if baseline is not None and baseline in trackers else {}
+    return ComplianceResult(
+        site.name, n_runs, seed, rows, time.perf_counter() - start, confidence, gain
+    )
+
+
+def _monte_carlo(
+    site: Site,
+    pairs: list[tuple[int, Case, VehicleClass]],
+    n_runs: int,
+    seed: int | list[int],
+    trackers: dict[str, Tracker],
+    bound: bool,
+    pool: TaskPool | None,
+    progress: Callable[[str], None] | None,
+    confidence: float,
+) -> list[ComplianceRow]:
+    """Simulate and score ``pairs`` (index in ``site.pairs()``, case, class); one row each.
+
+    The i-th pair of the site draws from the i-th child of ``seed``, so a subset reproduces
+    the full run's rows.
+    """
+    seeds = np.random.SeedSequence(seed).spawn(len(site.pairs()))
     pool = TaskPool() if pool is None else pool
     site_handle = pool.share(site)
     tasks = [
-        (pair, (site_handle, c, v, size, ss, trackers, bound))
-        for pair, ((c, v), pair_seed) in enumerate(zip(pairs, seeds, strict=True))
-        for size, ss in _blocks(n_runs, site_scan_count(site, c, v), pair_seed)
+        (k, (site_handle, c, v, size, ss, trackers, bound))
+        for k, (i, c, v) in enumerate(pairs)
+        for size, ss in _blocks(runs_of(c, n_runs), site_scan_count(site, c, v), seeds[i])
     ]
-    left = Counter(pair for pair, _ in tasks)  # blocks still running per pair
+    left = Counter(k for k, _ in tasks)  # blocks still running per pair
 
-    def done(k: int) -> None:
-        i = tasks[k][0]
-        left[i] -= 1
-        if progress and not left[i]:
-            progress(f"{pairs[i][1].name} / {pairs[i][0].name}")
+    def done(j: int) -> None:
+        k = tasks[j][0]
+        left[k] -= 1
+        if progress and not left[k]:
+            progress(f"{pairs[k][2].name} / {pairs[k][1].name}")
 
     results = pool.map(_block, [args for _, args in tasks], progress=done)
     by_pair: dict[int, list[BlockSums]] = defaultdict(list)
-    for (pair, _), block in zip(tasks, results, strict=True):
-        by_pair[pair].append(block)
-    rows = [
-        row for i, (c, v) in enumerate(pairs) for row in rows_of_pair(c, v, by_pair[i], confidence)
+    for (k, _), block in zip(tasks, results, strict=True):
+        by_pair[k].append(block)
+    return [
+        row
+        for k, (_, c, v) in enumerate(pairs)
+        for row in rows_of_pair(c, v, by_pair[k], confidence)
     ]
-    result = ComplianceResult(
-        site.name, n_runs, seed, rows, time.perf_counter() - start, confidence
-    )
-    if baseline is None or baseline not in trackers:
+
+
+def confirm_undecided(
+    result: ComplianceResult,
+    site: Site,
+    trackers: dict[str, Tracker],
+    *,
+    factor: int = CONFIRMATION_FACTOR,
+    pool: TaskPool | None = None,
+    progress: Callable[[str], None] | None = None,
+) -> ComplianceResult:
+    """Decide undecided rows of ``trackers`` on a confirmation Monte Carlo.
+
+    Each undecided (class, case) row of a named tracker is simulated again with ``factor``
+    times the runs on a fresh seed stream (child of ``[seed, 17]``) and the new row, marked
+    ``confirmation``, replaces it; its verdict is the new Monte Carlo's alone (an independent
+    test at the same confidence). Other rows are kept.
+    """
+    index = {(c.name, v.name): i for i, (c, v) in enumerate(site.pairs())}
+    pairs_of = {(c.name, v.name): (c, v) for c, v in site.pairs()}
+    todo = [r for r in result.rows if r.filter in trackers and r.verdict == "undecided"]
+    if not todo:
         return result
-    return ComplianceResult(
-        result.site,
-        n_runs,
-        seed,
-        rows,
-        result.elapsed_s,
-        confidence,
-        gains_over(rows, baseline),
+    keys = list(dict.fromkeys((r.case, r.vehicle_class) for r in todo))
+    pairs = [(index[k], *pairs_of[k]) for k in keys]
+    names = {r.filter for r in todo}
+    new = _monte_carlo(
+        site,
+        pairs,
+        factor * result.runs,
+        [result.seed, 17],
+        {k: v for k, v in trackers.items() if k in names},
+        False,
+        pool,
+        progress,
+        result.confidence,
     )
+    undecided = {id(r) for r in todo}
+    fresh = {
+        (r.filter, r.case, r.vehicle_class): dataclasses.replace(r, confirmation=True) for r in new
+    }
+    rows = [
+        dataclasses.replace(
+            fresh[(r.filter, r.case, r.vehicle_class)],
+            pcrlb_position_m=r.pcrlb_position_m,
+            pcrlb_speed_kmh=r.pcrlb_speed_kmh,
+        )
+        if id(r) in undecided
+        else r
+        for r in result.rows
+    ]
+    return dataclasses.replace(result, rows=rows)
+
+
+def runs_of(case: Case, n_runs: int) -> int:
+    """Return the runs of a case in a Monte Carlo of ``n_runs`` per scripted case."""
+    return n_runs * (RANDOM_RUNS_FACTOR if case.kind == "random" else 1)
 
 
 def gains_over(rows: list[ComplianceRow], baseline: str) -> dict[str, dict[str, float]]:
@@ -507,6 +584,7 @@ __all__ = [
     "ComplianceResult",
     "ComplianceRow",
     "RunSums",
+    "confirm_undecided",
     "default_trackers",
     "evaluate_pair",
     "evaluate_site",
@@ -514,6 +592,7 @@ __all__ = [
     "requirement_ratio",
     "rows_of_pair",
     "run_sums",
+    "runs_of",
     "score",
     "scored_epochs",
     "zone_epochs",

@@ -24,7 +24,14 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from .. import __version__
-from .compliance import POSITION_LIMIT_M, SPEED_LIMIT_KMH, WARM_UP_S, ComplianceResult
+from .compliance import (
+    CONFIRMATION_FACTOR,
+    POSITION_LIMIT_M,
+    RANDOM_RUNS_FACTOR,
+    SPEED_LIMIT_KMH,
+    WARM_UP_S,
+    ComplianceResult,
+)
 from .radar_sim import simulate_site_case
 from .selection import CRITERION_TEXT, SiteTuning
 from .site import Site, blind_zones
@@ -359,9 +366,12 @@ def _verdict_table(data: ReportData) -> list[str]:
     conf = f"{100 * data.confidence:.0f} %"
     parts = [
         f"<h2 id='verdict'>Verdict on the test runs</h2><p>{data.runs} runs per class and "
-        f"case that neither tuning nor selection has seen. A row passes when the {conf} "
-        "upper bounds of its RMS are within the limits, fails when a lower bound is beyond "
-        "them, and is undecided otherwise.</p><table id='worst'><tr><th>estimator</th>"
+        f"case ({RANDOM_RUNS_FACTOR} times as many for random approaches) that neither tuning "
+        f"nor selection has seen. A row passes when the {conf} upper bounds of its RMS are "
+        "within the limits, fails when a lower bound is beyond them, and is undecided "
+        "otherwise; an undecided row of the deployed estimator is decided by a confirmation "
+        f"Monte Carlo with {CONFIRMATION_FACTOR} times the runs on fresh seeds (marked "
+        "'confirmed' in the table).</p><table id='worst'><tr><th>estimator</th>"
         f"<th>worst position RMS [m]</th><th>({conf} bound)</th><th>worst speed RMS [km/h]</th>"
         f"<th>({conf} bound)</th><th>criterion</th><th>worst case</th><th>pass / fail / "
         "undecided</th><th>verdict</th></tr>"
@@ -502,7 +512,7 @@ def render_html(data: ReportData) -> str:
             f"<tr class='{r['verdict']}'><td class='l'>{e(r['filter'])}</td><td class='l'>"
             f"{e(r['vehicle_class'])}</td><td class='l'>{e(r['case'])}</td>"
             + "".join(f"<td>{c}</td>" for c in cells)
-            + f"<td>{r['verdict']}</td></tr>"
+            + f"<td>{r['verdict']}{' (confirmed)' if r['confirmation'] else ''}</td></tr>"
         )
     parts.append("</table></body></html>")
     return "".join(parts)

@@ -44,6 +44,7 @@ from .compliance import (
     evaluate_site,
     requirement_ratio,
     run_sums,
+    runs_of,
 )
 from .families import FAMILIES, M1_LAMBDAS, Family
 from .radar_sim import CrossingRuns, simulate_site_case
@@ -114,14 +115,19 @@ def _from_row(r: ComplianceRow) -> tuple[float, float, float, float, float]:
 
 
 def training_set(site: Site, n_runs: int, seed: int) -> Training:
-    """Simulate ``n_runs`` of every class x case of the site (their own seed stream)."""
+    """Simulate ``n_runs`` of every class x case of the site (their own seed stream).
+
+    Random approaches get :data:`~.compliance.RANDOM_RUNS_FACTOR` times the runs.
+    """
     pairs = site.pairs()
     seeds = np.random.SeedSequence([seed, 7919]).spawn(len(pairs))
     return [
         (
             case,
             veh,
-            simulate_site_case(site, case, veh, n_runs=n_runs, rng=np.random.default_rng(s)),
+            simulate_site_case(
+                site, case, veh, n_runs=runs_of(case, n_runs), rng=np.random.default_rng(s)
+            ),
         )
         for (case, veh), s in zip(pairs, seeds, strict=True)
     ]

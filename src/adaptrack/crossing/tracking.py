@@ -19,11 +19,13 @@ the radial speed along the line of sight); before that its estimates are NaN.
 A missed detection is information too. Inside the radar's field of view a scan without a
 detection is either a miss (probability ``1 - P_D``) or a target below the Doppler gate ``g``
 (``|v_r| < g``: a stopped or crossing vehicle). With the predicted radial speed
-``N(mu, sigma^2)``, ``p_g = P(|v_r| < g)`` and ``P(no detection) = p_g + (1 - P_D)(1 - p_g)``;
-where the gate is the likelier explanation (``p_g > P(no detection) / 2``) the filter applies
-it as a pseudo-measurement of the radial speed, 0 with variance ``g^2 / 3`` (uniform on
-``(-g, g)``). A vehicle stopped behind the gate is thus held, with a bounded covariance,
-instead of coasting away; the IMM uses ``P(no detection | mode)`` as the mode likelihood.
+``N(mu, sigma^2)``, ``p_g = P(|v_r| < g)``; a moving target misses ``m`` scans in a row with
+probability ``q = prod (1 - P_D)`` (the run of misses so far, reset by a detection), a gated one
+with probability about 1. Where the gate is the likelier explanation
+(``p_g > q (1 - p_g)``) the filter applies it as a pseudo-measurement of the radial speed, 0
+with variance ``g^2 / 3`` (uniform on ``(-g, g)``). A vehicle stopped behind the gate is thus
+held, with a bounded covariance, instead of coasting away. The IMM uses
+``P(no detection | mode) = p_g + (1 - P_D)(1 - p_g)`` as the mode likelihood.
 """
 
 from __future__ import annotations
@@ -170,12 +172,14 @@ def _detection_step(
     detected: BoolArray,
     started: BoolArray,
     misses: _Misses,
-) -> tuple[GaussianState, FloatArray]:
+    miss_run: FloatArray,
+) -> tuple[GaussianState, FloatArray, FloatArray]:
     """Update tracks on their detections (N, 3), or on the Doppler gate where it explains a miss.
 
-    ``zpred``, ``h`` (N, 3, n), ``r`` are the measurement model at the prior mean. Returns
-    the posterior and the log-likelihood of the scan per run (of the detection, or of the
-    miss inside the field of view; 0 otherwise).
+    ``zpred``, ``h`` (N, 3, n), ``r`` are the measurement model at the prior mean;
+    ``miss_run`` (N,) the probability of the current run of misses for a moving target. Returns
+    the posterior, the log-likelihood of the scan per run (of the detection, or of the miss
+    inside the field of view; 0 otherwise) and the updated ``miss_run``.
     """
     n_runs = detected.shape[0]
     upd = detected & started
@@ -185,9 +189,10 @@ def _detection_step(
     lin = resid + np.einsum("nij,nj->ni", h, prior.mean)
     post, info = _update(prior, lin, h, r, np.broadcast_to(upd[:, None], (n_runs, 3)), "joseph")
     loglik = np.where(upd, info.log_likelihood, 0.0)
+    miss_run = np.where(detected, 1.0, miss_run)
     miss = started & ~detected & misses.radar.in_view(zpred[:, 0], zpred[:, 1])
     if not miss.any():
-        return post, loglik
+        return post, loglik, miss_run
     h_vr = h[:, 2, :]
     var = np.einsum("na,nab,nb->n", h_vr, prior.cov, h_vr)
     sd = np.sqrt(np.maximum(var, 1e-24))
@@ -196,14 +201,15 @@ def _detection_step(
     p_gate = ndtr((gate - mu) / sd) - ndtr((-gate - mu) / sd)
     p_det = misses.detection(zpred[:, 0])
     p_miss = p_gate + (1.0 - p_det) * (1.0 - p_gate)
-    gated = miss & (p_gate > 0.5 * p_miss) & (gate > 0)
+    miss_run = np.where(miss, miss_run * (1.0 - p_det), miss_run)
+    gated = miss & (p_gate > miss_run * (1.0 - p_gate)) & (gate > 0)
     lin1 = -mu + np.einsum("na,na->n", h_vr, prior.mean)  # pseudo-measurement v_r = 0
     post, _ = _update(
         post, lin1[:, None], h[:, 2:3, :], np.full((n_runs, 1, 1), gate**2 / 3), gated[:, None],
         "joseph",
     )  # fmt: skip
     with np.errstate(divide="ignore"):
-        return post, np.where(miss, np.log(p_miss), loglik)
+        return post, np.where(miss, np.log(p_miss), loglik), miss_run
 
 
 def _run(
@@ -229,6 +235,7 @@ def _run(
     mean = np.zeros((n_runs, n))
     cov = np.broadcast_to(np.eye(n), (n_runs, n, n)).copy()
     started = np.zeros(n_runs, dtype=bool)
+    miss_run: FloatArray = np.ones(n_runs)
     t_prev = times[:, 0]
     for k in range(n_steps):
         t = times[:, k]
@@ -237,7 +244,9 @@ def _run(
         if constrain is not None:
             state = _trusted(GaussianState, mean=constrain(state.mean), cov=state.cov, time=t)
         zpred, h, r = measure(state.mean)
-        post, _ = _detection_step(state, zpred, h, r, z[:, k], detected[:, k], started, misses)
+        post, _, miss_run = _detection_step(
+            state, zpred, h, r, z[:, k], detected[:, k], started, misses, miss_run
+        )
         mean, cov = np.array(post.mean), np.array(post.cov)
         new = detected[:, k] & ~started
         if new.any():
@@ -652,6 +661,7 @@ def _road_imm_numpy(
     ]  # fmt: skip
     log_mu = np.tile(np.log(mu0), (n_runs, 1))
     started = np.zeros(n_runs, dtype=bool)
+    miss_runs: list[FloatArray] = [np.ones(n_runs) for _ in models]
     n_out = len(common)
     means = np.full((n_runs, n_steps, n_out), np.nan)
     covs = np.full((n_runs, n_steps, n_out, n_out), np.nan)
@@ -672,8 +682,8 @@ def _road_imm_numpy(
             x = _no_reversal(kj)(prior.mean)
             prior = _trusted(GaussianState, mean=x, cov=prior.cov, time=t)
             zpred, h, r = measures[j](x)
-            states[j], ll = _detection_step(
-                prior, zpred, h, r, z[:, k], detected[:, k], started, misses
+            states[j], ll, miss_runs[j] = _detection_step(
+                prior, zpred, h, r, z[:, k], detected[:, k], started, misses, miss_runs[j]
             )
             lls.append(ll)
         joint = np.stack(lls, -1) + log_c
@@ -869,7 +879,9 @@ def road_pcrlb(
     """Posterior Cramer-Rao bound of the road-constrained model along true trajectories.
 
     Information recursion (covariance form) with the Jacobians at the true state and each
-    run's own detection sequence, started at its first detection with the tracker's prior.
+    run's own detection sequence, started at its first detection with the tracker's prior; a
+    scan without a detection, in view and with the true radial speed below the Doppler gate,
+    adds the gate's information as the trackers do (module docstring).
     Returns the bound variance of the planar position [m^2] and of the speed [m^2/s^2],
     shapes (N, T) (NaN before the first detection). The truth here is deterministic, so a
     filter can beat this bound: it is the design reference of a target that really moves
@@ -900,6 +912,7 @@ def road_pcrlb(
             spec.radar,
             spec.noise_tab,
             spec.noise_cnt,
+            spec.fields,
             c(spec.road),
             spec.half_width_m,
             spec.scatter_std_m,
@@ -919,13 +932,25 @@ def road_pcrlb(
             phis[:, i] @ cov @ np.swapaxes(phis[:, i], -1, -2) + qds[:, i],
             p0,
         )
-        _, h, r = measure(truth[:, i])
+        zt, h, r = measure(truth[:, i])
         upd = detected[:, i]
-        s_mat = h @ cov @ np.swapaxes(h, -1, -2) + r
-        gain = np.swapaxes(np.linalg.solve(s_mat, h @ cov), -1, -2)
-        ikh = np.eye(n) - gain @ h
-        new = ikh @ cov @ np.swapaxes(ikh, -1, -2) + gain @ r @ np.swapaxes(gain, -1, -2)
-        cov = np.where(upd[:, None, None], 0.5 * (new + np.swapaxes(new, -1, -2)), cov)
+        gate = radar.min_radial_speed_mps
+        gated = (
+            started
+            & ~upd
+            & radar.in_view(zt[:, 0], zt[:, 1])
+            & (np.abs(zt[:, 2]) < gate)
+            & (gate > 0)
+        )
+        for use, hh, rr in (
+            (upd, h, r),
+            (gated, h[:, 2:3], np.full((n_runs, 1, 1), gate**2 / 3)),
+        ):
+            s_mat = hh @ cov @ np.swapaxes(hh, -1, -2) + rr
+            gain = np.swapaxes(np.linalg.solve(s_mat, hh @ cov), -1, -2)
+            ikh = np.eye(n) - gain @ hh
+            new = ikh @ cov @ np.swapaxes(ikh, -1, -2) + gain @ rr @ np.swapaxes(gain, -1, -2)
+            cov = np.where(use[:, None, None], 0.5 * (new + np.swapaxes(new, -1, -2)), cov)
         started |= upd
         pos_var[started, i] = cov[started, 0, 0] + cov[started, k, k]
         spd_var[started, i] = cov[started, 1, 1]
