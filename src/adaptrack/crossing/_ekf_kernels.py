@@ -20,6 +20,7 @@ from ..filters._kernels import predict_into, series_transition_into, update_into
 from ._radar_kernel import curve_at, in_view
 
 ROAD, FREE = 0, 1  # measurement models
+GATE_MIN_COS = 0.3  # the gate informs on speed only where |d v_r / d speed| is at least this
 
 
 @numba.njit(cache=True, inline="always")
@@ -160,10 +161,11 @@ def gate_update_into(  # type: ignore[no-untyped-def]
 ):  # fmt: skip
     """Posterior ``x``, ``p`` of the prior ``xp``, ``pp`` after a scan without a detection.
 
-    Inside the field of view, where the Doppler gate ``g = radar[5]`` explains the run of
-    misses better than ``1 - P_D`` (``miss_run``: its probability for a moving target so far;
-    :mod:`adaptrack.crossing.tracking`), the pseudo-measurement ``v_r = 0`` with variance
-    ``g^2 / 3`` is applied. Returns ``log P(no detection)`` (0 outside the view) and the
+    Inside the field of view, where the radial speed measures the speed
+    (``|d v_r / d speed| >= GATE_MIN_COS``) and the Doppler gate ``g = radar[5]`` explains the
+    run of misses better than ``1 - P_D`` (``miss_run``: its probability for a moving target
+    so far; :mod:`adaptrack.crossing.tracking`), the pseudo-measurement ``v_r = 0`` with
+    variance ``g^2 / 3`` is applied. Returns ``log P(no detection)`` (0 outside the view) and the
     updated ``miss_run``. ``hp``/``kt`` (1, n), ``s``/``lo``/``r1`` (1, 1), ``w``/``nu1``
     (1,) are scratch.
     """
@@ -178,6 +180,11 @@ def gate_update_into(  # type: ignore[no-untyped-def]
     off = abs((zp[1] - radar[3] + math.pi) % (2.0 * math.pi) - math.pi)
     if not in_view(zp[0], off, fields, radar[4]):
         return 0.0, miss_run
+    if kind == ROAD:
+        along = abs(h[2, 1])
+    else:  # the radial speed's sensitivity to the speed along the predicted velocity
+        sp = math.sqrt(xp[2] * xp[2] + xp[3] * xp[3])
+        along = abs(h[2, 2] * xp[2] + h[2, 3] * xp[3]) / sp if sp > 0.5 else 1.0
     var = 0.0
     for a in range(n):
         for b in range(n):
@@ -187,6 +194,8 @@ def gate_update_into(  # type: ignore[no-untyped-def]
     p_gate = _normal_cdf((gate - mu) / sd) - _normal_cdf((-gate - mu) / sd)
     p_det = curve_at(pd_tab, pd_cnt, 0, zp[0])
     p_miss = p_gate + (1.0 - p_det) * (1.0 - p_gate)
+    if along < GATE_MIN_COS:  # line of sight across the road: the miss says little on speed
+        return math.log(p_miss) if p_miss > 0.0 else -math.inf, miss_run
     miss_run = miss_run * (1.0 - p_det)
     if gate > 0.0 and p_gate > miss_run * (1.0 - p_gate):
         nu1[0] = -mu
@@ -313,10 +322,11 @@ def pcrlb_kernel(  # type: ignore[no-untyped-def]
     """Bound covariance recursion of the road model along the true states ``truth`` (N, T, n).
 
     Transitions as in :func:`ekf_kernel`. The covariance stays at ``p0`` until the first
-    detection; a scan without a detection, in view and with the true radial speed below the
-    Doppler gate ``radar[5]``, adds the gate's information (``v_r`` with variance ``g^2 / 3``),
-    as the filters do. ``pos_var``/``spd_var`` (N, T), pre-filled with NaN, receive
-    ``P[0, 0] + P[k, k]`` and ``P[1, 1]`` from then on.
+    detection; a scan without a detection, in view, with the true radial speed below the
+    Doppler gate ``radar[5]`` and a line of sight along the road (``GATE_MIN_COS``), adds the
+    gate's information (``v_r`` with variance ``g^2 / 3``), as the filters do.
+    ``pos_var``/``spd_var`` (N, T), pre-filled with NaN, receive ``P[0, 0] + P[k, k]`` and
+    ``P[1, 1]`` from then on.
     """
     n_runs, n_steps = detected.shape
     n = p0.shape[0]
@@ -366,7 +376,8 @@ def pcrlb_kernel(  # type: ignore[no-untyped-def]
                         zp, h, rm, jp, jv,
                     )  # fmt: skip
                     off = abs((zp[1] - radar[3] + math.pi) % (2.0 * math.pi) - math.pi)
-                    if in_view(zp[0], off, fields, radar[4]) and abs(zp[2]) < radar[5]:
+                    informs = abs(h[2, 1]) >= GATE_MIN_COS
+                    if in_view(zp[0], off, fields, radar[4]) and abs(zp[2]) < radar[5] and informs:
                         update_into(
                             xp, pp, resid[:1], h[2:3], r1, True, x, p, hp[:1], s[:1, :1],
                             lo[:1, :1], kt[:1], w[:1], ikh, tmp,

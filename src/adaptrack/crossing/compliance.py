@@ -8,12 +8,21 @@ to true speeds <= 100 km/h; above that the relative speed error RMS is compared 
 Zone epochs before a track has started (and warmed up) have no estimate: their share is
 reported as *untracked* (a blind zone at the far end shows up there).
 
-Verdict: every RMS carries one-sided bounds at ``confidence`` (default 95 %) from the spread
-between runs (:func:`adaptrack.analysis.confidence.rms_with_bounds`). A row *passes* when every
-upper bound is within its limit, *fails* when a lower bound is beyond it, and is *undecided*
-otherwise (more runs would decide it). Runs of a case are one batch; every (class, case) has
-its own seed stream, blocks of runs have their own sub-streams. Random approaches vary by
-trajectory as well as by sensor noise, so they get ``RANDOM_RUNS_FACTOR`` times the runs.
+Verdict: every RMS carries one-sided bounds from the spread between runs
+(:func:`adaptrack.analysis.confidence.rms_with_bounds`). They are stated at ``confidence``
+(95 %) and computed at the nominal level ``BOUND_LEVEL`` (99 %): squared errors of crossing
+runs are right-skewed (stops, random manoeuvres), and in repeated 10-run Monte Carlos of hard
+scripted built-in pairs the nominal-95 % bound covered the true RMS in only 84-91 % of cases,
+the nominal-99 % bound in 94-99 % (``tests/statistical/test_compliance_bounds.py``). Random
+approaches are heavy-tailed: rare runs (a manoeuvre or a stop where the radar cannot see it)
+dominate their mean, and the bound of a 40-run Monte Carlo covered it in 89-94 % on
+lx_default, less on sites with blind edges; their verdicts need more runs to be as sure. A
+row *passes* when every upper bound is within its limit, *fails* when a lower bound is beyond
+it, and is *undecided* otherwise (more runs would decide it).
+
+Runs of a case are one batch; every (class, case) has its own seed stream, blocks of runs
+have their own sub-streams. Random approaches vary by trajectory as well as by sensor noise,
+so they get ``RANDOM_RUNS_FACTOR`` times the runs.
 """
 
 from __future__ import annotations
@@ -44,7 +53,8 @@ SPEED_LIMIT_KMH = 2.0
 SPEED_LIMIT_REL = 0.02
 SPEED_SPLIT_KMH = 100.0
 WARM_UP_S = 1.0
-CONFIDENCE = 0.95
+CONFIDENCE = 0.95  # stated confidence of the verdict's bounds
+BOUND_LEVEL = 0.99  # nominal level they are computed at (coverage measured, module docstring)
 RANDOM_RUNS_FACTOR = 4  # runs of a random (Singer) approach per run of a scripted case
 CONFIRMATION_FACTOR = 4  # runs of a confirmation Monte Carlo per run of the first one
 LIMITS = np.array([POSITION_LIMIT_M, SPEED_LIMIT_KMH, SPEED_LIMIT_REL])
@@ -350,6 +360,11 @@ def _blocks(
     return list(zip(sizes, seeds, strict=True))
 
 
+def _level(confidence: float) -> float:
+    """Nominal level that gives the stated one-sided ``confidence`` (calibrated at 95 %)."""
+    return 1.0 - (1.0 - confidence) * (1.0 - BOUND_LEVEL) / (1.0 - CONFIDENCE)
+
+
 def rows_of_pair(
     case: Case, veh: VehicleClass, blocks: list[BlockSums], confidence: float = CONFIDENCE
 ) -> list[ComplianceRow]:
@@ -360,7 +375,7 @@ def rows_of_pair(
     for name in blocks[0][0]:
         parts = [b[0][name] for b in blocks]
         sums = sum(parts[1:], parts[0])
-        rms, lower, upper = rms_with_bounds(sums.squares, sums.counts, confidence)
+        rms, lower, upper = rms_with_bounds(sums.squares, sums.counts, _level(confidence))
         scored = np.asarray(np.isfinite(rms), dtype=bool)
         if np.any(lower[scored] > LIMITS[scored]):
             verdict = "fail"

@@ -23,8 +23,12 @@ detection is either a miss (probability ``1 - P_D``) or a target below the Doppl
 probability ``q = prod (1 - P_D)`` (the run of misses so far, reset by a detection), a gated one
 with probability about 1. Where the gate is the likelier explanation
 (``p_g > q (1 - p_g)``) the filter applies it as a pseudo-measurement of the radial speed, 0
-with variance ``g^2 / 3`` (uniform on ``(-g, g)``). A vehicle stopped behind the gate is thus
-held, with a bounded covariance, instead of coasting away. The IMM uses
+with variance ``g^2 / 3`` (uniform on ``(-g, g)``). Only where the radial speed measures the
+speed, ``|d v_r / d speed| = |cos theta| >= 0.3``: where the line of sight runs across the
+road (the vehicle passing close by the radar), a radial speed below the gate is geometry, not
+a stop, and such misses neither update the filter nor extend the run of misses. A vehicle
+stopped behind the gate is thus held, with a bounded covariance, instead of coasting away.
+The IMM uses
 ``P(no detection | mode) = p_g + (1 - P_D)(1 - p_g)`` as the mode likelihood.
 """
 
@@ -45,7 +49,7 @@ from ..models.continuous import ConstantVelocity, MotionModel
 from ..models.discretize import discretize
 from ..models.series_table import SeriesTable, model_series_table
 from ..types import GaussianState, _trusted
-from ._ekf_kernels import FREE, ROAD
+from ._ekf_kernels import FREE, GATE_MIN_COS, ROAD
 from .road import Road
 from .sensor import Curve, RadarSpec, curve_tables
 
@@ -154,13 +158,22 @@ class _Misses:
 
     radar: RadarSpec
     detection: Curve
+    kind: int
+
+    def speed_sensitivity(self, x: FloatArray, h_vr: FloatArray) -> FloatArray:
+        """``|d v_r / d speed|`` (N,) at states ``x`` with radial-speed Jacobian rows ``h_vr``."""
+        if self.kind == ROAD:
+            return np.abs(h_vr[:, 1])
+        sp = np.hypot(x[:, 2], x[:, 3])
+        along = np.abs(h_vr[:, 2] * x[:, 2] + h_vr[:, 3] * x[:, 3]) / np.maximum(sp, 1e-12)
+        return np.where(sp > 0.5, along, 1.0)
 
 
-def _misses(radar: RadarSpec, detection_probability: Curve | None) -> _Misses:
+def _misses(radar: RadarSpec, detection_probability: Curve | None, kind: int) -> _Misses:
     curve = (
         radar.detection_curve("default") if detection_probability is None else detection_probability
     )
-    return _Misses(radar, curve)
+    return _Misses(radar, curve, kind)
 
 
 def _detection_step(
@@ -194,6 +207,7 @@ def _detection_step(
     if not miss.any():
         return post, loglik, miss_run
     h_vr = h[:, 2, :]
+    informs = misses.speed_sensitivity(prior.mean, h_vr) >= GATE_MIN_COS
     var = np.einsum("na,nab,nb->n", h_vr, prior.cov, h_vr)
     sd = np.sqrt(np.maximum(var, 1e-24))
     gate = misses.radar.min_radial_speed_mps
@@ -201,8 +215,8 @@ def _detection_step(
     p_gate = ndtr((gate - mu) / sd) - ndtr((-gate - mu) / sd)
     p_det = misses.detection(zpred[:, 0])
     p_miss = p_gate + (1.0 - p_det) * (1.0 - p_gate)
-    miss_run = np.where(miss, miss_run * (1.0 - p_det), miss_run)
-    gated = miss & (p_gate > miss_run * (1.0 - p_gate)) & (gate > 0)
+    miss_run = np.where(miss & informs, miss_run * (1.0 - p_det), miss_run)
+    gated = miss & informs & (p_gate > miss_run * (1.0 - p_gate)) & (gate > 0)
     lin1 = -mu + np.einsum("na,na->n", h_vr, prior.mean)  # pseudo-measurement v_r = 0
     post, _ = _update(
         post, lin1[:, None], h[:, 2:3, :], np.full((n_runs, 1, 1), gate**2 / 3), gated[:, None],
@@ -396,7 +410,7 @@ def track_free_2d(
             cov[:, i, i] = 9.0
         return mean, cov
 
-    misses = _misses(radar, detection_probability)
+    misses = _misses(radar, detection_probability, FREE)
     if use_compiled(backend, detected.size, threshold=COMPILED_MIN_RUN_STEPS):
         spec = _compiled_spec(FREE, misses, scatter_std_m)
         return _run_compiled(times, z, detected, _series(model, times), initial, spec, n)
@@ -536,7 +550,7 @@ def track_on_road(
     def initial(zk: FloatArray) -> tuple[FloatArray, FloatArray]:
         return _road_initial(zk, radar, road, model, scatter_std_m, lateral_std_m)
 
-    misses = _misses(radar, detection_probability)
+    misses = _misses(radar, detection_probability, ROAD)
     if use_compiled(backend, detected.size, threshold=COMPILED_MIN_RUN_STEPS):
         spec = _compiled_spec(ROAD, misses, scatter_std_m, k, road)
         table = _series(model, times, (lateral_psd,))
@@ -613,7 +627,7 @@ def track_on_road_imm(
     def initial(zk: FloatArray) -> list[tuple[FloatArray, FloatArray]]:
         return [_road_initial(zk, radar, road, m, scatter_std_m, lateral_std_m) for m in models]
 
-    misses = _misses(radar, detection_probability)
+    misses = _misses(radar, detection_probability, ROAD)
     if use_compiled(backend, detected.size, threshold=COMPILED_MIN_RUN_STEPS):
         return _road_imm_compiled(
             times, z, detected, misses, road, models, gen, mu0, names, common, initial,
@@ -900,7 +914,7 @@ def road_pcrlb(
     if use_compiled(backend, detected.size, threshold=COMPILED_MIN_RUN_STEPS):
         from ._ekf_kernels import pcrlb_kernel
 
-        spec = _compiled_spec(ROAD, _misses(radar, None), scatter_std_m, k, road)
+        spec = _compiled_spec(ROAD, _misses(radar, None, ROAD), scatter_std_m, k, road)
         c = np.ascontiguousarray
         pcrlb_kernel(
             c(runs_times, dtype=float),
@@ -940,6 +954,7 @@ def road_pcrlb(
             & ~upd
             & radar.in_view(zt[:, 0], zt[:, 1])
             & (np.abs(zt[:, 2]) < gate)
+            & (np.abs(h[:, 2, 1]) >= GATE_MIN_COS)
             & (gate > 0)
         )
         for use, hh, rr in (
