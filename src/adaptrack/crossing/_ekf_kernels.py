@@ -21,6 +21,7 @@ from ._radar_kernel import curve_at, in_view
 
 ROAD, FREE = 0, 1  # measurement models
 GATE_MIN_COS = 0.3  # the gate informs on speed only where |d v_r / d speed| is at least this
+MISS_RUN_FLOOR = 1e-4  # a run of misses has at least this probability (occlusion, interference)
 
 
 @numba.njit(cache=True, inline="always")
@@ -196,7 +197,7 @@ def gate_update_into(  # type: ignore[no-untyped-def]
     p_miss = p_gate + (1.0 - p_det) * (1.0 - p_gate)
     if along < GATE_MIN_COS:  # line of sight across the road: the miss says little on speed
         return math.log(p_miss) if p_miss > 0.0 else -math.inf, miss_run
-    miss_run = miss_run * (1.0 - p_det)
+    miss_run = max(miss_run * (1.0 - p_det), MISS_RUN_FLOOR)
     if gate > 0.0 and p_gate > miss_run * (1.0 - p_gate):
         nu1[0] = -mu
         r1[0, 0] = gate * gate / 3.0

@@ -313,6 +313,12 @@ def _assign_radars(
                     f"{where}: road {rd.name!r}: unknown radar {rd.radar!r}; radars are "
                     f"{', '.join(names)}"
                 )
+            radar = radars[names.index(rd.radar)]
+            if not _coverage(radar, roads[rd.name], spec.zone_m).any():
+                raise ValueError(
+                    f"{where}: road {rd.name!r}: its radar {rd.radar!r} sees no part of its "
+                    "controlled zone"
+                )
             out[rd.name] = rd.radar
             continue
         seen = [float(_coverage(r, roads[rd.name], spec.zone_m).mean()) for r in radars]
@@ -323,19 +329,17 @@ def _assign_radars(
 
 
 def blind_zones(site: Site) -> dict[str, list[tuple[float, float]]]:
-    """Parts of each road's controlled zone that no radar sees: (from, to) along-road [m].
+    """Parts of each road's controlled zone its radar does not see: (from, to) along-road [m].
 
-    The lane centre is sampled every ``COVERAGE_STEP_M``; a part is blind where no radar's
-    field of view and range gates contain it (the Doppler gate is not geometry and is not
-    counted).
+    A road is tracked with the radar of ``site.radar_of_road`` only (detections of several
+    radars are not fused), so that radar's fields of view and range gates decide. The lane
+    centre is sampled every ``COVERAGE_STEP_M``; the Doppler gate is not geometry and is not
+    counted.
     """
     out = {}
     s = np.arange(0.0, site.zone_m + 1e-9, COVERAGE_STEP_M)
     for name, road in site.roads.items():
-        pts = road.lane_point(s)
-        seen = np.zeros(s.size, dtype=bool)
-        for r in site.radars:
-            seen |= r.covers(pts)
+        seen = site.radar_for(name).covers(road.lane_point(s))
         edges = np.diff(np.concatenate([[0], (~seen).astype(int), [0]]))
         starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1
         out[name] = [(float(s[a]), float(s[b])) for a, b in zip(starts, stops, strict=True)]

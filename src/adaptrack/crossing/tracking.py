@@ -20,8 +20,9 @@ A missed detection is information too. Inside the radar's field of view a scan w
 detection is either a miss (probability ``1 - P_D``) or a target below the Doppler gate ``g``
 (``|v_r| < g``: a stopped or crossing vehicle). With the predicted radial speed
 ``N(mu, sigma^2)``, ``p_g = P(|v_r| < g)``; a moving target misses ``m`` scans in a row with
-probability ``q = prod (1 - P_D)`` (the run of misses so far, reset by a detection), a gated one
-with probability about 1. Where the gate is the likelier explanation
+probability ``q = max(prod (1 - P_D), 1e-4)`` (the run of misses so far, reset by a
+detection; the floor stands for causes the sensor model does not know, such as occlusion or
+interference), a gated one with probability about 1. Where the gate is the likelier explanation
 (``p_g > q (1 - p_g)``) the filter applies it as a pseudo-measurement of the radial speed, 0
 with variance ``g^2 / 3`` (uniform on ``(-g, g)``). Only where the radial speed measures the
 speed, ``|d v_r / d speed| = |cos theta| >= 0.3``: where the line of sight runs across the
@@ -49,7 +50,7 @@ from ..models.continuous import ConstantVelocity, MotionModel
 from ..models.discretize import discretize
 from ..models.series_table import SeriesTable, model_series_table
 from ..types import GaussianState, _trusted
-from ._ekf_kernels import FREE, GATE_MIN_COS, ROAD
+from ._ekf_kernels import FREE, GATE_MIN_COS, MISS_RUN_FLOOR, ROAD
 from .road import Road
 from .sensor import Curve, RadarSpec, curve_tables
 
@@ -215,7 +216,9 @@ def _detection_step(
     p_gate = ndtr((gate - mu) / sd) - ndtr((-gate - mu) / sd)
     p_det = misses.detection(zpred[:, 0])
     p_miss = p_gate + (1.0 - p_det) * (1.0 - p_gate)
-    miss_run = np.where(miss & informs, miss_run * (1.0 - p_det), miss_run)
+    miss_run = np.where(
+        miss & informs, np.maximum(miss_run * (1.0 - p_det), MISS_RUN_FLOOR), miss_run
+    )
     gated = miss & informs & (p_gate > miss_run * (1.0 - p_gate)) & (gate > 0)
     lin1 = -mu + np.einsum("na,na->n", h_vr, prior.mean)  # pseudo-measurement v_r = 0
     post, _ = _update(
