@@ -1,15 +1,17 @@
 """`adaptrack simulate` and `adaptrack track` on files, including bad input."""
 
+import json
 import os
 import re
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
 
-from adaptrack.crossing.selection import Candidate, SiteTuning
+from adaptrack.crossing.selection import Candidate, SiteTuning, load_tuning
 
 IMM_PARAMS = {"accel_psd": 0.1, "jerk_psd": 3.0, "sojourn_s": 10.0}
 
@@ -106,3 +108,67 @@ def test_track_bad_input(simulated, change, message):
     assert proc.stderr.count("\n") == 1  # one line
     assert "Traceback" not in proc.stderr
     assert not out.exists()
+
+
+EXAMPLE_SITE = Path(__file__).parents[2] / "examples" / "sites" / "rural_crossing.toml"
+
+
+@pytest.fixture(scope="module")
+def demo_on_a_site_file(tmp_path_factory):
+    out = tmp_path_factory.mktemp("demo")
+    proc = run(
+        "demo", "--site", str(EXAMPLE_SITE), "--runs", "3", "--training-runs", "1",
+        "--validation-runs", "2", "--workers", "1", "--seed", "5", "--out", str(out),
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return out, proc.stdout
+
+
+def test_demo_on_a_site_file_reports_the_family_and_the_validation_table(demo_on_a_site_file):
+    out, stdout = demo_on_a_site_file
+    summary = json.loads((out / "summary.json").read_text())
+    deployed = summary["deployed"]
+    assert "candidates on 2 validation runs" in stdout and deployed in stdout
+    assert {c["family"] for c in summary["selection"]["candidates"]} == {
+        "cv", "ca", "singer", "m1", "m2", "imm",
+    }  # fmt: skip
+    tuned = (out / "tuned.toml").read_text()
+    assert 'family = "' in tuned and "[candidates.imm.parameters]" in tuned
+    html = (out / "report.html").read_text()
+    assert "rural_crossing" in html and "id='candidates'" in html and "north_east: 0.0-" in html
+    # the summary carries the site: the report re-renders for a site given as a file
+    again = out / "again.html"
+    proc = run("report", str(out / "summary.json"), "--out", str(again))
+    assert proc.returncode == 0, proc.stderr
+    assert "id='candidates'" in again.read_text() and "rural_crossing" in again.read_text()
+    # and track uses the deployed estimator of tuned.toml
+    assert load_tuning(out / "tuned.toml").winner.label == deployed
+
+
+def test_tune_writes_the_selection(tmp_path):
+    out = tmp_path / "tuned.toml"
+    proc = run(
+        "tune", str(EXAMPLE_SITE), "--out", str(out), "--families", "cv,ca",
+        "--training-runs", "1", "--validation-runs", "2", "--workers", "1",
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    assert {c.family for c in load_tuning(out).candidates} == {"cv", "ca"}
+    bad = run("tune", str(EXAMPLE_SITE), "--out", str(out), "--families", "kalman")
+    assert bad.returncode == 2 and "unknown ['kalman']" in bad.stderr
+
+
+@pytest.mark.parametrize(
+    "edit, message",
+    [
+        (lambda t: t.replace("min_radial_speed_mps", "min_radial_speed"), "unknown key"),
+        (lambda t: t.replace("decel_mps2 = 9.0", "decel_mps2 = 12.0"), "less than or equal to 10"),
+        (lambda t: t.replace('road = "south_west"', 'road = "south"', 1), "unknown road 'south'"),
+    ],
+)
+def test_demo_bad_site_file_is_one_line(tmp_path, edit, message):
+    site = tmp_path / "site.toml"
+    site.write_text(edit(EXAMPLE_SITE.read_text()))
+    proc = run("demo", "--site", str(site), "--out", str(tmp_path / "out"), "--workers", "1")
+    assert proc.returncode == 1 and proc.stderr.startswith("error: ")
+    assert re.search(message, proc.stderr) and proc.stderr.count("\n") == 1, proc.stderr
+    assert not (tmp_path / "out").exists()

@@ -268,7 +268,7 @@ def _map_figure(data: ReportData) -> str:
                 ax.plot([x, x + length * math.sin(a)], [y, y + length * math.cos(a)], "k:", lw=0.8)
     for j, pts in enumerate(data.blind.values()):
         p = np.asarray(pts)
-        label = "blind zone (no radar sees it)" if j == 0 else None
+        label = "blind zone (its radar does not see it)" if j == 0 else None
         ax.plot(p[:, 0], p[:, 1], color="red", lw=5, alpha=0.6, label=label)
     for s in data.samples:
         t = np.asarray(s.truth_xy)
@@ -456,7 +456,7 @@ def render_html(data: ReportData) -> str:
         parts += _selection_table(data)
     parts.append("<h2>Site</h2><figure id='map'>" + _map_figure(data) + "</figure>")
     parts.append(
-        "<p id='blind'>Blind zones (parts of the controlled zone that no radar sees): "
+        "<p id='blind'>Blind zones (parts of a controlled zone its road's radar does not see): "
         + (", ".join(e(k) for k in data.blind) if data.blind else "none")
         + ".</p>"
     )
