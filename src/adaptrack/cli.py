@@ -77,6 +77,9 @@ TRAINING_RUNS = typer.Option(3, "--training-runs", min=1, help="Tuning runs per 
 VALIDATION_RUNS = typer.Option(
     10, "--validation-runs", min=2, help="Validation runs per class x case (model choice)."
 )
+FAMILY_KEYS = typer.Option(
+    ",".join(FAMILIES), "--families", help="Comma-separated candidate families."
+)
 
 
 @app.command()
@@ -92,6 +95,7 @@ def demo(
     training_runs: int = TRAINING_RUNS,
     validation_runs: int = VALIDATION_RUNS,
     criterion: str = CRITERION,
+    families: str = FAMILY_KEYS,
     workers: int | None = WORKERS,
     scheduler: str | None = SCHEDULER,
 ) -> None:
@@ -102,11 +106,12 @@ def demo(
     """
     st = _load_site(site)
     criterion = _criterion(criterion)
+    keys = _families(families)
     console = Console()
     test_seed = int(np.random.SeedSequence([seed, 13]).generate_state(1)[0])
     n_pairs = len(st.pairs())
     with _pool(workers, scheduler) as pool, Progress(console=console, transient=True) as progress:
-        task = progress.add_task("tuning", total=len(FAMILIES) + 2 * n_pairs)
+        task = progress.add_task("tuning", total=len(keys) + 2 * n_pairs)
 
         def step(msg: str) -> None:
             progress.update(task, advance=1, description=msg)
@@ -117,13 +122,14 @@ def demo(
             training_runs=training_runs,
             validation_runs=validation_runs,
             criterion=criterion,  # type: ignore[arg-type]
+            families=keys,
             pool=pool,
             progress=step,
         )
         winner = tuning.winner
         trackers: dict[str, Tracker] = {winner.label: winner.tracker()}
-        baseline = tuning.candidate("cv")
-        if winner.family != "cv":
+        baseline = next((c for c in tuning.candidates if c.family == "cv"), winner)
+        if baseline is not winner:
             trackers[baseline.label] = baseline.tracker()
         trackers.update({k: v for k, v in default_trackers().items() if not k.startswith("road")})
         test = evaluate_site(
@@ -172,6 +178,14 @@ def _load_site(site: str) -> Site:
         return load_site(site)
     except ValueError as exc:
         _fail(str(exc))
+
+
+def _families(text: str) -> tuple[str, ...]:
+    keys = tuple(f.strip() for f in text.split(",") if f.strip())
+    unknown = [k for k in keys if k not in FAMILIES]
+    if unknown or not keys:
+        raise typer.BadParameter(f"--families: unknown {unknown}; known: {', '.join(FAMILIES)}")
+    return keys
 
 
 def _criterion(text: str) -> str:
@@ -298,19 +312,14 @@ def tune(
     training_runs: int = TRAINING_RUNS,
     validation_runs: int = VALIDATION_RUNS,
     criterion: str = CRITERION,
-    families: str = typer.Option(
-        ",".join(FAMILIES), "--families", help="Comma-separated candidate families."
-    ),
+    families: str = FAMILY_KEYS,
     workers: int | None = WORKERS,
     scheduler: str | None = SCHEDULER,
 ) -> None:
     """Adapt the road estimator to a site: tune every family, choose on validation runs."""
     st = _load_site(site)
     criterion = _criterion(criterion)
-    keys = tuple(f.strip() for f in families.split(",") if f.strip())
-    unknown = [k for k in keys if k not in FAMILIES]
-    if unknown or not keys:
-        raise typer.BadParameter(f"--families: unknown {unknown}; known: {', '.join(FAMILIES)}")
+    keys = _families(families)
     with _pool(workers, scheduler) as pool, Progress(transient=True) as progress:
         task = progress.add_task("tuning", total=len(keys) + len(st.pairs()))
         tuning, _ = select_estimator(

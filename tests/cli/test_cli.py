@@ -18,24 +18,29 @@ def run(*args, cwd=None):
 
 
 def test_demo_writes_summary(tmp_path):
-    proc = run("demo", "--runs", "2", "--seed", "3", "--out", str(tmp_path), "--workers", "1")
+    proc = run(
+        "demo", "--runs", "2", "--seed", "3", "--out", str(tmp_path), "--workers", "1",
+        "--training-runs", "1", "--validation-runs", "2", "--families", "cv,ca,m1,m2",
+    )  # fmt: skip
     assert proc.returncode == 0, proc.stderr
-    assert "road EKF (M2)" in proc.stdout
+    assert "road EKF (M2)" in proc.stdout and "(deployed)" in proc.stdout
     summary = json.loads((tmp_path / "summary.json").read_text())
-    assert summary["runs"] == 2 and summary["seed"] == 3 and summary["site"] == "lx_default"
-    rows = summary["rows"]
+    test = summary["test"]
+    assert test["runs"] == 2 and summary["seed"] == 3 and summary["site"]["name"] == "lx_default"
+    rows = test["rows"]
     assert {r["vehicle_class"] for r in rows} == {"motorcycle", "car", "truck", "bus"}
     for r in rows:
-        assert {"filter", "case", "position_rms_m", "speed_rms_kmh", "pass"} <= set(r)
+        assert {"filter", "case", "position_rms_m", "position_upper_m", "verdict"} <= set(r)
+    assert summary["deployed"] in {r["filter"] for r in rows}
     assert not list(tmp_path.glob("*.tmp"))
     assert "lambda_per_s2" in (tmp_path / "tuned.toml").read_text()
-    assert {"lambda_per_s2", "accel_psd", "profile"} <= set(summary["tuning"])
+    assert {"candidates", "deployed", "m1_profile"} <= set(summary["selection"])
     html = (tmp_path / "report.html").read_text()
     assert "Pass/fail per estimator, class and case" in html
     # the report command re-renders from the summary
     proc = run("report", str(tmp_path / "summary.json"), "--out", str(tmp_path / "again.html"))
     assert proc.returncode == 0, proc.stderr
-    assert "Worst case per estimator" in (tmp_path / "again.html").read_text()
+    assert "Verdict on the test runs" in (tmp_path / "again.html").read_text()
     proc = run("report", str(tmp_path / "report.html"), "--out", str(tmp_path / "x.html"))
     assert proc.returncode == 1 and "not a demo summary" in proc.stderr
 

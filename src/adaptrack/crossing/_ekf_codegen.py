@@ -185,9 +185,8 @@ def ekf_kernel(n: int, phi_coef: FloatArray, qd_coef: FloatArray) -> Any:
         return generic
 
     def nonzero(coef: FloatArray) -> Pattern:
-        return tuple(
-            tuple(tuple(bool(v) for v in coef[:, a, b]) for b in range(n)) for a in range(n)
-        )
+        rows = (coef != 0).transpose(1, 2, 0).tolist()  # [row][column][term]
+        return tuple(tuple(tuple(terms) for terms in row) for row in rows)
 
     return _generated(n, (nonzero(phi_coef), nonzero(qd_coef)))
 

@@ -286,7 +286,17 @@ def _series(
     steps = np.diff(times, axis=1)
     longest = float(steps.max()) if steps.size else 1.0
     bound = 2.0 ** math.ceil(math.log2(longest)) if longest > 0 else 1.0
-    return model_series_table(model, bound, extra_random_walk_psd)
+    key = (repr(model), bound, extra_random_walk_psd)  # the model's parameters, not its id
+    if key not in _SERIES_CACHE:
+        if len(_SERIES_CACHE) >= 256:
+            _SERIES_CACHE.clear()
+        _SERIES_CACHE[key] = model_series_table(model, bound, extra_random_walk_psd)
+    return _SERIES_CACHE[key]
+
+
+# Series tables by model parameters and step bound. No kernel writes to a table (read-only
+# arrays would be a second numba type, compiled again for every kernel).
+_SERIES_CACHE: dict[tuple[str, float, tuple[float, ...]], SeriesTable] = {}
 
 
 def _run_compiled(
@@ -631,36 +641,43 @@ def track_on_road_imm(
         return [_road_initial(zk, radar, road, m, scatter_std_m, lateral_std_m) for m in models]
 
     misses = _misses(radar, detection_probability, ROAD)
-    if use_compiled(backend, detected.size, threshold=COMPILED_MIN_RUN_STEPS):
-        return _road_imm_compiled(
-            times, z, detected, misses, road, models, gen, mu0, names, common, initial,
-            scatter_std_m, lateral_psd,
-        )  # fmt: skip
-    return _road_imm_numpy(
-        times, z, detected, misses, road, models, gen, mu0, names, common, initial,
+    problem = _RoadIMM(
+        times, z, detected, misses, road, tuple(models), gen, mu0, names, common, initial,
         scatter_std_m, lateral_psd,
     )  # fmt: skip
+    if use_compiled(backend, detected.size, threshold=COMPILED_MIN_RUN_STEPS):
+        return _road_imm_compiled(problem)
+    return _road_imm_numpy(problem)
 
 
-def _road_imm_numpy(
-    times: FloatArray,
-    z: FloatArray,
-    detected: BoolArray,
-    misses: _Misses,
-    road: Road,
-    models: tuple[MotionModel, ...],
-    gen: FloatArray,
-    mu0: FloatArray,
-    names: list[tuple[str, ...]],
-    common: tuple[str, ...],
-    initial: Callable[[FloatArray], list[tuple[FloatArray, FloatArray]]],
-    scatter_std_m: float,
-    lateral_psd: float,
-) -> RoadIMMEstimates:
+@dataclass(frozen=True, eq=False)
+class _RoadIMM:
+    """A road-IMM problem as :func:`track_on_road_imm` prepares it for either backend."""
+
+    times: FloatArray
+    z: FloatArray
+    detected: BoolArray
+    misses: _Misses
+    road: Road
+    models: tuple[MotionModel, ...]
+    gen: FloatArray  # (M, M) switching generator
+    mu0: FloatArray  # (M,) mode probabilities at the first detection
+    names: list[tuple[str, ...]]  # every mode's state names
+    common: tuple[str, ...]  # the combined states
+    initial: Callable[[FloatArray], list[tuple[FloatArray, FloatArray]]]
+    scatter_std_m: float
+    lateral_psd: float
+
+
+def _road_imm_numpy(p: _RoadIMM) -> RoadIMMEstimates:
     """NumPy reference of :func:`track_on_road_imm` (loop over scans, batched over runs)."""
     from scipy.linalg import expm
 
     from ..filters.imm import _embed, _mix
+
+    times, z, detected, misses, road = p.times, p.z, p.detected, p.misses, p.road
+    models, gen, mu0, names, common = p.models, p.gen, p.mu0, p.names, p.common
+    initial, scatter_std_m, lateral_psd = p.initial, p.scatter_std_m, p.lateral_psd
 
     n_runs, n_steps = detected.shape
     n_modes = len(models)
@@ -728,25 +745,15 @@ def _road_imm_numpy(
     )
 
 
-def _road_imm_compiled(
-    times: FloatArray,
-    z: FloatArray,
-    detected: BoolArray,
-    misses: _Misses,
-    road: Road,
-    models: tuple[MotionModel, ...],
-    gen: FloatArray,
-    mu0: FloatArray,
-    names: list[tuple[str, ...]],
-    common: tuple[str, ...],
-    initial: Callable[[FloatArray], list[tuple[FloatArray, FloatArray]]],
-    scatter_std_m: float,
-    lateral_psd: float,
-) -> RoadIMMEstimates:
+def _road_imm_compiled(p: _RoadIMM) -> RoadIMMEstimates:
     """Run :func:`track_on_road_imm` in :mod:`._road_imm_kernel`."""
     from ..filters.imm import _embed
     from ..models.series_table import series_table
     from ._road_imm_kernel import road_imm_kernel
+
+    times, z, detected, misses, road = p.times, p.z, p.detected, p.misses, p.road
+    models, gen, mu0, names, common = p.models, p.gen, p.mu0, p.names, p.common
+    initial, scatter_std_m, lateral_psd = p.initial, p.scatter_std_m, p.lateral_psd
 
     n_runs, n_steps = detected.shape
     n_modes = len(models)
