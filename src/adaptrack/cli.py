@@ -75,7 +75,7 @@ CRITERION = typer.Option(
 )
 TRAINING_RUNS = typer.Option(3, "--training-runs", min=1, help="Tuning runs per class x case.")
 VALIDATION_RUNS = typer.Option(
-    10, "--validation-runs", min=2, help="Validation runs per class x case (model choice)."
+    20, "--validation-runs", min=2, help="Validation runs per class x case (model choice)."
 )
 FAMILY_KEYS = typer.Option(
     ",".join(FAMILIES), "--families", help="Comma-separated candidate families."

@@ -368,7 +368,7 @@ def select_estimator(
     *,
     seed: int = 0,
     training_runs: int = 3,
-    validation_runs: int = 10,
+    validation_runs: int = 20,
     criterion: Criterion = "tail",
     families: tuple[str, ...] = tuple(FAMILIES),
     pool: TaskPool | None = None,
