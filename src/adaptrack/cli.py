@@ -372,6 +372,7 @@ def track(
             st.radar(obj.radar),
             st.roads[st.road_of_radar(obj.radar)],
             st.classes[obj.vehicle_class or "car"].scatter_std_m,
+            st.radar(obj.radar).detection_curve(obj.vehicle_class or "car"),
         )
         frames.append(
             pd.DataFrame(

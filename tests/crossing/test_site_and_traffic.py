@@ -332,3 +332,30 @@ def test_blind_zones_from_the_field_of_view():
     # slant range 100 m at 6 m height and 3.25 m beside the lane: s = sqrt(100^2 - 36 - 3.25^2)
     assert far[0] == pytest.approx(math.sqrt(100**2 - 36 - 3.25**2), abs=0.5) and far[1] == 150.0
     assert near[0] == 0.0
+
+
+@pytest.mark.parametrize(
+    "points, message",
+    [
+        ((), "needs 1 to 32 points"),
+        (((1.0, 0.1), (0.0, 0.2)), "strictly increasing"),
+        (((0.0, math.nan),), "must be finite"),
+        (tuple((float(i), 1.0) for i in range(33)), "needs 1 to 32 points"),
+    ],
+)
+def test_curve_errors(points, message):
+    from adaptrack.crossing.sensor import Curve
+
+    with pytest.raises(ValueError, match=message):
+        Curve(points)
+
+
+def test_curve_values_and_packing():
+    from adaptrack.crossing.sensor import Curve, curve_tables
+
+    c = Curve(((10.0, 1.0), (20.0, 3.0)))
+    np.testing.assert_allclose(c([0.0, 15.0, 99.0]), [1.0, 2.0, 3.0])
+    assert Curve.constant(0.4)(123.0) == 0.4 and c.maximum == 3.0
+    np.testing.assert_allclose(c.scaled(argument=2.0, value=0.5)(30.0), 1.0)
+    table, counts = curve_tables((c, Curve.constant(5.0)))
+    assert table.shape == (2, 2, 2) and list(counts) == [2, 1]

@@ -193,7 +193,7 @@ def default_trackers() -> dict[str, Tracker]:
     sig_a = singer_accel_std(9.0, 0.05, 0.5)
     return {
         "free 2-D EKF (CV)": PlanarTracker(track_free_2d),
-        "CMKF (2-D, no Doppler)": PlanarTracker(track_converted),
+        "CMKF (2-D, no Doppler)": PlanarTracker(track_converted, reads_misses=False),
         "road EKF (CV)": RoadTracker(ConstantVelocity(accel_psd=3.0)),
         "road EKF (CA)": RoadTracker(ConstantAcceleration(jerk_psd=3.0)),
         "road EKF (M2)": RoadTracker(

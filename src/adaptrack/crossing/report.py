@@ -35,7 +35,7 @@ from .compliance import (
 from .radar_sim import simulate_site_case
 from .selection import CRITERION_TEXT, SiteTuning
 from .site import Site, blind_zones
-from .trackers import Tracker
+from .trackers import PlanarTracker, Tracker
 from .tracking import track_free_2d
 
 
@@ -98,13 +98,7 @@ def sample_tracks(site: Site, seed: int, deployed: Tracker) -> list[SampleTrack]
         runs = simulate_site_case(
             site, case, veh, n_runs=1, rng=np.random.default_rng(np.random.SeedSequence([seed, i]))
         )
-        free = track_free_2d(
-            runs.times,
-            runs.measurements,
-            runs.detected,
-            site.radar_for(case.road),
-            scatter_std_m=veh.scatter_std_m,
-        )
+        free = PlanarTracker(track_free_2d)(runs, site, case, veh)
         rd = deployed(runs, site, case, veh)
         fp, fs = _errors(free, runs)
         rp, rs = _errors(rd, runs)

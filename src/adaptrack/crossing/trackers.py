@@ -17,7 +17,7 @@ from .._typing import BoolArray, FloatArray
 from ..models.continuous import MotionModel
 from .radar_sim import CrossingRuns
 from .road import Road
-from .sensor import RadarSpec
+from .sensor import Curve, RadarSpec
 from .site import Site
 from .tracking import TrackEstimates, track_on_road, track_on_road_imm
 from .traffic import Case, VehicleClass
@@ -29,22 +29,22 @@ Tracker = Callable[[CrossingRuns, Site, Case, VehicleClass], TrackEstimates]
 class PlanarTracker:
     """A planar tracker on the radar of the case's road.
 
-    ``track`` is :func:`~.tracking.track_free_2d` or :func:`~.tracking.track_converted`.
+    ``track`` is :func:`~.tracking.track_free_2d` or :func:`~.tracking.track_converted`;
+    ``reads_misses``: whether it takes the class's P_D to interpret missed detections.
     """
 
     track: Callable[..., TrackEstimates]
+    reads_misses: bool = True
 
     def __call__(
         self, runs: CrossingRuns, site: Site, case: Case, veh: VehicleClass
     ) -> TrackEstimates:
         """Track the runs of one class x case."""
-        return self.track(
-            runs.times,
-            runs.measurements,
-            runs.detected,
-            site.radar_for(case.road),
-            scatter_std_m=veh.scatter_std_m,
-        )
+        radar = site.radar_for(case.road)
+        kw: dict[str, object] = {"scatter_std_m": veh.scatter_std_m}
+        if self.reads_misses:
+            kw["detection_probability"] = radar.detection_curve(veh.name)
+        return self.track(runs.times, runs.measurements, runs.detected, radar, **kw)
 
 
 @dataclass(frozen=True)
@@ -59,21 +59,28 @@ class _RoadTrackerBase:
         radar: RadarSpec,
         road: Road,
         scatter_std_m: float,
+        detection_probability: Curve | None = None,
     ) -> TrackEstimates:
-        """Track detections (N, T, 3) of ``radar`` on ``road`` (overridden)."""
+        """Track detections (N, T, 3) of ``radar`` on ``road`` (overridden).
+
+        ``detection_probability``: the tracked class's P_D against range (default: the
+        radar's ``default`` curve).
+        """
         raise NotImplementedError
 
     def __call__(
         self, runs: CrossingRuns, site: Site, case: Case, veh: VehicleClass
     ) -> TrackEstimates:
         """Track the runs of one class x case."""
+        radar = site.radar_for(case.road)
         return self.estimate(
             runs.times,
             runs.measurements,
             runs.detected,
-            site.radar_for(case.road),
+            radar,
             site.roads[case.road],
             veh.scatter_std_m,
+            radar.detection_curve(veh.name),
         )
 
 
@@ -92,11 +99,12 @@ class RoadTracker(_RoadTrackerBase):
         radar: RadarSpec,
         road: Road,
         scatter_std_m: float,
+        detection_probability: Curve | None = None,
     ) -> TrackEstimates:
         """Track detections (N, T, 3) of ``radar`` on ``road`` (:func:`track_on_road`)."""
         return track_on_road(
-            times, z, detected, radar, road,
-            model=self.model, scatter_std_m=scatter_std_m, backend=self.backend,
+            times, z, detected, radar, road, model=self.model, scatter_std_m=scatter_std_m,
+            detection_probability=detection_probability, backend=self.backend,
         )  # fmt: skip
 
 
@@ -116,11 +124,13 @@ class IMMTracker(_RoadTrackerBase):
         radar: RadarSpec,
         road: Road,
         scatter_std_m: float,
+        detection_probability: Curve | None = None,
     ) -> TrackEstimates:
         """Track detections (N, T, 3) of ``radar`` on ``road`` (:func:`track_on_road_imm`)."""
         return track_on_road_imm(
             times, z, detected, radar, road, models=self.models, sojourn_s=self.sojourn_s,
-            scatter_std_m=scatter_std_m, backend=self.backend,
+            scatter_std_m=scatter_std_m, detection_probability=detection_probability,
+            backend=self.backend,
         )  # fmt: skip
 
 
