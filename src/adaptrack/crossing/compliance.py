@@ -276,15 +276,6 @@ def run_sums(est: TrackEstimates, runs: CrossingRuns, zone_m: float) -> RunSums:
     )
 
 
-def score(
-    est: TrackEstimates, runs: CrossingRuns, zone_m: float
-) -> tuple[float, float, float, int]:
-    """Position RMS [m], speed RMS [km/h] (<= 100 km/h), relative speed RMS (> 100), epochs."""
-    sums = run_sums(est, runs, zone_m)
-    pos, spd, rel = sums.rms()
-    return float(pos), float(spd), float(rel), int(sums.counts[:, 0].sum())
-
-
 def _bound_sums(runs: CrossingRuns, site: Site, case: Case, veh: VehicleClass) -> RunSums:
     """Road-aligned PCRLB variances as per-run sums (position [m^2], speed [(km/h)^2])."""
     pos_var, spd_var = road_pcrlb(
@@ -309,17 +300,6 @@ def _bound_sums(runs: CrossingRuns, site: Site, case: Case, veh: VehicleClass) -
         zeros,
         zeros,
     )
-
-
-def case_bound(
-    runs: CrossingRuns, site: Site, case: Case, veh: VehicleClass
-) -> tuple[float, float]:
-    """Road-aligned PCRLB (constant-acceleration model, jerk PSD 3 m^2/s^5) over the zone.
-
-    Returns RMS position [m] and speed [km/h, true speed <= 100 km/h] bounds of the case.
-    """
-    pos, spd, _ = _bound_sums(runs, site, case, veh).rms()
-    return float(pos), float(spd)
 
 
 BlockSums = tuple[dict[str, RunSums], RunSums | None]
@@ -608,7 +588,6 @@ __all__ = [
     "rows_of_pair",
     "run_sums",
     "runs_of",
-    "score",
     "scored_epochs",
     "zone_epochs",
 ]

@@ -72,11 +72,6 @@ class Curve:
         """Return the curve with arguments and values multiplied (unit conversion)."""
         return Curve(tuple((x * argument, y * value) for x, y in self.points))
 
-    @property
-    def maximum(self) -> float:
-        """Largest value of the curve."""
-        return float(self.values.max())
-
 
 @dataclass(frozen=True)
 class FieldOfView:
