@@ -28,9 +28,11 @@ from .crossing.compliance import (
     evaluate_site,
 )
 from .crossing.families import FAMILIES
-from .crossing.measurements_io import detections_frame, read_detections
+from .crossing.measurements_io import detections_frame, read_detections, read_scene_detections
 from .crossing.radar_sim import simulate_site_case
 from .crossing.report import build_report, render_html, sample_tracks
+from .crossing.scene import scene_spec, simulate_scene
+from .crossing.scene_tracker import EVENT_COLUMNS, SceneTracker, iter_scans
 from .crossing.selection import (
     CRITERIA,
     CRITERION_TEXT,
@@ -41,7 +43,7 @@ from .crossing.selection import (
 from .crossing.site import Site, load_site, site_from_mapping
 from .crossing.trackers import RoadTracker, Tracker
 from .io.navigation import read_navigation_measurements
-from .io.tables import DataFormatError, read_flight_csv, write_table_atomic
+from .io.tables import DataFormatError, read_flight_csv, read_table, write_table_atomic
 from .models.continuous import ConstantAcceleration, Singer
 from .parallel import TaskPool, task_pool
 from .simulation.scenario import load_scenario
@@ -280,9 +282,36 @@ def simulate(
     truth: Path | None = typer.Option(None, "--truth", help="Also write the true kinematics."),
     runs: int = typer.Option(1, "--runs", min=1, help="Vehicles per class and case."),
     seed: int = typer.Option(0, "--seed", help="Random seed."),
+    scene: bool = typer.Option(
+        False, "--scene", help="Mixed traffic of the site's [scene]: detections without ids."
+    ),
+    duration: float | None = typer.Option(
+        None, "--duration", min=1.0, help="Scene length [s] (default: the site's)."
+    ),
 ) -> None:
-    """Simulate radar detections of traffic at a site, as a radar object list."""
+    """Simulate radar detections of traffic at a site.
+
+    Without ``--scene``: one vehicle at a time per class and case, as a radar object list with
+    ``object_id``. With ``--scene``: the site's mixed traffic (flows, closures, clutter), as
+    raw detections without identities; ``--truth`` then holds every road user per traffic step.
+    """
     st = _load_site(site)
+    if scene:
+        try:
+            spec = scene_spec(st, **({} if duration is None else {"duration_s": duration}))
+        except ValueError as exc:
+            _fail(str(exc))
+        rec = simulate_scene(st, spec, seed)
+        write_table_atomic(rec.detections, out)
+        if truth is not None:
+            cols = ["object_id", "vehicle_class", "time_s", "east_m", "north_m", "speed_mps",
+                    "in_zone"]  # fmt: skip
+            write_table_atomic(rec.truth.table[cols], truth)
+        Console().print(
+            f"wrote {out} ({len(rec.detections)} detections of {len(rec.truth.users)} road "
+            f"users over {spec.duration_s:g} s)"
+        )
+        return
     pairs = st.pairs()
     seeds = np.random.SeedSequence(seed).spawn(len(pairs))
     frames, truths = [], []
@@ -346,14 +375,23 @@ def track(
     config: Path | None = typer.Option(
         None, "--config", help="Tuned configuration from 'adaptrack tune' or 'demo'."
     ),
+    events: Path | None = typer.Option(
+        None, "--events", help="Hazard events of raw detections (default: next to --out)."
+    ),
 ) -> None:
-    """Track every radar object with the site's road estimator; write per-object estimates.
+    """Track radar detections at a site; write the estimates.
 
-    The estimator is the deployed one of ``--config`` (the road EKF with constant
-    acceleration without it). The reflection-point scatter follows the ``vehicle_class``
-    column (a car when absent).
+    With an ``object_id`` column (a radar object list): every object with the site's road
+    estimator, the deployed one of ``--config`` (the road EKF with constant acceleration
+    without it); the reflection-point scatter follows the ``vehicle_class`` column (a car
+    when absent). Without ``object_id`` (raw detections): the many-object scene tracker;
+    tracks go to ``--out`` (status tentative tracks excluded) and hazard events to
+    ``--events``.
     """
     st = _load_site(site)
+    if "object_id" not in read_table(measurements).columns:
+        _track_scene_file(measurements, st, out, events)
+        return
     try:
         objects = read_detections(measurements, st)
         estimator = (
@@ -389,6 +427,38 @@ def track(
         )
     write_table_atomic(pd.concat(frames, ignore_index=True), out)
     Console().print(f"wrote {out} ({len(objects)} objects)")
+
+
+def _track_scene_file(measurements: Path, st: Site, out: Path, events: Path | None) -> None:
+    try:
+        det = read_scene_detections(measurements, st)
+    except ValueError as exc:
+        _fail(str(exc))
+    tracker = SceneTracker(st)
+    scans = list(iter_scans(det))
+    frames = []
+    with Progress(transient=True) as progress:
+        task = progress.add_task("tracking", total=len(scans))
+        for radar, time_s, z in scans:
+            try:
+                frames.append(tracker.step(radar, time_s, z))
+            except ValueError as exc:
+                _fail(f"{measurements}: {exc}")
+            progress.advance(task)
+    tracks = pd.concat(frames, ignore_index=True)
+    write_table_atomic(tracks, out)
+    ev_path = events or out.with_name(out.stem + ".events.csv")
+    write_table_atomic(
+        pd.DataFrame(tracker.events, columns=EVENT_COLUMNS),
+        ev_path,
+    )
+    log = tracker.log
+    Console().print(
+        f"wrote {out} ({tracks['track_id'].nunique()} tracks) and {ev_path} "
+        f"({len(tracker.events)} events); detections: {log.updated} updated tracks, "
+        f"{log.opened + log.joined_new} opened tracks, {log.rejected_outside_view} rejected "
+        f"(outside every field of view), {log.total} of {len(det)}"
+    )
 
 
 @contextmanager

@@ -23,10 +23,10 @@ def _per_pair(rows, label):
 def test_deployed_estimator_holds_on_held_out_runs(name, dask_pool):
     site = load_site(name)
     tuning, _ = select_estimator(
-        site, seed=20261124, training_runs=2, validation_runs=4, pool=dask_pool
+        site, seed=20261124, training_runs=2, validation_runs=8, pool=dask_pool
     )
     trackers = {c.label: c.tracker() for c in tuning.candidates}
-    held_out = evaluate_site(site, 4, 977, trackers=trackers, bound=False, pool=dask_pool)
+    held_out = evaluate_site(site, 8, 977, trackers=trackers, bound=False, pool=dask_pool)
     score = {label: criterion_value(_per_pair(held_out.rows, label), "tail") for label in trackers}
     deployed = tuning.winner.label
     assert score[deployed] <= 1.1 * min(score.values()), score

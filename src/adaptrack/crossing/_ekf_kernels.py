@@ -113,14 +113,15 @@ def measure(  # type: ignore[no-untyped-def]
     tx, ty = math.sin(th), math.cos(th)
     rx, ry = -ty, tx
     off = half_width + d
-    _polar_into(cx + off * rx, cy + off * ry, vs * tx, vs * ty, radar, zp, jp, jv)
-    lever = 1.0 + kappa * (half_width + d)
+    lever = 1.0 + kappa * off  # the lane point moves at lever * ds/dt
     dpx, dpy = lever * tx, lever * ty
-    dvx, dvy = -(vs * kappa) * rx, -(vs * kappa) * ry
+    _polar_into(cx + off * rx, cy + off * ry, vs * dpx, vs * dpy, radar, zp, jp, jv)
+    dvx, dvy = -(vs * lever * kappa) * rx, -(vs * lever * kappa) * ry
+    ex, ey = vs * kappa * tx, vs * kappa * ty  # d velocity / d d
     for a in range(3):
         h[a, 0] = jp[a, 0] * dpx + jp[a, 1] * dpy + jv[a, 0] * dvx + jv[a, 1] * dvy
-        h[a, 1] = jv[a, 0] * tx + jv[a, 1] * ty
-        h[a, k] = jp[a, 0] * rx + jp[a, 1] * ry
+        h[a, 1] = jv[a, 0] * dpx + jv[a, 1] * dpy
+        h[a, k] = jp[a, 0] * rx + jp[a, 1] * ry + jv[a, 0] * ex + jv[a, 1] * ey
     _noise_into(radar, noise_tab, noise_cnt, zp, jp, -tx, -ty, scatter_std, rm)
 
 
@@ -128,7 +129,8 @@ def measure(  # type: ignore[no-untyped-def]
 def _planar_into(kind, x, p, k, road, half_width, pos, vel, pcov):  # type: ignore[no-untyped-def]
     """Planar position, velocity and position covariance (2, 2) of state ``x``, ``p``.
 
-    ROAD: ``p = c(s) + (w/2 + d) right(s)``, ``v = ds/dt t(s)``, covariance through
+    ROAD: ``p = c(s) + (w/2 + d) right(s)``, ``v = (1 + kappa (w/2 + d)) ds/dt t(s)``,
+    covariance through
     ``dp/ds = (1 + kappa (w/2 + d)) t``, ``dp/dd = right``. Returns the speed.
     """
     if kind == FREE:
@@ -141,13 +143,13 @@ def _planar_into(kind, x, p, k, road, half_width, pos, vel, pcov):  # type: igno
     rx, ry = -ty, tx
     off = half_width + d
     pos[0], pos[1] = cx + off * rx, cy + off * ry
-    vel[0], vel[1] = vs * tx, vs * ty
     ax, ay = (1.0 + kappa * off) * tx, (1.0 + kappa * off) * ty
+    vel[0], vel[1] = vs * ax, vs * ay
     pss, psd, pdd = p[0, 0], p[0, k], p[k, k]
     pcov[0, 0] = pss * ax * ax + 2.0 * psd * ax * rx + pdd * rx * rx
     pcov[1, 1] = pss * ay * ay + 2.0 * psd * ay * ry + pdd * ry * ry
     pcov[0, 1] = pcov[1, 0] = pss * ax * ay + psd * (ax * ry + rx * ay) + pdd * rx * ry
-    return abs(vs)
+    return abs(vs) * (1.0 + kappa * off)
 
 
 @numba.njit(cache=True, inline="always")

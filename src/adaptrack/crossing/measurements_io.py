@@ -69,6 +69,49 @@ class ObjectDetections:
     vehicle_class: str | None = None
 
 
+SCENE_COLUMNS = ["radar", "time_s", "range_m", "azimuth_rad", "radial_speed_mps"]
+
+
+def read_scene_detections(path: str | Path, site: Site) -> pd.DataFrame:
+    """Read and validate detections without identities.
+
+    Columns ``SCENE_COLUMNS`` (``azimuth_deg`` accepted); errors name file, row and column.
+    Rows come back sorted by time, stably.
+    """
+    p = Path(path)
+    frame = read_table(p)
+    az_col = "azimuth_rad" if "azimuth_rad" in frame.columns else "azimuth_deg"
+    require_columns(frame, ["radar", "time_s", "range_m", az_col, "radial_speed_mps"], p)
+    if frame.empty:
+        raise DataFormatError(f"{p}: no detections (the table has a header but no rows)")
+    values = {
+        c: numeric_column(frame, c, p) for c in ("time_s", "range_m", az_col, "radial_speed_mps")
+    }
+    if np.any(values["range_m"] <= 0):
+        row = int(np.argmax(values["range_m"] <= 0))
+        raise DataFormatError(f"{p}: row {row + 1}, column 'range_m': must be > 0")
+    names = frame["radar"].astype(str).to_numpy()
+    radars = {x.name for x in site.radars}
+    unknown = ~np.isin(names, list(radars))
+    if unknown.any():
+        row = int(np.argmax(unknown))
+        raise DataFormatError(
+            f"{p}: row {row + 1}, column 'radar': unknown radar {names[row]!r}; the site has "
+            f"{sorted(radars)}"
+        )
+    az = values[az_col] if az_col == "azimuth_rad" else np.deg2rad(values[az_col])
+    out = pd.DataFrame(
+        {
+            "radar": names,
+            "time_s": values["time_s"],
+            "range_m": values["range_m"],
+            "azimuth_rad": az,
+            "radial_speed_mps": values["radial_speed_mps"],
+        }
+    )
+    return out.sort_values("time_s", kind="stable", ignore_index=True)
+
+
 def read_detections(path: str | Path, site: Site) -> list[ObjectDetections]:
     """Read and validate a detection table; errors name file, row and column."""
     p = Path(path)
@@ -141,4 +184,11 @@ def read_detections(path: str | Path, site: Site) -> list[ObjectDetections]:
     return out
 
 
-__all__ = ["COLUMNS", "ObjectDetections", "detections_frame", "read_detections"]
+__all__ = [
+    "COLUMNS",
+    "SCENE_COLUMNS",
+    "ObjectDetections",
+    "detections_frame",
+    "read_detections",
+    "read_scene_detections",
+]

@@ -10,7 +10,8 @@ the class's scatter), the vehicle drives off the lane centre (a constant offset 
 vehicle kept inside its lane), detections are lost with probability ``1 - P_D(class, range)``,
 outside every field of view and below the Doppler gate (a vehicle stopped at the barrier
 vanishes); radial speed optionally folds at ``+-max_unambiguous_speed_mps``. Truth is the
-front reference point at the lane offset.
+front reference point at the lane offset; the case's profile is its distance along its own
+lane (on a curve that differs from the centreline's by the factor ``1 + kappa (w/2 + d)``).
 """
 
 from __future__ import annotations
@@ -77,15 +78,17 @@ def simulate_case(
     n = scan_count(radar, vehicle, case, start_m, stop_line_m)
     t_true = radar.period_s * np.arange(n)
     if case.kind == "random":
-        s, v, _ = random_profiles(case, vehicle, start_m, t_true, n_runs, rng)
-        on_road = s
-    else:  # one profile for every run: the road geometry once (broadcast below)
+        on_road, v, _ = random_profiles(case, vehicle, start_m, t_true, n_runs, rng)
+    else:  # one profile for every run
         on_road, v, _ = along_road_profile(case, vehicle, start_m, stop_line_m, t_true)
-        s, v = np.broadcast_to(on_road, (n_runs, n)), np.broadcast_to(v, (n_runs, n))
+        v = np.broadcast_to(v, (n_runs, n))
     half = max(0.5 * (road.lane_width_m - vehicle.width_m), 0.0)  # the vehicle stays in lane
     offset = np.clip(rng.normal(0.0, lateral_offset_std_m, n_runs), -half, half)
-    pos = road.lane_point(on_road, offset[:, None])
-    direction = road.inbound_direction(on_road)
+    # the profile is the vehicle's own distance along its lane: on a curve the lane point runs
+    # (1 + kappa (w/2 + d)) times as far as the centreline
+    s = road.centreline_at(on_road, offset)
+    pos = road.lane_point(s, offset[:, None])
+    direction = road.inbound_direction(s)
     vel = v[..., None] * direction
     # reflection point: along the body about the front face
     scatter = rng.normal(0.0, vehicle.scatter_std_m, (n_runs, n))
@@ -106,8 +109,8 @@ def simulate_case(
     meas = np.empty((n_runs, n, 3))
     detected = np.empty((n_runs, n), dtype=bool)
     detections_kernel(
-        np.broadcast_to(pos, (n_runs, n, 2)),
-        np.broadcast_to(direction, (n_runs, n, 2)),
+        pos,
+        direction,
         v,
         scatter,
         noise,

@@ -88,6 +88,33 @@ class Road:
         off = np.asarray(offset_m, dtype=float)[..., None]
         return p + (0.5 * self.lane_width_m + off) * right
 
+    def lane_speed_factor(self, s: ArrayLike, offset_m: ArrayLike = 0.0) -> FloatArray:
+        """Speed of the lane point per unit centreline speed, ``1 + kappa (w/2 + d)`` (...,).
+
+        A point ``w/2 + d`` to the right of the inbound direction moves this much faster than
+        the centreline (slower on the inside of a curve).
+        """
+        q = np.clip(as_float_array(s, "s"), 0.0, self.length_m)
+        kappa = np.interp(q, self.s, self.curvature)
+        return 1.0 + kappa * (0.5 * self.lane_width_m + np.asarray(offset_m, dtype=float))
+
+    def centreline_at(self, lane_distance_m: ArrayLike, offset_m: ArrayLike = 0.0) -> FloatArray:
+        """Centreline ``s`` where the lane at ``offset_m`` has run ``lane_distance_m`` from s = 0.
+
+        The lane's own arc length is ``s + (w/2 + d) (theta(s) - theta(0))``; shapes broadcast
+        to (N, T) with one offset per row (N,) or (N, 1), or (T,) with a scalar offset.
+        Beyond the ends of the road the distance carries on one to one.
+        """
+        sigma = as_float_array(lane_distance_m, "lane_distance_m")
+        off = np.asarray(offset_m, dtype=float)
+        if off.ndim == 0:
+            lane = self.s + (0.5 * self.lane_width_m + off) * (self.heading - self.heading[0])
+            beyond = np.minimum(sigma, 0.0) + np.maximum(sigma - lane[-1], 0.0)
+            return np.interp(sigma, lane, self.s) + beyond  # past the ends: as a straight
+        off = off.reshape(-1)
+        sig = np.broadcast_to(sigma, (off.size,) + sigma.shape[-1:])
+        return np.stack([self.centreline_at(row, o) for row, o in zip(sig, off, strict=True)])
+
     def inbound_direction(self, s: ArrayLike) -> FloatArray:
         """Return the unit vector (..., 2) of travel towards the crossing at ``s``."""
         _, th = self.centreline(s)

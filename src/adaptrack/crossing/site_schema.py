@@ -265,6 +265,53 @@ class CaseFile(_Strict):
         return self
 
 
+class FlowFile(_Strict):
+    """Traffic entering on road ``entry`` and leaving on ``exit``: Poisson arrivals per hour."""
+
+    entry: Name
+    exit: Name
+    vehicles_per_h: NonNegative
+
+
+class StallFile(_Strict):
+    """A vehicle that stalls between the barriers.
+
+    The first vehicle from ``entry`` after ``time_s`` stops ``at_m`` before the crossing
+    centre (negative: past it) and stays ``duration_s``.
+    """
+
+    entry: Name
+    time_s: NonNegative
+    at_m: float = 0.0
+    duration_s: Positive = 180.0
+    vehicle_class: Name = "car"
+
+
+class SceneFile(_Strict):
+    """Mixed traffic for the many-object scene (:mod:`adaptrack.crossing.scene`).
+
+    ``mix`` gives the share of each road-user class in the flows (default: the site's traffic
+    mix); ``pedestrian`` and ``cyclist`` are known besides the vehicle classes. Barriers close
+    for ``closure_s`` every ``closure_every_s`` (first at ``first_closure_s``).
+    """
+
+    duration_s: Positive = 3600.0
+    flows: Annotated[list[FlowFile], Field(min_length=1)] | None = None
+    mix: dict[Name, Annotated[float, Field(gt=0, le=1)]] | None = None
+    closure_every_s: Positive = 600.0
+    closure_s: NonNegative = 120.0
+    first_closure_s: NonNegative = 300.0
+    false_alarms_per_scan: NonNegative = 0.5
+    static_clutter_m: list[Annotated[list[float], Field(min_length=2, max_length=2)]] = Field(
+        default_factory=list
+    )
+    multipath_probability: Annotated[float, Field(ge=0, le=1)] = 0.01
+    multipath_extra_m: Positive = 8.0
+    occlusion: bool = True
+    stationary_detections: bool = True
+    stalls: list[StallFile] = Field(default_factory=list)
+
+
 class SiteFile(_Strict):
     """A level-crossing site: geometry, radars, road users and the cases to check."""
 
@@ -281,6 +328,7 @@ class SiteFile(_Strict):
     classes: dict[Name, ClassFile] = Field(default_factory=dict)
     traffic: TrafficFile | None = None
     cases: Annotated[list[CaseFile], Field(min_length=1)] | None = None
+    scene: SceneFile | None = None
 
 
 def validate_site_mapping(data: dict[str, Any], where: str) -> SiteFile:

@@ -464,15 +464,15 @@ def _road_measure(
     def measure(x: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
         s, vs, d = x[:, 0], x[:, 1], x[:, k]
         pos, tangent, right, kappa = road.lane_geometry(s, d)
-        vel = vs[:, None] * tangent
-        zp, jp, jv = _polar_jacobian(pos, vel, radar)
-        lever = 1.0 + kappa * (0.5 * road.lane_width_m + d)
-        dpos_ds = lever[:, None] * tangent
-        dvel_ds = -(vs * kappa)[:, None] * right
+        lever = 1.0 + kappa * (0.5 * road.lane_width_m + d)  # lane point speed / ds/dt
+        along = lever[:, None] * tangent
+        zp, jp, jv = _polar_jacobian(pos, vs[:, None] * along, radar)
+        dvel_ds = -(vs * lever * kappa)[:, None] * right
+        dvel_dd = (vs * kappa)[:, None] * tangent
         h = np.zeros((x.shape[0], 3, n))
-        h[:, :, 0] = np.einsum("nij,nj->ni", jp, dpos_ds) + np.einsum("nij,nj->ni", jv, dvel_ds)
-        h[:, :, 1] = np.einsum("nij,nj->ni", jv, tangent)
-        h[:, :, k] = np.einsum("nij,nj->ni", jp, right)
+        h[:, :, 0] = np.einsum("nij,nj->ni", jp, along) + np.einsum("nij,nj->ni", jv, dvel_ds)
+        h[:, :, 1] = np.einsum("nij,nj->ni", jv, along)
+        h[:, :, k] = np.einsum("nij,nj->ni", jp, right) + np.einsum("nij,nj->ni", jv, dvel_dd)
         return zp, h, _measurement_cov(radar, zp, jp, -tangent, scatter_std_m)
 
     return measure
@@ -504,7 +504,7 @@ def _road_initial(
     tangent = -road.inbound_direction(s0)
     rel = road.lane_point(s0, d0) - np.asarray(radar.position_m)
     r = np.sqrt(np.sum(rel**2, -1) + radar.height_m**2)
-    along = np.einsum("ni,ni->n", rel, tangent) / r
+    along = np.einsum("ni,ni->n", rel, tangent) / r * road.lane_speed_factor(s0, d0)
     ok = np.abs(along) > 0.3
     vs0 = np.where(ok, zk[:, 2] / np.where(ok, along, 1.0), 0.0)
     m = zk.shape[0]
@@ -817,11 +817,15 @@ def _road_estimates(means: FloatArray, covs: FloatArray, road: Road, k: int) -> 
     s, vs, d = means[..., 0], means[..., 1], means[..., k]
     pos, tangent, right, kappa = road.lane_geometry(np.nan_to_num(s), np.nan_to_num(d))
     pos[np.isnan(s)] = np.nan
-    # dp/ds = (1 + kappa (w/2 + d)) t, dp/dd = right
-    jac = np.stack([(1.0 + kappa * (0.5 * road.lane_width_m + d))[..., None] * tangent, right], -1)
+    # dp/ds = (1 + kappa (w/2 + d)) t, dp/dd = right; the lane point moves at lever * ds/dt
+    lever = 1.0 + kappa * (0.5 * road.lane_width_m + d)
+    jac = np.stack([lever[..., None] * tangent, right], -1)
     sub = covs[..., [0, k], :][..., :, [0, k]]
     return TrackEstimates(
-        pos, vs[..., None] * tangent, np.abs(vs), jac @ sub @ np.swapaxes(jac, -1, -2)
+        pos,
+        (vs * lever)[..., None] * tangent,
+        np.abs(vs * lever),
+        jac @ sub @ np.swapaxes(jac, -1, -2),
     )
 
 
@@ -916,7 +920,8 @@ def road_pcrlb(
     n = k + 1
     n_runs, n_steps = detected.shape
     truth = np.zeros((n_runs, n_steps, n))
-    truth[..., 0], truth[..., 1] = along_road_m, -speed
+    lever = road.lane_speed_factor(along_road_m, lateral_offset_m[:, None])
+    truth[..., 0], truth[..., 1] = along_road_m, -speed / lever
     truth[..., k] = lateral_offset_m[:, None]
     p0 = np.diag([1.0 + scatter_std_m**2, 1.0] + [9.0] * (k - 2) + [lateral_std_m**2])
     pos_var = np.full((n_runs, n_steps), np.nan)
@@ -943,7 +948,7 @@ def road_pcrlb(
             pos_var,
             spd_var,
         )
-        return pos_var, spd_var
+        return pos_var, spd_var * lever**2
     measure = _road_measure(road, radar, k, scatter_std_m)
     phis, qds = _road_transition(model, lateral_psd)(
         np.diff(runs_times, axis=1, prepend=runs_times[:, :1])
@@ -979,7 +984,7 @@ def road_pcrlb(
         started |= upd
         pos_var[started, i] = cov[started, 0, 0] + cov[started, k, k]
         spd_var[started, i] = cov[started, 1, 1]
-    return pos_var, spd_var
+    return pos_var, spd_var * lever**2
 
 
 __all__ = [

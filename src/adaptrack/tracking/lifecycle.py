@@ -1,0 +1,102 @@
+"""Track life cycle: M-of-N confirmation, coasting, deletion, stable identities."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import IntEnum
+
+import numpy as np
+
+from .._typing import FloatArray
+
+
+class TrackStatus(IntEnum):
+    """What a track is.
+
+    Being confirmed, confirmed and seen, coasting without detections, stopped (a confirmed
+    object at a standstill), or deleted.
+    """
+
+    TENTATIVE = 0
+    CONFIRMED = 1
+    COASTING = 2
+    STOPPED = 3
+    DELETED = 4
+
+
+@dataclass(frozen=True)
+class LifecycleRules:
+    """Rules of the track life cycle.
+
+    Confirm after ``confirm_hits`` hits in the last ``confirm_window`` scans; drop a tentative
+    track after ``tentative_misses`` misses in a row; delete a confirmed track not seen for
+    ``max_coast_s`` (``max_coast_stopped_s`` while stopped) [s].
+    """
+
+    confirm_hits: int = 3
+    confirm_window: int = 4
+    tentative_misses: int = 2
+    max_coast_s: float = 1.5
+    max_coast_stopped_s: float = 600.0
+
+    def __post_init__(self) -> None:
+        if not 1 <= self.confirm_hits <= self.confirm_window <= 62:
+            raise ValueError("need 1 <= confirm_hits <= confirm_window <= 62")
+
+
+@dataclass
+class TrackBook:
+    """Identities and hit histories of live tracks (rows), in the order of creation."""
+
+    rules: LifecycleRules = field(default_factory=LifecycleRules)
+    ids: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    history: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    confirmed: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    misses: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    last_hit_s: FloatArray = field(default_factory=lambda: np.zeros(0))
+    born_s: FloatArray = field(default_factory=lambda: np.zeros(0))
+    next_id: int = 1
+
+    def add(self, n: int, time_s: float) -> np.ndarray:
+        """Open ``n`` tentative tracks (each with its first hit); return their new ids."""
+        new = np.arange(self.next_id, self.next_id + n, dtype=np.int64)
+        self.next_id += n
+        self.ids = np.concatenate([self.ids, new])
+        self.history = np.concatenate([self.history, np.ones(n, dtype=np.int64)])
+        self.confirmed = np.concatenate([self.confirmed, np.zeros(n, dtype=bool)])
+        self.misses = np.concatenate([self.misses, np.zeros(n, dtype=np.int64)])
+        self.last_hit_s = np.concatenate([self.last_hit_s, np.full(n, time_s)])
+        self.born_s = np.concatenate([self.born_s, np.full(n, time_s)])
+        return new
+
+    def record(self, rows: np.ndarray, hit: np.ndarray, time_s: float) -> np.ndarray:
+        """Record a scan's hits (bool) of the tracks in ``rows``; return the rows confirmed now."""
+        mask = (1 << self.rules.confirm_window) - 1
+        self.history[rows] = ((self.history[rows] << 1) | hit.astype(np.int64)) & mask
+        self.misses[rows] = np.where(hit, 0, self.misses[rows] + 1)
+        self.last_hit_s[rows] = np.where(hit, time_s, self.last_hit_s[rows])
+        hits = np.array([int(h).bit_count() for h in self.history[rows]], dtype=np.int64)
+        now = rows[~self.confirmed[rows] & (hits >= self.rules.confirm_hits)]
+        self.confirmed[now] = True
+        return now
+
+    def expired(self, time_s: float, stopped: np.ndarray) -> np.ndarray:
+        """Return the rows to delete at ``time_s``.
+
+        Failed tentative tracks, and confirmed ones coasting too long (``stopped`` rows by the
+        stopped limit).
+        """
+        limit = np.where(stopped, self.rules.max_coast_stopped_s, self.rules.max_coast_s)
+        dead_tentative = ~self.confirmed & (self.misses >= self.rules.tentative_misses)
+        dead_confirmed = self.confirmed & (time_s - self.last_hit_s > limit)
+        return np.flatnonzero(dead_tentative | dead_confirmed)
+
+    def remove(self, rows: np.ndarray) -> None:
+        """Forget the tracks in ``rows``."""
+        keep = np.ones(self.ids.size, dtype=bool)
+        keep[rows] = False
+        for name in ("ids", "history", "confirmed", "misses", "last_hit_s", "born_s"):
+            setattr(self, name, getattr(self, name)[keep])
+
+
+__all__ = ["LifecycleRules", "TrackBook", "TrackStatus"]

@@ -1,0 +1,86 @@
+"""Mixed-traffic scene: simulated traffic and detections, and the many-object tracker on them."""
+
+import numpy as np
+import pytest
+
+from adaptrack.crossing.scene import STEP_S, Stall, scene_spec, simulate_scene
+from adaptrack.crossing.scene_metrics import event_delays, score_scene
+from adaptrack.crossing.scene_tracker import SceneTracker, track_scene
+from adaptrack.crossing.site import load_site
+
+SITE = load_site("lx_default")
+
+
+@pytest.fixture(scope="module")
+def free_flow():
+    spec = scene_spec(SITE, duration_s=120.0, closure_s=0.0, stalls=())
+    return simulate_scene(SITE, spec, seed=3)
+
+
+@pytest.fixture(scope="module")
+def stalled():
+    spec = scene_spec(SITE, duration_s=150.0, closure_s=0.0, stalls=(Stall("A", 20.0, 0.0, 60.0),))
+    return simulate_scene(SITE, spec, seed=11)
+
+
+def test_traffic_moves_at_its_reported_speed(free_flow):
+    """Speed from the positions' own differences (independent of the corridor geometry)."""
+    tab = free_flow.truth.table.sort_values(["object_id", "time_s"])
+    for _, g in tab.groupby("object_id"):
+        xy = g[["east_m", "north_m"]].to_numpy()
+        t = g["time_s"].to_numpy()
+        step = np.linalg.norm(np.diff(xy, axis=0), axis=1) / np.diff(t)
+        mid = 0.5 * (g["speed_mps"].to_numpy()[1:] + g["speed_mps"].to_numpy()[:-1])
+        np.testing.assert_allclose(step, mid, atol=0.02 + 0.01 * mid.max())
+        assert np.allclose(np.diff(t), STEP_S)
+
+
+def test_detections_carry_no_identity_and_clutter_is_poisson(free_flow):
+    det = free_flow.detections
+    assert list(det.columns) == ["radar", "time_s", "range_m", "azimuth_rad", "radial_speed_mps"]
+    src = free_flow.sources
+    assert src.size == len(det)
+    static = det[src == -2]
+    assert static.size and np.abs(static["radial_speed_mps"]).max() < 1.0  # zero Doppler
+    # false alarms: Poisson with the scene's rate per scan, thinned by the fields of view
+    n_scans = sum(int(free_flow.spec.duration_s / r.period_s) for r in SITE.radars)
+    rate = (src == -1).sum() / n_scans
+    assert 0.3 < rate <= free_flow.spec.false_alarms_per_scan * 1.05
+    users = set(free_flow.truth.users["object_id"])
+    assert set(src[src >= 0]) <= users and len(set(src[src >= 0])) > 0.8 * len(users)
+
+
+def test_tracker_meets_the_requirement_through_association(free_flow):
+    tracks, _, log = track_scene(SITE, free_flow.detections)
+    assert log.total == len(free_flow.detections)  # no detection lost without a record
+    score = score_scene(free_flow.truth, tracks, SITE.zone_m)
+    for row in score.classes.itertuples():
+        assert row.position_rms_m <= 0.7, row
+        assert row.speed_rms_kmh <= 2.0, row
+        assert row.coverage >= 0.9, row
+    assert score.gospa_false < 0.5 * 12.5  # under half a false track on average
+
+
+def test_stall_between_the_barriers_raises_the_event_in_time(stalled):
+    tracks, events, _ = track_scene(SITE, stalled.detections)
+    delays = event_delays(stalled.truth, events)
+    assert len(delays) == 1
+    assert -1.0 <= delays["delay_s"].iloc[0] <= 1.0, delays
+    # the stalled track: stopped, and its covariance stays bounded through the stall
+    ev = events.iloc[0]
+    rows = tracks[(tracks["track_id"] == ev["track_id"]) & (tracks["status"] == "stopped")]
+    assert rows["time_s"].max() - rows["time_s"].min() > 40.0
+    assert rows["position_std_m"].max() < 0.5
+
+
+def test_bad_scans_are_refused_with_a_reason():
+    tracker = SceneTracker(SITE)
+    with pytest.raises(ValueError, match="unknown radar 'nope'"):
+        tracker.step("nope", 0.0, np.zeros((0, 3)))
+    tracker.step("radar_A", 1.0, np.array([[50.0, 0.1, -10.0]]))
+    with pytest.raises(ValueError, match="not after its previous scan"):
+        tracker.step("radar_A", 0.5, np.array([[50.0, 0.1, -10.0]]))
+    with pytest.raises(ValueError, match="not finite"):
+        tracker.step("radar_A", 2.0, np.array([[np.nan, 0.1, -10.0]]))
+    tracker.step("radar_A", 3.0, np.array([[50.0, 3.0, -10.0]]))  # far outside the view
+    assert tracker.log.rejected_outside_view == 1

@@ -1,0 +1,100 @@
+"""Generic tracking layer: gating, GNN assignment, clustering and the track life cycle, on
+hand-made cases with a known answer (and brute force where the answer is a minimum)."""
+
+import itertools
+
+import numpy as np
+import pytest
+from scipy.stats import chi2
+
+from adaptrack.tracking import (
+    LifecycleRules,
+    TrackBook,
+    cluster_points,
+    gate_threshold,
+    gnn_assign,
+    mahalanobis_squared,
+)
+
+
+def brute_force_assignment(cost, miss):
+    """Cheapest partial one-to-one assignment by enumeration (oracle)."""
+    n_t, n_d = cost.shape
+    best, best_pairs = np.inf, None
+    for k in range(min(n_t, n_d) + 1):
+        for rows in itertools.combinations(range(n_t), k):
+            for cols in itertools.permutations(range(n_d), k):
+                c = sum(cost[r, d] for r, d in zip(rows, cols, strict=True))
+                c += sum(miss[r] for r in range(n_t) if r not in rows)
+                if c < best:
+                    best, best_pairs = c, set(zip(rows, cols, strict=True))
+    return best, best_pairs
+
+
+def test_gnn_prefers_the_global_optimum_over_greedy():
+    # greedy would give track 0 detection 0 (cost 1) and leave track 1 with cost 9
+    cost = np.array([[1.0, 2.0], [1.5, 9.0]])
+    rows, cols = gnn_assign(cost, 20.0)
+    assert set(zip(rows.tolist(), cols.tolist())) == {(0, 1), (1, 0)}
+
+
+def test_gnn_leaves_out_pairs_dearer_than_the_miss_cost_and_gated_ones():
+    cost = np.array([[np.inf, 3.0], [12.0, np.inf]])
+    rows, cols = gnn_assign(cost, 10.0)
+    assert list(zip(rows.tolist(), cols.tolist())) == [(0, 1)]
+    rows, cols = gnn_assign(np.full((2, 3), np.inf), 10.0)
+    assert rows.size == 0 and cols.size == 0
+    assert gnn_assign(np.zeros((0, 4)), 1.0)[0].size == 0
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_gnn_matches_brute_force(seed):
+    rng = np.random.default_rng(seed)
+    n_t, n_d = rng.integers(1, 5), rng.integers(1, 5)
+    cost = rng.uniform(0, 15, (n_t, n_d))
+    cost[rng.uniform(size=cost.shape) < 0.3] = np.inf
+    miss = rng.uniform(3, 12, n_t)
+    rows, cols = gnn_assign(cost, miss)
+    got = cost[rows, cols].sum() + sum(miss[r] for r in range(n_t) if r not in rows)
+    best, _ = brute_force_assignment(cost, miss)
+    assert got == pytest.approx(best)
+
+
+def test_mahalanobis_and_gate():
+    s = np.array([[[4.0, 0.0], [0.0, 1.0]]])
+    r = np.array([[[2.0, 0.0], [0.0, 3.0], [2.0, 1.0]]])
+    np.testing.assert_allclose(mahalanobis_squared(r, s), [[1.0, 9.0, 2.0]])
+    assert gate_threshold(3, 0.99) == pytest.approx(chi2.ppf(0.99, 3))
+    with pytest.raises(ValueError, match="not positive definite"):
+        mahalanobis_squared(r, np.array([[[1.0, 2.0], [2.0, 1.0]]]))
+    with pytest.raises(ValueError, match="probability"):
+        gate_threshold(3, 1.0)
+
+
+def test_clusters_are_single_link_groups():
+    pts = np.array([[0, 0], [1.5, 0], [3.0, 0], [10, 0], [10, 1], [30, 30]])
+    labels = cluster_points(pts, 2.0)
+    groups = {frozenset(np.flatnonzero(labels == g)) for g in np.unique(labels)}
+    assert groups == {frozenset({0, 1, 2}), frozenset({3, 4}), frozenset({5})}
+    assert cluster_points(np.zeros((0, 2)), 1.0).size == 0
+
+
+def test_m_of_n_confirmation_coasting_and_stable_ids():
+    book = TrackBook(LifecycleRules(confirm_hits=3, confirm_window=4, tentative_misses=2,
+                                    max_coast_s=1.0, max_coast_stopped_s=10.0))  # fmt: skip
+    ids = book.add(2, 0.0)
+    assert ids.tolist() == [1, 2]
+    rows = np.arange(2)
+    assert book.record(rows, np.array([True, False]), 0.1).tolist() == []
+    assert book.record(rows, np.array([True, False]), 0.2).tolist() == [0]  # 3 hits of 4
+    assert book.expired(0.2, np.zeros(2, bool)).tolist() == [1]  # two misses in a row
+    book.remove(np.array([1]))
+    assert book.ids.tolist() == [1]
+    assert book.add(1, 0.3).tolist() == [3]  # ids are never reused
+    # a confirmed track is kept while it coasts less than its limit
+    rows = np.arange(2)
+    for t in (0.5, 0.9, 1.1):
+        book.record(rows, np.array([False, True]), t)
+    assert book.expired(1.1, np.zeros(2, bool)).tolist() == []
+    assert book.expired(1.3, np.zeros(2, bool)).tolist() == [0]
+    assert book.expired(1.3, np.array([True, False])).tolist() == []  # stopped: longer limit
