@@ -32,7 +32,7 @@ from .crossing.measurements_io import detections_frame, read_detections, read_sc
 from .crossing.radar_sim import simulate_site_case
 from .crossing.report import build_report, render_html, sample_tracks
 from .crossing.scene import scene_spec, simulate_scene
-from .crossing.scene_tracker import EVENT_COLUMNS, SceneTracker, iter_scans
+from .crossing.scene_tracker import track_scene
 from .crossing.selection import (
     CRITERIA,
     CRITERION_TEXT,
@@ -434,28 +434,22 @@ def _track_scene_file(measurements: Path, st: Site, out: Path, events: Path | No
         det = read_scene_detections(measurements, st)
     except ValueError as exc:
         _fail(str(exc))
-    tracker = SceneTracker(st)
-    scans = list(iter_scans(det))
-    frames = []
     with Progress(transient=True) as progress:
-        task = progress.add_task("tracking", total=len(scans))
-        for radar, time_s, z in scans:
-            try:
-                frames.append(tracker.step(radar, time_s, z))
-            except ValueError as exc:
-                _fail(f"{measurements}: {exc}")
-            progress.advance(task)
-    tracks = pd.concat(frames, ignore_index=True)
+        task = progress.add_task("tracking")
+        try:
+            tracks, events_frame, log = track_scene(
+                st,
+                det,
+                on_scan=lambda done, total: progress.update(task, completed=done, total=total),
+            )
+        except ValueError as exc:
+            _fail(f"{measurements}: {exc}")
     write_table_atomic(tracks, out)
     ev_path = events or out.with_name(out.stem + ".events.csv")
-    write_table_atomic(
-        pd.DataFrame(tracker.events, columns=EVENT_COLUMNS),
-        ev_path,
-    )
-    log = tracker.log
+    write_table_atomic(events_frame, ev_path)
     Console().print(
         f"wrote {out} ({tracks['track_id'].nunique()} tracks) and {ev_path} "
-        f"({len(tracker.events)} events); detections: {log.updated} updated tracks, "
+        f"({len(events_frame)} events); detections: {log.updated} updated tracks, "
         f"{log.opened + log.joined_new} opened tracks, {log.rejected_outside_view} rejected "
         f"(outside every field of view), {log.total} of {len(det)}"
     )

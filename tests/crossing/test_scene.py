@@ -84,3 +84,51 @@ def test_bad_scans_are_refused_with_a_reason():
         tracker.step("radar_A", 2.0, np.array([[np.nan, 0.1, -10.0]]))
     tracker.step("radar_A", 3.0, np.array([[50.0, 3.0, -10.0]]))  # far outside the view
     assert tracker.log.rejected_outside_view == 1
+
+
+def _write(tmp_path, text):
+    path = tmp_path / "det.csv"
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("radar,time_s,range_m,azimuth_rad\nradar_A,0.1,50,0.1\n", "radial_speed_mps"),
+        ("radar,time_s,range_m,azimuth_rad,radial_speed_mps\n", "no detections"),
+        ("radar,time_s,range_m,azimuth_rad,radial_speed_mps\nradar_A,0.1,nan,0.1,-3\n", "row 1"),
+        ("radar,time_s,range_m,azimuth_rad,radial_speed_mps\nradar_A,0.1,50,inf,-3\n", "infinite"),
+        ("radar,time_s,range_m,azimuth_rad,radial_speed_mps\nradar_Q,0.1,50,0.1,-3\n", "radar_Q"),
+        ("radar,time_s,range_m,azimuth_rad,radial_speed_mps\nradar_A,0.1,-5,0.1,-3\n", "> 0"),
+    ],
+)
+def test_bad_detection_files_get_one_line_errors(tmp_path, text, message):
+    from adaptrack.crossing.measurements_io import read_scene_detections
+
+    with pytest.raises(ValueError, match=message):
+        read_scene_detections(_write(tmp_path, text), SITE)
+
+
+def test_bad_scene_settings_are_named():
+    with pytest.raises(ValueError, match="unknown class 'tram'"):
+        scene_spec(SITE, mix={"tram": 1.0})
+    with pytest.raises(ValueError, match="unknown road 'Z'"):
+        from adaptrack.crossing.scene import Flow
+
+        scene_spec(SITE, flows=(Flow("A", "Z", 100.0),))
+    from adaptrack.crossing.site import site_from_mapping
+
+    data = dict(SITE.source)
+    data["scene"] = {"duraton_s": 10.0}
+    with pytest.raises(ValueError, match="duraton_s"):
+        site_from_mapping(data, "x.toml")
+
+
+def test_corridor_follows_the_roads_as_built():
+    """lx_default: arm A runs straight north for 60 m, arm B straight south (site file)."""
+    from adaptrack.crossing.corridor import site_corridors
+
+    (cor,) = site_corridors(SITE.roads, 200.0)
+    pts = cor.path.lane_point(cor.crossing_u + np.array([-30.0, 0.0, 100.0]), 0.0)
+    np.testing.assert_allclose(pts, [[0.0, 30.0], [0.0, 0.0], [0.0, -100.0]], atol=0.06)

@@ -72,62 +72,19 @@ class ObjectDetections:
 SCENE_COLUMNS = ["radar", "time_s", "range_m", "azimuth_rad", "radial_speed_mps"]
 
 
-def read_scene_detections(path: str | Path, site: Site) -> pd.DataFrame:
-    """Read and validate detections without identities.
+def _polar_columns(
+    frame: pd.DataFrame, p: Path, site: Site, extra: tuple[str, ...] = ()
+) -> tuple[np.ndarray, FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Return the validated radar names, times, ranges, azimuths [rad] and radial speeds of a table.
 
-    Columns ``SCENE_COLUMNS`` (``azimuth_deg`` accepted); errors name file, row and column.
-    Rows come back sorted by time, stably.
+    ``extra`` columns are required as well. Errors name file, row and column.
     """
-    p = Path(path)
-    frame = read_table(p)
-    az_col = "azimuth_rad" if "azimuth_rad" in frame.columns else "azimuth_deg"
-    require_columns(frame, ["radar", "time_s", "range_m", az_col, "radial_speed_mps"], p)
-    if frame.empty:
-        raise DataFormatError(f"{p}: no detections (the table has a header but no rows)")
-    values = {
-        c: numeric_column(frame, c, p) for c in ("time_s", "range_m", az_col, "radial_speed_mps")
-    }
-    if np.any(values["range_m"] <= 0):
-        row = int(np.argmax(values["range_m"] <= 0))
-        raise DataFormatError(f"{p}: row {row + 1}, column 'range_m': must be > 0")
-    names = frame["radar"].astype(str).to_numpy()
-    radars = {x.name for x in site.radars}
-    unknown = ~np.isin(names, list(radars))
-    if unknown.any():
-        row = int(np.argmax(unknown))
-        raise DataFormatError(
-            f"{p}: row {row + 1}, column 'radar': unknown radar {names[row]!r}; the site has "
-            f"{sorted(radars)}"
-        )
-    az = values[az_col] if az_col == "azimuth_rad" else np.deg2rad(values[az_col])
-    out = pd.DataFrame(
-        {
-            "radar": names,
-            "time_s": values["time_s"],
-            "range_m": values["range_m"],
-            "azimuth_rad": az,
-            "radial_speed_mps": values["radial_speed_mps"],
-        }
-    )
-    return out.sort_values("time_s", kind="stable", ignore_index=True)
-
-
-def read_detections(path: str | Path, site: Site) -> list[ObjectDetections]:
-    """Read and validate a detection table; errors name file, row and column."""
-    p = Path(path)
-    frame = read_table(p)
     az_col = "azimuth_rad" if "azimuth_rad" in frame.columns else "azimuth_deg"
     if "azimuth_rad" in frame.columns and "azimuth_deg" in frame.columns:
         raise DataFormatError(f"{p}: both 'azimuth_rad' and 'azimuth_deg' (mixed units)")
-    require_columns(
-        frame, ["object_id", "radar", "time_s", "range_m", az_col, "radial_speed_mps"], p
-    )
+    require_columns(frame, [*extra, "radar", "time_s", "range_m", az_col, "radial_speed_mps"], p)
     if frame.empty:
         raise DataFormatError(f"{p}: no detections (the table has a header but no rows)")
-    oid = numeric_column(frame, "object_id", p)
-    if np.any(oid != np.round(oid)):
-        row = int(np.argmax(oid != np.round(oid)))
-        raise DataFormatError(f"{p}: row {row + 1}, column 'object_id': not an integer")
     t = numeric_column(frame, "time_s", p)
     r = numeric_column(frame, "range_m", p)
     az = numeric_column(frame, az_col, p)
@@ -152,6 +109,32 @@ def read_detections(path: str | Path, site: Site) -> list[ObjectDetections]:
             f"{p}: row {row + 1}, column 'radar': unknown radar "
             f"{names[row]!r}; the site has {sorted(radars)}"
         )
+    return names, t, r, az, vr
+
+
+def read_scene_detections(path: str | Path, site: Site) -> pd.DataFrame:
+    """Read and validate detections without identities.
+
+    Columns ``SCENE_COLUMNS`` (``azimuth_deg`` accepted); errors name file, row and column.
+    Rows come back sorted by time, stably.
+    """
+    p = Path(path)
+    names, t, r, az, vr = _polar_columns(read_table(p), p, site)
+    out = pd.DataFrame(
+        {"radar": names, "time_s": t, "range_m": r, "azimuth_rad": az, "radial_speed_mps": vr}
+    )
+    return out.sort_values("time_s", kind="stable", ignore_index=True)
+
+
+def read_detections(path: str | Path, site: Site) -> list[ObjectDetections]:
+    """Read and validate a detection table; errors name file, row and column."""
+    p = Path(path)
+    frame = read_table(p)
+    names, t, r, az, vr = _polar_columns(frame, p, site, ("object_id",))
+    oid = numeric_column(frame, "object_id", p)
+    if np.any(oid != np.round(oid)):
+        row = int(np.argmax(oid != np.round(oid)))
+        raise DataFormatError(f"{p}: row {row + 1}, column 'object_id': not an integer")
     out = []
     for obj in np.unique(oid):
         sel = np.flatnonzero(oid == obj)

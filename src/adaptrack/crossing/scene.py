@@ -33,6 +33,7 @@ import pandas as pd
 
 from .._typing import FloatArray
 from .corridor import Corridor, site_corridors
+from .radar_sim import radial_geometry
 from .sensor import RadarSpec
 from .site import Site
 from .traffic import KMH, VEHICLES, VehicleClass
@@ -455,8 +456,7 @@ def detect(
         fwd = np.stack([np.sin(hd), np.cos(hd)], -1)
         vel = rows["speed_mps"].to_numpy()[:, None] * fwd
         rel = centre - np.asarray(radar.position_m)
-        rng_c = np.hypot(np.hypot(rel[:, 0], rel[:, 1]), radar.height_m)
-        az_c = np.arctan2(rel[:, 0], rel[:, 1])
+        rng_c, az_c, _ = radial_geometry(centre, vel, radar)
         near = radar.in_view(rng_c, az_c) | (rng_c < radar.max_range_m + 20.0)
         occluded = np.zeros(obj.size, dtype=bool)
         if spec.occlusion and obj.size:
@@ -483,10 +483,7 @@ def detect(
         side = rng.uniform(-0.5, 0.5, rep.size) * width[rep]
         right = np.stack([fwd[rep, 1], -fwd[rep, 0]], -1)
         point = centre[rep] + along[:, None] * fwd[rep] + side[:, None] * right
-        prel = point - np.asarray(radar.position_m)
-        prng = np.hypot(np.hypot(prel[:, 0], prel[:, 1]), radar.height_m)
-        paz = np.arctan2(prel[:, 0], prel[:, 1])
-        pvr = np.einsum("ij,ij->i", prel, vel[rep]) / prng
+        prng, paz, pvr = radial_geometry(point, vel[rep], radar)
         pd_ = np.empty(rep.size)
         for c in np.unique(cls[rep]) if rep.size else []:
             m = cls[rep] == c
@@ -511,9 +508,7 @@ def detect(
         fa_vr = rng.uniform(-FALSE_ALARM_SPEED_MPS, FALSE_ALARM_SPEED_MPS, fa_scan.size)
         # static clutter
         st_pts = np.asarray(spec.static_clutter_m, dtype=float).reshape(-1, 2)
-        st_rel = st_pts - np.asarray(radar.position_m)
-        st_rng = np.hypot(np.hypot(st_rel[:, 0], st_rel[:, 1]), radar.height_m)
-        st_az = np.arctan2(st_rel[:, 0], st_rel[:, 1])
+        st_rng, st_az, _ = radial_geometry(st_pts, np.zeros_like(st_pts), radar)
         vis = radar.in_view(st_rng, st_az) if st_pts.size else np.zeros(0, bool)
         st_rng, st_az = st_rng[vis], st_az[vis]
         if not spec.stationary_detections:

@@ -32,7 +32,7 @@ or rejected with a reason (``ScanLog``).
 from __future__ import annotations
 
 import itertools
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -40,6 +40,7 @@ import pandas as pd
 from scipy.spatial import cKDTree
 
 from .._typing import FloatArray
+from ..coords.radar import wrap_to_pi
 from ..tracking import (
     LifecycleRules,
     TrackBook,
@@ -47,10 +48,12 @@ from ..tracking import (
     cluster_points,
     gate_threshold,
     gnn_assign,
+    mahalanobis_squared,
 )
 from .corridor import Corridor, site_corridors
 from .sensor import RadarSpec
 from .site import Site
+from .tracking import _initial_point, _polar_jacobian
 
 N_STATE = 4  # u, du/dt, d2u/dt2, d
 EVENT_COLUMNS = ["time_s", "event", "track_id", "east_m", "north_m"]
@@ -155,36 +158,20 @@ def _measure(
     lever = 1.0 + kappa * d
     along = lever[:, None] * tangent
     vel = vu[:, None] * along
-    rel = pos - np.asarray(radar.position_m)
-    horiz2 = np.sum(rel**2, -1)
-    rng = np.sqrt(horiz2 + radar.height_m**2)
-    vr = np.einsum("ti,ti->t", rel, vel) / rng
-    az = np.arctan2(rel[:, 0], rel[:, 1])
-    jp = np.zeros((x.shape[0], 3, 2))  # d(r, az, vr) / d position
-    jp[:, 0] = rel / rng[:, None]
-    jp[:, 1, 0] = rel[:, 1] / horiz2
-    jp[:, 1, 1] = -rel[:, 0] / horiz2
-    jp[:, 2] = vel / rng[:, None] - (vr / rng**2)[:, None] * rel
-    jv = np.zeros((x.shape[0], 3, 2))
-    jv[:, 2] = rel / rng[:, None]
+    zp, jp, jv = _polar_jacobian(pos, vel, radar)
     dvel_du = -(vu * lever * kappa)[:, None] * right
     dvel_dd = (vu * kappa)[:, None] * tangent
     h = np.zeros((x.shape[0], 3, N_STATE))
     h[:, :, 0] = np.einsum("tij,tj->ti", jp, along) + np.einsum("tij,tj->ti", jv, dvel_du)
     h[:, :, 1] = np.einsum("tij,tj->ti", jv, along)
     h[:, :, 3] = np.einsum("tij,tj->ti", jp, right) + np.einsum("tij,tj->ti", jv, dvel_dd)
-    zp = np.stack([rng, az, vr], -1)
-    std = np.stack(radar.noise_std(rng, az), -1)
+    std = np.stack(radar.noise_std(zp[:, 0], zp[:, 1]), -1)
     r = std[:, :, None] ** 2 * np.eye(3)
     b_along = np.einsum("tij,tj->ti", jp[:, :2], tangent)
     b_across = np.einsum("tij,tj->ti", jp[:, :2], right)
     r[:, :2, :2] += (spread**2)[:, None, None] * b_along[:, :, None] * b_along[:, None, :]
     r[:, :2, :2] += cfg.body_across_std_m**2 * b_across[:, :, None] * b_across[:, None, :]
     return zp, h, r
-
-
-def _wrap(a: FloatArray) -> FloatArray:
-    return (a + np.pi) % (2 * np.pi) - np.pi
 
 
 class SceneTracker:
@@ -243,7 +230,7 @@ class SceneTracker:
         tr = self.tracks
         zp, h, r, s = self._predicted_detections(radar, rows)
         nu = z - zp
-        nu[:, 1] = _wrap(nu[:, 1])
+        nu[:, 1] = wrap_to_pi(nu[:, 1])
         # a detection that shows motion ends a stop (velocity freed again)
         moving = tr.stopped[rows] & (np.abs(z[:, 2]) > self.config.moving_radial_mps)
         if moving.any():
@@ -254,7 +241,7 @@ class SceneTracker:
             tr.p[mv, 2, 2] += 4.0
             zp, h, r, s = self._predicted_detections(radar, rows)
             nu = z - zp
-            nu[:, 1] = _wrap(nu[:, 1])
+            nu[:, 1] = wrap_to_pi(nu[:, 1])
         self._learn_spread(rows, z, radar)
         pht = tr.p[rows] @ np.swapaxes(h, -1, -2)
         k = np.swapaxes(np.linalg.solve(s, np.swapaxes(pht, -1, -2)), -1, -2)
@@ -272,10 +259,7 @@ class SceneTracker:
         A moving average of the squared along-track residuals, less the sensor's share.
         """
         tr = self.tracks
-        horiz = np.sqrt(np.maximum(z[:, 0] ** 2 - radar.height_m**2, 0.01))
-        xy = np.asarray(radar.position_m) + horiz[:, None] * np.stack(
-            [np.sin(z[:, 1]), np.cos(z[:, 1])], -1
-        )
+        xy, _, horiz = _initial_point(z, radar)
         along = np.zeros(rows.size)
         for c, cor in enumerate(self.corridors):
             sel = tr.corridor[rows] == c
@@ -293,10 +277,7 @@ class SceneTracker:
     # -- track opening ----------------------------------------------------------------------
     def _open(self, z: FloatArray, radar: RadarSpec, time_s: float) -> int:
         """Open one tentative track per cluster of detections ``z`` (n, 3); return the count."""
-        horiz = np.sqrt(np.maximum(z[:, 0] ** 2 - radar.height_m**2, 0.01))
-        xy = np.asarray(radar.position_m) + horiz[:, None] * np.stack(
-            [np.sin(z[:, 1]), np.cos(z[:, 1])], -1
-        )
+        xy, _, _ = _initial_point(z, radar)
         labels = cluster_points(xy, self.config.cluster_radius_m)
         n_new = int(labels.max()) + 1 if labels.size else 0
         if n_new == 0:
@@ -383,10 +364,8 @@ class SceneTracker:
             zp, s = zp[seen], s[seen]
             if rows.size and z.shape[0]:
                 nu = z[None, :, :] - zp[:, None, :]
-                nu[..., 1] = _wrap(nu[..., 1])
-                chol = np.linalg.cholesky(s)
-                y = np.linalg.solve(chol[:, None], nu[..., None])[..., 0]
-                d2 = np.einsum("tdm,tdm->td", y, y)
+                nu[..., 1] = wrap_to_pi(nu[..., 1])
+                d2 = mahalanobis_squared(nu, s)
                 gated = d2 <= self._gate
                 cost = np.where(gated, d2, np.inf)
                 ti, di = gnn_assign(cost, self._gate)
@@ -454,12 +433,7 @@ class SceneTracker:
                 older, younger = younger, older
             if int(older) not in drop:
                 drop.add(int(younger))
-        if drop:
-            rows = np.array(sorted(drop))
-            keep = np.ones(n, bool)
-            keep[rows] = False
-            self.book.remove(rows)
-            tr.keep(keep)
+        self._drop(np.array(sorted(drop), dtype=int))
 
     def _modes(self, time_s: float) -> None:
         cfg = self.config
@@ -509,12 +483,15 @@ class SceneTracker:
         for c, cor in enumerate(self.corridors):
             sel = tr.corridor == c
             out[sel] = (tr.x[sel, 0] < 0) | (tr.x[sel, 0] > cor.path.length_m)
-        gone = np.union1d(gone, np.flatnonzero(out))
-        if gone.size:
-            keep = np.ones(tr.time_s.size, bool)
-            keep[gone] = False
-            self.book.remove(gone)
-            tr.keep(keep)
+        self._drop(np.union1d(gone, np.flatnonzero(out)))
+
+    def _drop(self, rows: np.ndarray) -> None:
+        """Forget the tracks in ``rows`` (book and filter states)."""
+        if rows.size:
+            keep = np.ones(self.tracks.time_s.size, bool)
+            keep[rows] = False
+            self.book.remove(rows)
+            self.tracks.keep(keep)
 
     def _position(self, rows: np.ndarray) -> FloatArray:
         tr = self.tracks
@@ -600,14 +577,23 @@ def iter_scans(detections: pd.DataFrame) -> Iterator[tuple[str, float, FloatArra
 
 
 def track_scene(
-    site: Site, detections: pd.DataFrame, config: SceneTrackerConfig | None = None
+    site: Site,
+    detections: pd.DataFrame,
+    config: SceneTrackerConfig | None = None,
+    on_scan: Callable[[int, int], None] | None = None,
 ) -> tuple[pd.DataFrame, pd.DataFrame, ScanLog]:
     """Track a detection table scan by scan (:func:`iter_scans`).
 
-    Returns the track rows of every scan, the hazard events and the detection log.
+    ``on_scan(done, total)`` is called after each scan (progress). Returns the track rows of
+    every scan, the hazard events and the detection log.
     """
     tracker = SceneTracker(site, config)
-    out = [tracker.step(radar, t, z) for radar, t, z in iter_scans(detections)]
+    scans = list(iter_scans(detections))
+    out = []
+    for i, (radar, t, z) in enumerate(scans):
+        out.append(tracker.step(radar, t, z))
+        if on_scan is not None:
+            on_scan(i + 1, len(scans))
     tracks = pd.concat(out, ignore_index=True) if out else pd.DataFrame()
     return tracks, pd.DataFrame(tracker.events, columns=EVENT_COLUMNS), tracker.log
 
