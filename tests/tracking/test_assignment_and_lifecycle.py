@@ -81,13 +81,15 @@ def test_clusters_are_single_link_groups():
 
 def test_m_of_n_confirmation_coasting_and_stable_ids():
     book = TrackBook(LifecycleRules(confirm_hits=3, confirm_window=4, tentative_misses=2,
-                                    max_coast_s=1.0, max_coast_stopped_s=10.0))  # fmt: skip
+                                    max_coast_s=1.0, max_coast_stopped_s=10.0,
+                                    max_coast_hidden_s=5.0))  # fmt: skip
     ids = book.add(2, 0.0)
     assert ids.tolist() == [1, 2]
     rows = np.arange(2)
     assert book.record(rows, np.array([True, False]), 0.1).tolist() == []
     assert book.record(rows, np.array([True, False]), 0.2).tolist() == [0]  # 3 hits of 4
-    assert book.expired(0.2, np.zeros(2, bool)).tolist() == [1]  # two misses in a row
+    none = np.zeros(2, bool)
+    assert book.expired(0.2, none, none).tolist() == [1]  # two misses in a row
     book.remove(np.array([1]))
     assert book.ids.tolist() == [1]
     assert book.add(1, 0.3).tolist() == [3]  # ids are never reused
@@ -95,6 +97,11 @@ def test_m_of_n_confirmation_coasting_and_stable_ids():
     rows = np.arange(2)
     for t in (0.5, 0.9, 1.1):
         book.record(rows, np.array([False, True]), t)
-    assert book.expired(1.1, np.zeros(2, bool)).tolist() == []
-    assert book.expired(1.3, np.zeros(2, bool)).tolist() == [0]
-    assert book.expired(1.3, np.array([True, False])).tolist() == []  # stopped: longer limit
+    assert book.expired(1.1, none, none).tolist() == []
+    assert book.expired(1.3, none, none).tolist() == [0]
+    first = np.array([True, False])
+    assert book.expired(1.3, first, none).tolist() == []  # stopped: longer limit
+    assert book.expired(1.3, none, first).tolist() == []  # hidden: longer limit
+    assert book.expired(5.1, none, first).tolist() == [1]  # 4.9 s hidden: kept
+    assert book.expired(5.3, none, first).tolist() == [0, 1]  # 5.1 s hidden: deleted
+    assert book.expired(5.3, first, none).tolist() == [1]

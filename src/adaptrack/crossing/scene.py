@@ -249,11 +249,13 @@ def simulate_traffic(site: Site, spec: SceneSpec, rng: np.random.Generator) -> S
         -(half_lane - width / 2),
         half_lane - width / 2,
     )
+    # pedestrians on a footway, cyclists on the lane's edge, motorcycles along the centre line
+    # (past a queue's cars: width / 2 + 0.9 m + wander away from a car's centre)
     lateral = half_lane + np.where(
         classes == "pedestrian",
         half_lane + 1.5,
         np.where(
-            classes == "cyclist", half_lane - 0.6, np.where(classes == "motorcycle", -1.0, 0.0)
+            classes == "cyclist", half_lane, np.where(classes == "motorcycle", 0.2 - half_lane, 0.0)
         ),
     )
     lateral = np.where(
@@ -261,6 +263,9 @@ def simulate_traffic(site: Site, spec: SceneSpec, rng: np.random.Generator) -> S
     )
     d_side = -direction * lateral  # corridor offset (right of decreasing u)
     blocking = ~np.isin(classes, list(NON_BLOCKING))
+    # who follows whom: the vehicles in the lane, each non-blocking class in its own line
+    lane_of = np.where(blocking, "lane", classes)
+    lanes = np.unique(lane_of)
     # along-corridor distance travelled by the front from the corridor's start of this direction
     x = length_m.copy()  # the whole body is on the corridor when a user appears
     v = v0.copy()
@@ -311,8 +316,8 @@ def simulate_traffic(site: Site, spec: SceneSpec, rng: np.random.Generator) -> S
         gap = np.full(idx.size, np.inf)
         dv = np.zeros(idx.size)
         pos = {int(i): j for j, i in enumerate(idx)}
-        for members in group:
-            mem = members[active[members] & ~done[members] & blocking[members]]
+        for members, lane in itertools.product(group, lanes):
+            mem = members[active[members] & ~done[members] & (lane_of[members] == lane)]
             if mem.size < 2:
                 continue
             order = mem[np.argsort(x[mem])]

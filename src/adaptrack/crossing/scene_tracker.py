@@ -40,7 +40,6 @@ import pandas as pd
 from scipy.spatial import cKDTree
 
 from .._typing import FloatArray
-from ..coords.radar import wrap_to_pi
 from ..tracking import (
     LifecycleRules,
     TrackBook,
@@ -48,14 +47,28 @@ from ..tracking import (
     cluster_points,
     gate_threshold,
     gnn_assign,
-    mahalanobis_squared,
+)
+from ._scene_kernels import (
+    gate_scan,
+    miss_updates,
+    occluded_rows,
+    owners,
+    planar_rows,
+    predict_tracks,
+    unambiguous_assignment,
+    update_tracks,
 )
 from .corridor import Corridor, site_corridors
-from .sensor import RadarSpec
+from .sensor import RadarSpec, curve_tables
 from .site import Site
-from .tracking import _initial_point, _polar_jacobian
+from .tracking import _initial_point
 
 N_STATE = 4  # u, du/dt, d2u/dt2, d
+STATIC = len(TrackStatus)  # status code of a stopped object that never moved
+ROW_COLUMNS = (
+    "track_id", "time_s", "east_m", "north_m", "speed_mps", "east_speed_mps", "north_speed_mps",
+    "from_crossing_m", "status", "moved", "position_std_m", "speed_std_mps",
+)  # fmt: skip
 EVENT_COLUMNS = ["time_s", "event", "track_id", "east_m", "north_m"]
 
 
@@ -74,12 +87,13 @@ class SceneTrackerConfig:
     cluster_radius_m: float = 3.0
     stop_speed_mps: float = 0.3
     stop_confirm_s: float = 0.5
-    moving_radial_mps: float = 0.6  # a detection this fast (beyond 3 sigma) ends a stop
+    moving_radial_mps: float = 0.3  # a detection this fast (beyond 3 sigma) ends a stop
+    start_speed_max_mps: float = 3.0  # a stopped vehicle's gate allows starting up to this
     moved_speed_mps: float = 0.8
     moved_distance_m: float = 3.0  # ... and has moved this far from where it was opened
     initial_speed_std_mps: float = 15.0
     merge_lateral_m: float = 1.2  # two tracks this close across (and along: the spread) ...
-    merge_speed_mps: float = 2.0  # ... and this similar in speed are one body
+    merge_speed_mps: float = 1.0  # ... and this similar in speed are one body
     rules: LifecycleRules = field(default_factory=LifecycleRules)
 
 
@@ -97,13 +111,17 @@ class _Tracks:
     event_raised: np.ndarray
     born_u: FloatArray
     spread: FloatArray  # body spread of the reflections along the track [m]
+    direction: FloatArray  # +1 / -1: direction of travel along u once known, else 0
+    miss_run: FloatArray  # probability of the current run of misses for a moving target
+    occluded: np.ndarray  # hidden behind a nearer track at its last scan without a detection
 
     @classmethod
     def empty(cls) -> _Tracks:
         return cls(
             np.zeros(0, int), np.zeros((0, N_STATE)), np.zeros((0, N_STATE, N_STATE)),
             np.zeros(0), np.zeros(0, bool), np.full(0, np.nan), np.zeros(0, bool),
-            np.zeros(0, bool), np.zeros(0), np.zeros(0),
+            np.zeros(0, bool), np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0),
+            np.zeros(0, bool),
         )  # fmt: skip
 
     def append(self, other: _Tracks) -> None:
@@ -130,50 +148,6 @@ class ScanLog:
         return self.updated + self.opened + self.joined_new + self.rejected_outside_view
 
 
-def _transition(dt: FloatArray, q: float, q_lat: float) -> tuple[FloatArray, FloatArray]:
-    """Constant-acceleration (white jerk) transition and noise (T, 4, 4) for steps ``dt``."""
-    n = dt.size
-    f = np.zeros((n, N_STATE, N_STATE))
-    f[:, 0, 0] = f[:, 1, 1] = f[:, 2, 2] = f[:, 3, 3] = 1.0
-    f[:, 0, 1] = f[:, 1, 2] = dt
-    f[:, 0, 2] = dt**2 / 2
-    qm = np.zeros((n, N_STATE, N_STATE))
-    qm[:, 0, 0] = q * dt**5 / 20
-    qm[:, 0, 1] = qm[:, 1, 0] = q * dt**4 / 8
-    qm[:, 0, 2] = qm[:, 2, 0] = q * dt**3 / 6
-    qm[:, 1, 1] = q * dt**3 / 3
-    qm[:, 1, 2] = qm[:, 2, 1] = q * dt**2 / 2
-    qm[:, 2, 2] = q * dt
-    qm[:, 3, 3] = q_lat * dt
-    return f, qm
-
-
-def _measure(
-    cor: Corridor, radar: RadarSpec, x: FloatArray, spread: FloatArray, cfg: SceneTrackerConfig
-) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Predicted (range, azimuth, radial speed), Jacobian (T, 3, 4) and noise (T, 3, 3)."""
-    path = cor.path
-    u, vu, d = x[:, 0], x[:, 1], x[:, 3]
-    pos, tangent, right, kappa = path.lane_geometry(u, d)
-    lever = 1.0 + kappa * d
-    along = lever[:, None] * tangent
-    vel = vu[:, None] * along
-    zp, jp, jv = _polar_jacobian(pos, vel, radar)
-    dvel_du = -(vu * lever * kappa)[:, None] * right
-    dvel_dd = (vu * kappa)[:, None] * tangent
-    h = np.zeros((x.shape[0], 3, N_STATE))
-    h[:, :, 0] = np.einsum("tij,tj->ti", jp, along) + np.einsum("tij,tj->ti", jv, dvel_du)
-    h[:, :, 1] = np.einsum("tij,tj->ti", jv, along)
-    h[:, :, 3] = np.einsum("tij,tj->ti", jp, right) + np.einsum("tij,tj->ti", jv, dvel_dd)
-    std = np.stack(radar.noise_std(zp[:, 0], zp[:, 1]), -1)
-    r = std[:, :, None] ** 2 * np.eye(3)
-    b_along = np.einsum("tij,tj->ti", jp[:, :2], tangent)
-    b_across = np.einsum("tij,tj->ti", jp[:, :2], right)
-    r[:, :2, :2] += (spread**2)[:, None, None] * b_along[:, :, None] * b_along[:, None, :]
-    r[:, :2, :2] += cfg.body_across_std_m**2 * b_across[:, :, None] * b_across[:, None, :]
-    return zp, h, r
-
-
 class SceneTracker:
     """Incremental many-object tracker of one site (module docstring).
 
@@ -190,89 +164,18 @@ class SceneTracker:
         self.events: list[dict[str, object]] = []
         self.log = ScanLog()
         self._radars = {r.name: r for r in site.radars}
+        self._radar_tables = {
+            r.name: (
+                r.kernel_row(), *r.noise_table(), r.field_table(),
+                *curve_tables((r.detection_curve("default"),)),
+            )
+            for r in site.radars
+        }  # fmt: skip
+        self._roads, self._bounds = _corridor_tables(self.corridors)
+        self._crossing_u = np.array([c.crossing_u for c in self.corridors])
+        self._length_m = np.array([c.path.length_m for c in self.corridors])
         self._gate = gate_threshold(3, self.config.gate_probability)
         self._last_time: dict[str, float] = {}
-
-    # -- prediction -------------------------------------------------------------------------
-    def _predict(self, time_s: float) -> None:
-        tr = self.tracks
-        if tr.time_s.size == 0:
-            return
-        dt = np.maximum(time_s - tr.time_s, 0.0)
-        cfg = self.config
-        f, q = _transition(dt, cfg.accel_psd, cfg.lateral_psd)
-        st = tr.stopped
-        if st.any():  # held at a standstill
-            f[st] = np.eye(N_STATE)
-            q[st] = 0.0
-            q[st, 0, 0] = cfg.stopped_psd * dt[st]
-            q[st, 3, 3] = cfg.stopped_psd * dt[st]
-        tr.x = np.einsum("tij,tj->ti", f, tr.x)
-        tr.p = f @ tr.p @ np.swapaxes(f, -1, -2) + q
-        tr.time_s = np.maximum(tr.time_s, time_s)
-
-    def _predicted_detections(self, radar: RadarSpec, rows: np.ndarray) -> tuple[FloatArray, ...]:
-        zp = np.zeros((rows.size, 3))
-        h = np.zeros((rows.size, 3, N_STATE))
-        r = np.zeros((rows.size, 3, 3))
-        for c, cor in enumerate(self.corridors):
-            sel = self.tracks.corridor[rows] == c
-            if sel.any():
-                zp[sel], h[sel], r[sel] = _measure(
-                    cor, radar, self.tracks.x[rows[sel]], self.tracks.spread[rows[sel]],
-                    self.config,
-                )  # fmt: skip
-        s = h @ self.tracks.p[rows] @ np.swapaxes(h, -1, -2) + r
-        return zp, h, r, s
-
-    # -- update -----------------------------------------------------------------------------
-    def _update(self, rows: np.ndarray, z: FloatArray, radar: RadarSpec) -> None:
-        tr = self.tracks
-        zp, h, r, s = self._predicted_detections(radar, rows)
-        nu = z - zp
-        nu[:, 1] = wrap_to_pi(nu[:, 1])
-        # a detection that shows motion ends a stop (velocity freed again)
-        moving = tr.stopped[rows] & (np.abs(z[:, 2]) > self.config.moving_radial_mps)
-        if moving.any():
-            mv = rows[moving]
-            tr.stopped[mv] = False
-            tr.slow_since[mv] = np.nan
-            tr.p[mv, 1, 1] += 4.0
-            tr.p[mv, 2, 2] += 4.0
-            zp, h, r, s = self._predicted_detections(radar, rows)
-            nu = z - zp
-            nu[:, 1] = wrap_to_pi(nu[:, 1])
-        self._learn_spread(rows, z, radar)
-        pht = tr.p[rows] @ np.swapaxes(h, -1, -2)
-        k = np.swapaxes(np.linalg.solve(s, np.swapaxes(pht, -1, -2)), -1, -2)
-        x = tr.x[rows] + np.einsum("tij,tj->ti", k, nu)
-        ikh = np.eye(N_STATE) - k @ h
-        p = ikh @ tr.p[rows] @ np.swapaxes(ikh, -1, -2) + k @ r @ np.swapaxes(k, -1, -2)
-        held = tr.stopped[rows]
-        x[held, 1:3] = 0.0
-        tr.x[rows] = x
-        tr.p[rows] = 0.5 * (p + np.swapaxes(p, -1, -2))
-
-    def _learn_spread(self, rows: np.ndarray, z: FloatArray, radar: RadarSpec) -> None:
-        """Follow the spread of the reflections along each body.
-
-        A moving average of the squared along-track residuals, less the sensor's share.
-        """
-        tr = self.tracks
-        xy, _, horiz = _initial_point(z, radar)
-        along = np.zeros(rows.size)
-        for c, cor in enumerate(self.corridors):
-            sel = tr.corridor[rows] == c
-            if sel.any():
-                pos, tangent, _, _ = cor.path.lane_geometry(tr.x[rows[sel], 0], tr.x[rows[sel], 3])
-                along[sel] = np.einsum("ti,ti->t", xy[sel] - pos, tangent)
-        sensor = radar.noise_std(z[:, 0], z[:, 1])
-        floor = sensor[0] ** 2 + (horiz * sensor[1]) ** 2
-        sample = np.maximum(along**2 - floor - tr.p[rows, 0, 0], 0.0)
-        w = self.config.spread_learning_rate
-        var = (1 - w) * tr.spread[rows] ** 2 + w * sample
-        lo, hi = self.config.spread_limits_m
-        tr.spread[rows] = np.sqrt(np.clip(var, lo**2, hi**2))
 
     # -- track opening ----------------------------------------------------------------------
     def _open(self, z: FloatArray, radar: RadarSpec, time_s: float) -> int:
@@ -327,14 +230,15 @@ class SceneTracker:
             _Tracks(
                 best_c, x, p, np.full(n_new, time_s), np.zeros(n_new, bool),
                 np.full(n_new, np.nan), np.zeros(n_new, bool), np.zeros(n_new, bool), u0,
-                np.full(n_new, self.config.body_along_std_m),
+                np.full(n_new, self.config.body_along_std_m), np.zeros(n_new), np.ones(n_new),
+                np.zeros(n_new, bool),
             )
         )  # fmt: skip
         return n_new
 
     # -- one scan ---------------------------------------------------------------------------
-    def step(self, radar_name: str, time_s: float, z: FloatArray) -> pd.DataFrame:
-        """Process the detections ``z`` (n, 3) of one radar scan; return the tracks' rows."""
+    def step(self, radar_name: str, time_s: float, z: FloatArray) -> None:
+        """Process the detections ``z`` (n, 3) of one radar scan (see :meth:`rows`)."""
         radar = self._radars.get(radar_name)
         if radar is None:
             raise ValueError(f"unknown radar {radar_name!r}; the site has {sorted(self._radars)}")
@@ -344,49 +248,59 @@ class SceneTracker:
                 f"radar {radar_name!r}: scan at {time_s} s is not after its previous scan at "
                 f"{last} s (scans of a radar must be in time order, one per time)"
             )
-        self._last_time[radar_name] = time_s
         z = np.asarray(z, dtype=float).reshape(-1, 3)
         if not np.all(np.isfinite(z)):
             raise ValueError(f"radar {radar_name!r} at {time_s} s: a detection is not finite")
-        self._predict(time_s)
+        self._last_time[radar_name] = time_s
+        cfg = self.config
+        tr = self.tracks
+        predict_tracks(
+            tr.x, tr.p, tr.time_s, tr.stopped, tr.direction, time_s,
+            cfg.accel_psd, cfg.lateral_psd, cfg.stopped_psd,
+        )  # fmt: skip
         view = radar.in_view(z[:, 0], z[:, 1])
         self.log.rejected_outside_view += int((~view).sum())
         z = z[view]
-        tr = self.tracks
         n_t = tr.time_s.size
-        rows = np.arange(n_t)
-        hit = np.zeros(n_t, dtype=bool)
         used = np.zeros(z.shape[0], dtype=bool)
         if n_t:
-            zp, _h, _r, s = self._predicted_detections(radar, rows)
-            seen = radar.in_view(zp[:, 0], zp[:, 1])
-            rows = rows[seen]
-            zp, s = zp[seen], s[seen]
-            if rows.size and z.shape[0]:
-                nu = z[None, :, :] - zp[:, None, :]
-                nu[..., 1] = wrap_to_pi(nu[..., 1])
-                d2 = mahalanobis_squared(nu, s)
-                gated = d2 <= self._gate
-                cost = np.where(gated, d2, np.inf)
-                ti, di = gnn_assign(cost, self._gate)
-                owner = np.full(z.shape[0], -1)
-                owner[di] = ti
-                # the body's other reflections: gated, unassigned detections join the closest
-                rest = np.flatnonzero((owner < 0) & gated.any(axis=0))
-                owner[rest] = np.argmin(cost[:, rest], axis=0)
-                assigned = np.flatnonzero(owner >= 0)
-                # sequential rounds: each track takes at most one detection per round
-                order = assigned[np.argsort(d2[owner[assigned], assigned], kind="stable")]
-                rnd = np.zeros(order.size, int)
-                count: dict[int, int] = {}
-                for j, det in enumerate(order):
-                    rnd[j] = count.get(int(owner[det]), 0)
-                    count[int(owner[det])] = rnd[j] + 1
-                for k in range(int(rnd.max()) + 1 if rnd.size else 0):
-                    dets = order[rnd == k]
-                    self._update(rows[owner[dets]], z[dets], radar)
-                used[assigned] = True
-                hit[rows[owner[assigned]]] = True
+            radar_row, noise_tab, noise_cnt, fields, pd_tab, pd_cnt = self._radar_tables[radar_name]
+            d2 = np.empty((n_t, z.shape[0]))
+            seen = gate_scan(
+                tr.x, tr.p, tr.spread, tr.stopped & tr.moved, tr.direction, tr.corridor,
+                self._roads, self._bounds, radar_row, noise_tab, noise_cnt, fields,
+                cfg.body_across_std_m, cfg.start_speed_max_mps, z, d2,
+            )  # fmt: skip
+            hit = np.zeros(n_t, dtype=bool)
+            if z.shape[0]:
+                simple, ti, di = unambiguous_assignment(d2, self._gate)
+                if not simple:
+                    ti, di = gnn_assign(np.where(d2 <= self._gate, d2, np.inf), self._gate)
+                owner, order = owners(d2, self._gate, ti, di)
+                lo, hi = cfg.spread_limits_m
+                update_tracks(
+                    order, owner, z, tr.x, tr.p, tr.spread, tr.stopped, tr.moved,
+                    tr.direction, tr.slow_since, tr.corridor, self._roads, self._bounds,
+                    radar_row, noise_tab, noise_cnt, cfg.body_across_std_m,
+                    cfg.moving_radial_mps, cfg.start_speed_max_mps**2,
+                    cfg.spread_learning_rate, lo, hi,
+                )  # fmt: skip
+                used[order] = True
+                hit[owner[order]] = True
+            tr.miss_run[hit] = 1.0
+            missed = np.flatnonzero(seen & ~hit)
+            hidden = occluded_rows(
+                missed, tr.x, tr.spread, tr.corridor, self._roads, self._bounds, radar_row
+            )
+            tr.occluded[hit] = False
+            tr.occluded[missed] = hidden
+            missed = missed[~hidden]  # a hidden track's miss tells nothing
+            miss_updates(
+                missed[~tr.stopped[missed]], tr.x, tr.p, tr.spread, tr.miss_run, tr.corridor,
+                self._roads, self._bounds, radar_row, noise_tab, noise_cnt, fields, pd_tab,
+                pd_cnt,
+            )  # fmt: skip
+            rows = np.flatnonzero(seen & ~tr.occluded)
             self.book.record(rows, hit[rows], time_s)
         self.log.updated += int(used.sum())
         left = z[~used]
@@ -394,17 +308,16 @@ class SceneTracker:
             n_new = self._open(left, radar, time_s)
             self.log.opened += n_new
             self.log.joined_new += left.shape[0] - n_new
-            hit = np.concatenate([hit, np.ones(n_new, bool)])
         self._modes(time_s)
         self._delete(time_s)
         self._merge()
-        return self.rows(time_s)
 
     def _merge(self) -> None:
         """Drop the younger of two tracks on one body.
 
         Same corridor, within the bodies' spreads along it, within ``merge_lateral_m``
-        across, velocities alike (within ``merge_speed_mps`` plus three sigma).
+        across, velocities alike (within ``merge_speed_mps`` plus three sigma), both static
+        objects or neither.
         """
         tr = self.tracks
         n = tr.time_s.size
@@ -420,8 +333,10 @@ class SceneTracker:
         dd = np.abs(tr.x[a, 3] - tr.x[b, 3])
         dv = np.abs(tr.x[a, 1] - tr.x[b, 1])
         sv = np.sqrt(tr.p[a, 1, 1] + tr.p[b, 1, 1])
+        static = tr.stopped & ~tr.moved
         same = (
-            (du < tr.spread[a] + tr.spread[b] + 0.5)
+            (static[a] == static[b])
+            & (du < tr.spread[a] + tr.spread[b] + 0.5)
             & (dd < self.config.merge_lateral_m)
             & (dv < self.config.merge_speed_mps + 3.0 * sv)
         )
@@ -442,10 +357,9 @@ class SceneTracker:
         speed = np.abs(tr.x[:, 1])
         sd = np.sqrt(tr.p[:, 1, 1])
         travelled = np.abs(tr.x[:, 0] - tr.born_u)
-        tr.moved |= (
-            conf & (speed > cfg.moved_speed_mps) & (sd < 0.5 * speed)
-            & (travelled > cfg.moved_distance_m)
-        )  # fmt: skip
+        moving = conf & (speed > cfg.moved_speed_mps) & (sd < 0.5 * speed)
+        tr.direction[moving] = np.sign(tr.x[moving, 1])
+        tr.moved |= moving & (travelled > cfg.moved_distance_m)
         slow = conf & ~tr.stopped & (speed < cfg.stop_speed_mps) & (sd < 0.5)
         tr.slow_since = np.where(
             slow, np.where(np.isnan(tr.slow_since), time_s, tr.slow_since), np.nan
@@ -457,13 +371,10 @@ class SceneTracker:
             tr.p[enter, 1:3, :] = 0.0
             tr.p[enter, :, 1:3] = 0.0
         # hazard: a road user stopped between the barriers
-        to_cross = np.zeros(tr.time_s.size)
-        for c, cor in enumerate(self.corridors):
-            sel = tr.corridor == c
-            to_cross[sel] = np.abs(cor.crossing_u - tr.x[sel, 0])
+        to_cross = np.abs(self._crossing_u[tr.corridor] - tr.x[:, 0])
         hazard = tr.stopped & tr.moved & ~tr.event_raised & (to_cross <= self.site.barrier_m)
         for i in np.flatnonzero(hazard):
-            pos = self._position(np.array([i]))[0]
+            pos = self._planar(np.array([i]))["position"][0]
             self.events.append(
                 {
                     "time_s": time_s,
@@ -477,12 +388,9 @@ class SceneTracker:
 
     def _delete(self, time_s: float) -> None:
         tr = self.tracks
-        gone = self.book.expired(time_s, tr.stopped)
+        gone = self.book.expired(time_s, tr.stopped, tr.occluded)
         # tracks that left every corridor
-        out = np.zeros(tr.time_s.size, bool)
-        for c, cor in enumerate(self.corridors):
-            sel = tr.corridor == c
-            out[sel] = (tr.x[sel, 0] < 0) | (tr.x[sel, 0] > cor.path.length_m)
+        out = (tr.x[:, 0] < 0) | (tr.x[:, 0] > self._length_m[tr.corridor])
         self._drop(np.union1d(gone, np.flatnonzero(out)))
 
     def _drop(self, rows: np.ndarray) -> None:
@@ -493,14 +401,21 @@ class SceneTracker:
             self.book.remove(rows)
             self.tracks.keep(keep)
 
-    def _position(self, rows: np.ndarray) -> FloatArray:
+    def _planar(self, rows: np.ndarray) -> dict[str, FloatArray]:
+        """Planar position, velocity, position sigma and distance to the crossing of rows."""
         tr = self.tracks
-        pos = np.zeros((rows.size, 2))
-        for c, cor in enumerate(self.corridors):
-            sel = tr.corridor[rows] == c
-            if sel.any():
-                pos[sel] = cor.path.lane_geometry(tr.x[rows[sel], 0], tr.x[rows[sel], 3])[0]
-        return pos
+        n = rows.size
+        out = {
+            "position": np.zeros((n, 2)),
+            "velocity": np.zeros((n, 2)),
+            "position_std": np.zeros(n),
+            "to_crossing": np.zeros(n),
+        }
+        planar_rows(
+            tr.x[rows], tr.p[rows], tr.corridor[rows], self._roads, self._bounds,
+            self._crossing_u, *out.values(),
+        )  # fmt: skip
+        return out
 
     def status(self) -> np.ndarray:
         """Status (TrackStatus values) of every live track."""
@@ -513,51 +428,55 @@ class SceneTracker:
         st[conf & tr.stopped] = int(TrackStatus.STOPPED)
         return st
 
-    def rows(self, time_s: float) -> pd.DataFrame:
-        """Estimates of every confirmed track at ``time_s`` (after the scan's update)."""
+    def columns(self, time_s: float) -> dict[str, np.ndarray]:
+        """Columns of :meth:`rows` (arrays, one entry per confirmed track)."""
         tr = self.tracks
         rows = np.flatnonzero(self.book.confirmed)
-        pos = np.zeros((rows.size, 2))
-        speed = np.zeros(rows.size)
-        pos_std = np.zeros(rows.size)
-        vel = np.zeros((rows.size, 2))
-        to_cross = np.zeros(rows.size)
-        for c, cor in enumerate(self.corridors):
-            sel = tr.corridor[rows] == c
-            if not sel.any():
-                continue
-            x = tr.x[rows[sel]]
-            p_, tangent, right, kappa = cor.path.lane_geometry(x[:, 0], x[:, 3])
-            lever = 1.0 + kappa * x[:, 3]
-            pos[sel] = p_
-            speed[sel] = np.abs(x[:, 1] * lever)
-            vel[sel] = (x[:, 1] * lever)[:, None] * tangent
-            to_cross[sel] = np.abs(cor.crossing_u - x[:, 0])
-            jac = np.stack([lever[:, None] * tangent, right], -1)
-            sub = tr.p[rows[sel]][:, [0, 3]][:, :, [0, 3]]
-            cov = jac @ sub @ np.swapaxes(jac, -1, -2)
-            pos_std[sel] = np.sqrt(np.trace(cov, axis1=-2, axis2=-1))
+        geo = self._planar(rows)
         status = self.status()[rows]
-        names = {int(s): s.name.lower() for s in TrackStatus}
-        return pd.DataFrame(
-            {
-                "track_id": self.book.ids[rows],
-                "time_s": time_s,
-                "east_m": pos[:, 0],
-                "north_m": pos[:, 1],
-                "speed_mps": speed,
-                "east_speed_mps": vel[:, 0],
-                "north_speed_mps": vel[:, 1],
-                "from_crossing_m": to_cross,
-                "status": [
-                    names[int(s)] if tr.moved[i] or s != TrackStatus.STOPPED else "static"
-                    for i, s in zip(rows, status, strict=True)
-                ],
-                "moved": tr.moved[rows],
-                "position_std_m": pos_std,
-                "speed_std_mps": np.sqrt(tr.p[rows, 1, 1]),
-            }
-        )
+        status[(status == TrackStatus.STOPPED) & ~tr.moved[rows]] = STATIC
+        vel = geo["velocity"]
+        return {
+            "track_id": self.book.ids[rows],
+            "time_s": np.full(rows.size, time_s),
+            "east_m": geo["position"][:, 0],
+            "north_m": geo["position"][:, 1],
+            "speed_mps": np.hypot(vel[:, 0], vel[:, 1]),
+            "east_speed_mps": vel[:, 0],
+            "north_speed_mps": vel[:, 1],
+            "from_crossing_m": geo["to_crossing"],
+            "status": status,
+            "moved": tr.moved[rows],
+            "position_std_m": geo["position_std"],
+            "speed_std_mps": np.sqrt(tr.p[rows, 1, 1]),
+        }
+
+    def rows(self, time_s: float) -> pd.DataFrame:
+        """Estimates of every confirmed track at ``time_s`` (after the scan's update).
+
+        ``status`` is tentative / confirmed / coasting / stopped, or static for a stopped
+        object that never moved (clutter).
+        """
+        return _frame([self.columns(time_s)])
+
+
+def _frame(columns: list[dict[str, np.ndarray]]) -> pd.DataFrame:
+    """One table of track rows from the columns of several scans (status named)."""
+    names = np.array([s.name.lower() for s in TrackStatus] + ["static"])
+    keys = list(columns[0]) if columns else list(ROW_COLUMNS)
+    table = {k: np.concatenate([c[k] for c in columns]) if columns else [] for k in keys}
+    table["status"] = names[np.asarray(table["status"], dtype=int)]
+    return pd.DataFrame(table)
+
+
+def _corridor_tables(corridors: list[Corridor]) -> tuple[FloatArray, np.ndarray]:
+    """Corridor centrelines packed as one (5, S) table and each one's column range (C, 2)."""
+    paths = [c.path for c in corridors]
+    table = np.concatenate(
+        [np.stack([p.s, p.xy[:, 0], p.xy[:, 1], p.heading, p.curvature]) for p in paths], axis=1
+    )
+    stops = np.cumsum([p.s.size for p in paths])
+    return table, np.stack([stops - [p.s.size for p in paths], stops], -1).astype(np.int64)
 
 
 def iter_scans(detections: pd.DataFrame) -> Iterator[tuple[str, float, FloatArray]]:
@@ -591,11 +510,11 @@ def track_scene(
     scans = list(iter_scans(detections))
     out = []
     for i, (radar, t, z) in enumerate(scans):
-        out.append(tracker.step(radar, t, z))
+        tracker.step(radar, t, z)
+        out.append(tracker.columns(t))
         if on_scan is not None:
             on_scan(i + 1, len(scans))
-    tracks = pd.concat(out, ignore_index=True) if out else pd.DataFrame()
-    return tracks, pd.DataFrame(tracker.events, columns=EVENT_COLUMNS), tracker.log
+    return _frame(out), pd.DataFrame(tracker.events, columns=EVENT_COLUMNS), tracker.log
 
 
 __all__ = [

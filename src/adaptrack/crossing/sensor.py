@@ -190,6 +190,13 @@ class RadarSpec:
         """
         return curve_tables((self.range_std_m, self.azimuth_std_rad, self.radial_speed_std_mps))
 
+    def kernel_row(self) -> FloatArray:
+        """Geometry for compiled code: x, y, height, boresight, min range, Doppler gate (6,)."""
+        return np.array(
+            [*self.position_m, self.height_m, self.boresight_rad, self.min_range_m,
+             self.min_radial_speed_mps],
+        )  # fmt: skip
+
     def field_table(self) -> FloatArray:
         """Fields of view for compiled code: (F, 2) maximum range [m], half angle [rad]."""
         return np.array([[f.max_range_m, f.half_angle_rad] for f in self.fields])

@@ -137,15 +137,7 @@ def _compiled_spec(
     kind: int, misses: _Misses, scatter_std_m: float, k: int = 0, road: Road | None = None
 ) -> _Compiled:
     radar = misses.radar
-    radar_arr = np.array(
-        [
-            *radar.position_m,
-            radar.height_m,
-            radar.boresight_rad,
-            radar.min_range_m,
-            radar.min_radial_speed_mps,
-        ]
-    )
+    radar_arr = radar.kernel_row()
     sensor = (*radar.noise_table(), radar.field_table(), *curve_tables((misses.detection,)))
     if road is None:
         return _Compiled(kind, k, radar_arr, *sensor, np.zeros((5, 2)), 0.0, scatter_std_m)

@@ -30,7 +30,8 @@ class LifecycleRules:
 
     Confirm after ``confirm_hits`` hits in the last ``confirm_window`` scans; drop a tentative
     track after ``tentative_misses`` misses in a row; delete a confirmed track not seen for
-    ``max_coast_s`` (``max_coast_stopped_s`` while stopped) [s].
+    ``max_coast_s`` (``max_coast_stopped_s`` while stopped, ``max_coast_hidden_s`` while
+    possibly hidden behind another object) [s].
     """
 
     confirm_hits: int = 3
@@ -38,6 +39,7 @@ class LifecycleRules:
     tentative_misses: int = 2
     max_coast_s: float = 1.5
     max_coast_stopped_s: float = 600.0
+    max_coast_hidden_s: float = 10.0
 
     def __post_init__(self) -> None:
         if not 1 <= self.confirm_hits <= self.confirm_window <= 62:
@@ -80,14 +82,17 @@ class TrackBook:
         self.confirmed[now] = True
         return now
 
-    def expired(self, time_s: float, stopped: np.ndarray) -> np.ndarray:
+    def expired(self, time_s: float, stopped: np.ndarray, hidden: np.ndarray) -> np.ndarray:
         """Return the rows to delete at ``time_s``.
 
-        Failed tentative tracks, and confirmed ones coasting too long (``stopped`` rows by the
-        stopped limit).
+        Failed tentative tracks, and confirmed ones coasting too long (``stopped`` and
+        ``hidden`` rows by their own limits).
         """
-        limit = np.where(stopped, self.rules.max_coast_stopped_s, self.rules.max_coast_s)
-        dead_tentative = ~self.confirmed & (self.misses >= self.rules.tentative_misses)
+        r = self.rules
+        limit = np.where(
+            stopped, r.max_coast_stopped_s, np.where(hidden, r.max_coast_hidden_s, r.max_coast_s)
+        )
+        dead_tentative = ~self.confirmed & (self.misses >= r.tentative_misses)
         dead_confirmed = self.confirmed & (time_s - self.last_hit_s > limit)
         return np.flatnonzero(dead_tentative | dead_confirmed)
 

@@ -1,0 +1,389 @@
+"""Compiled (numba) per-scan steps of :class:`adaptrack.crossing.scene_tracker.SceneTracker`.
+
+Tracks are rows of arrays: state ``x`` (T, 4) = ``[u, du/dt, d2u/dt2, d]`` in corridor
+coordinates, covariance ``p`` (T, 4, 4), the corridor index of each row and the learnt body
+spread. Corridors are packed as one (5, S) table of centreline samples (``u``, east, north,
+heading, curvature) with ``bounds`` (C, 2) the column range of each. The radar row is
+``x, y, height, boresight, min range, Doppler gate`` as in :mod:`._ekf_kernels`, whose
+measurement model (:func:`._ekf_kernels.measure`, lane half width 0) they evaluate.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from ..filters._kernels import cholesky_into, update_into
+from ._ekf_kernels import ROAD, _centreline, gate_update_into, measure
+from ._radar_kernel import curve_at, in_view
+
+N_STATE = 4
+
+
+@numba.njit(cache=True)
+def predict_tracks(  # type: ignore[no-untyped-def]
+    x, p, t, stopped, direction, time_s, accel_psd, lateral_psd, stopped_psd
+):
+    """Predict every track to ``time_s`` in place (white-jerk CA; stopped rows held).
+
+    A track with a known ``direction`` (+1 / -1 along ``u``) does not reverse: a predicted
+    speed against it becomes a standstill (speed and acceleration 0), as a braking vehicle.
+    """
+    phi = np.zeros((N_STATE, N_STATE))
+    q = np.zeros((N_STATE, N_STATE))
+    tmp = np.zeros((N_STATE, N_STATE))
+    for i in range(x.shape[0]):
+        dt = max(time_s - t[i], 0.0)
+        t[i] = max(t[i], time_s)
+        if dt == 0.0:
+            continue
+        phi[:, :] = 0.0
+        q[:, :] = 0.0
+        for a in range(N_STATE):
+            phi[a, a] = 1.0
+        if stopped[i]:
+            q[0, 0] = q[3, 3] = stopped_psd * dt
+        else:
+            phi[0, 1] = phi[1, 2] = dt
+            phi[0, 2] = 0.5 * dt * dt
+            q[0, 0] = accel_psd * dt**5 / 20.0
+            q[0, 1] = q[1, 0] = accel_psd * dt**4 / 8.0
+            q[0, 2] = q[2, 0] = accel_psd * dt**3 / 6.0
+            q[1, 1] = accel_psd * dt**3 / 3.0
+            q[1, 2] = q[2, 1] = accel_psd * dt**2 / 2.0
+            q[2, 2] = accel_psd * dt
+            q[3, 3] = lateral_psd * dt
+        xi = x[i].copy()
+        for a in range(N_STATE):
+            acc = 0.0
+            for b in range(N_STATE):
+                acc += phi[a, b] * xi[b]
+            x[i, a] = acc
+        for a in range(N_STATE):
+            for b in range(N_STATE):
+                acc = 0.0
+                for c in range(N_STATE):
+                    acc += phi[a, c] * p[i, c, b]
+                tmp[a, b] = acc
+        for a in range(N_STATE):
+            for b in range(a, N_STATE):
+                acc = 0.0
+                for c in range(N_STATE):
+                    acc += tmp[a, c] * phi[b, c]
+                p[i, a, b] = acc + q[a, b]
+                p[i, b, a] = p[i, a, b]
+        if direction[i] != 0 and x[i, 1] * direction[i] < 0.0:
+            x[i, 1] = x[i, 2] = 0.0
+
+
+@numba.njit(cache=True, inline="always")
+def _model(  # type: ignore[no-untyped-def]
+    i, x, spread, corridor, roads, bounds, radar, noise_tab, noise_cnt, across_std,
+    zp, h, rm, jp, jv,
+):  # fmt: skip
+    """Predicted detection, Jacobian and noise of track ``i`` (body spread along and across)."""
+    road = roads[:, bounds[corridor[i], 0] : bounds[corridor[i], 1]]
+    measure(ROAD, x[i], 3, radar, noise_tab, noise_cnt, road, 0.0, spread[i], zp, h, rm, jp, jv)
+    th = _centreline(road, x[i, 0])[2]
+    rx, ry = -math.cos(th), math.sin(th)
+    b0 = jp[0, 0] * rx + jp[0, 1] * ry
+    b1 = jp[1, 0] * rx + jp[1, 1] * ry
+    b2 = jp[2, 0] * rx + jp[2, 1] * ry
+    bb = (b0, b1, b2)
+    s2 = across_std * across_std
+    for a in range(3):
+        for c in range(3):
+            rm[a, c] += s2 * bb[a] * bb[c]
+    return road
+
+
+@numba.njit(cache=True)
+def gate_scan(  # type: ignore[no-untyped-def]
+    x, p, spread, starting, direction, corridor, roads, bounds, radar, noise_tab, noise_cnt,
+    fields, across_std, start_speed_max, z, d2,
+):  # fmt: skip
+    """Fill ``d2`` (T, D) with each detection's squared Mahalanobis distance to each track.
+
+    A stopped vehicle may be starting (``starting`` rows): its held zero speed is replaced by
+    the speed in ``[0, start_speed_max]`` along its ``direction`` that best explains the
+    detection's radial speed (a road user passing by in the other direction does not fit).
+    Rows of tracks whose predicted detection lies outside
+    the radar's view are ``inf``; returns whether each track is in view (T,).
+    """
+    n_t, n_d = x.shape[0], z.shape[0]
+    seen = np.zeros(n_t, dtype=np.bool_)
+    zp = np.zeros(3)
+    h = np.zeros((3, N_STATE))
+    rm = np.zeros((3, 3))
+    jp = np.zeros((3, 2))
+    jv = np.zeros((3, 2))
+    s = np.zeros((3, 3))
+    lo = np.zeros((3, 3))
+    w = np.zeros(3)
+    for i in range(n_t):
+        _model(
+            i, x, spread, corridor, roads, bounds, radar, noise_tab, noise_cnt, across_std,
+            zp, h, rm, jp, jv,
+        )  # fmt: skip
+        off = abs((zp[1] - radar[3] + math.pi) % (2.0 * math.pi) - math.pi)
+        seen[i] = in_view(zp[0], off, fields, radar[4])
+        if not seen[i] or n_d == 0:
+            d2[i, :] = np.inf
+            continue
+        for a in range(3):
+            for b in range(3):
+                acc = rm[a, b]
+                for c in range(N_STATE):
+                    for e in range(N_STATE):
+                        acc += h[a, c] * p[i, c, e] * h[b, e]
+                s[a, b] = acc
+        if not cholesky_into(s, lo):
+            d2[i, :] = np.inf
+            continue
+        for j in range(n_d):
+            w[0] = z[j, 0] - zp[0]
+            w[1] = (z[j, 1] - zp[1] + math.pi) % (2.0 * math.pi) - math.pi
+            w[2] = z[j, 2] - zp[2]
+            if starting[i] and h[2, 1] != 0.0:
+                v = min(max(direction[i] * w[2] / h[2, 1], 0.0), start_speed_max)
+                for a in range(3):
+                    w[a] -= h[a, 1] * direction[i] * v
+            acc = 0.0
+            for a in range(3):
+                v = w[a]
+                for c in range(a):
+                    v -= lo[a, c] * w[c]
+                w[a] = v / lo[a, a]
+                acc += w[a] * w[a]
+            d2[i, j] = acc
+    return seen
+
+
+@numba.njit(cache=True)
+def owners(d2, gate, primary_track, primary_det):  # type: ignore[no-untyped-def]
+    """Owner track of every detection (-1: none) and the update order.
+
+    ``primary_track``/``primary_det`` is the one-to-one assignment; every further gated
+    detection joins the track it is closest to (a body's other reflections). The order
+    processes each track's detections by increasing distance.
+    """
+    n_t, n_d = d2.shape
+    owner = np.full(n_d, -1, dtype=np.int64)
+    for k in range(primary_det.size):
+        owner[primary_det[k]] = primary_track[k]
+    for j in range(n_d):
+        if owner[j] >= 0:
+            continue
+        best, arg = np.inf, -1
+        for i in range(n_t):
+            if d2[i, j] <= gate and d2[i, j] < best:
+                best, arg = d2[i, j], i
+        owner[j] = arg
+    dist = np.full(n_d, np.inf)
+    for j in range(n_d):
+        if owner[j] >= 0:
+            dist[j] = d2[owner[j], j]
+    order = np.argsort(dist, kind="mergesort")
+    count = 0
+    for j in range(n_d):
+        if owner[j] >= 0:
+            count += 1
+    return owner, order[:count]
+
+
+@numba.njit(cache=True)
+def unambiguous_assignment(d2, gate):  # type: ignore[no-untyped-def]
+    """Return the one-to-one assignment if no detection lies in two tracks' gates.
+
+    ``(True, tracks, detections)``, or ``(False, empty, empty)`` when there is a conflict.
+
+    Without shared detections each track's nearest gated detection is the globally cheapest
+    assignment (what ``gnn_assign`` would return); otherwise the caller solves it.
+    """
+    n_t, n_d = d2.shape
+    for j in range(n_d):
+        k = 0
+        for i in range(n_t):
+            if d2[i, j] <= gate:
+                k += 1
+        if k > 1:
+            return False, np.zeros(0, np.int64), np.zeros(0, np.int64)
+    tracks = np.zeros(n_t, np.int64)
+    dets = np.zeros(n_t, np.int64)
+    m = 0
+    for i in range(n_t):
+        best, arg = np.inf, -1
+        for j in range(n_d):
+            if d2[i, j] <= gate and d2[i, j] < best:
+                best, arg = d2[i, j], j
+        if arg >= 0:
+            tracks[m], dets[m] = i, arg
+            m += 1
+    return True, tracks[:m], dets[:m]
+
+
+@numba.njit(cache=True)
+def update_tracks(  # type: ignore[no-untyped-def]
+    order, owner, z, x, p, spread, stopped, moved, direction, slow_since, corridor, roads,
+    bounds, radar, noise_tab, noise_cnt, across_std, moving_radial, start_speed_var,
+    learning_rate, spread_lo, spread_hi,
+):  # fmt: skip
+    """Update each owning track with its detections in ``order`` (sequential EKF updates).
+
+    A detection whose radial speed exceeds ``moving_radial`` along the vehicle's ``direction``
+    ends the stop of a vehicle that had moved (speed and acceleration freed with variance
+    ``start_speed_var``; static objects stay); the body spread follows a moving average (rate
+    ``learning_rate``) of the squared along-track residual less the sensor's and the track's
+    share, within ``[spread_lo, spread_hi]``.
+    """
+    zp = np.zeros(3)
+    h = np.zeros((3, N_STATE))
+    rm = np.zeros((3, 3))
+    jp = np.zeros((3, 2))
+    jv = np.zeros((3, 2))
+    nu = np.zeros(3)
+    hp = np.zeros((3, N_STATE))
+    s = np.zeros((3, 3))
+    lo = np.zeros((3, 3))
+    kt = np.zeros((3, N_STATE))
+    w = np.zeros(3)
+    ikh = np.zeros((N_STATE, N_STATE))
+    tmp = np.zeros((N_STATE, N_STATE))
+    xn = np.zeros(N_STATE)
+    pn = np.zeros((N_STATE, N_STATE))
+    for j in order:
+        i = owner[j]
+        # body spread: along-track residual of the detection's ground point
+        road = roads[:, bounds[corridor[i], 0] : bounds[corridor[i], 1]]
+        cx, cy, th, _ = _centreline(road, x[i, 0])
+        tx, ty = math.sin(th), math.cos(th)
+        px, py = cx - x[i, 3] * ty, cy + x[i, 3] * tx
+        rho = math.sqrt(max(z[j, 0] ** 2 - radar[2] ** 2, 0.01))
+        gx = radar[0] + rho * math.sin(z[j, 1])
+        gy = radar[1] + rho * math.cos(z[j, 1])
+        along = (gx - px) * tx + (gy - py) * ty
+        off = abs((z[j, 1] - radar[3] + math.pi) % (2.0 * math.pi) - math.pi)
+        sr = curve_at(noise_tab, noise_cnt, 0, z[j, 0])
+        sa = curve_at(noise_tab, noise_cnt, 1, off)
+        sample = max(along * along - sr * sr - (rho * sa) ** 2 - p[i, 0, 0], 0.0)
+        var = (1.0 - learning_rate) * spread[i] ** 2 + learning_rate * sample
+        spread[i] = math.sqrt(min(max(var, spread_lo**2), spread_hi**2))
+        _model(
+            i, x, spread, corridor, roads, bounds, radar, noise_tab, noise_cnt, across_std,
+            zp, h, rm, jp, jv,
+        )  # fmt: skip
+        nu[0] = z[j, 0] - zp[0]
+        nu[1] = (z[j, 1] - zp[1] + math.pi) % (2.0 * math.pi) - math.pi
+        nu[2] = z[j, 2] - zp[2]
+        if (
+            stopped[i] and moved[i] and abs(z[j, 2]) > moving_radial
+            and direction[i] * z[j, 2] * h[2, 1] > 0.0
+        ):  # fmt: skip
+            stopped[i] = False
+            slow_since[i] = np.nan
+            p[i, 1, 1] += start_speed_var
+            p[i, 2, 2] += start_speed_var
+        ok, _, _ = update_into(x[i], p[i], nu, h, rm, True, xn, pn, hp, s, lo, kt, w, ikh, tmp)
+        if ok:
+            x[i] = xn
+            p[i] = pn
+            if stopped[i]:
+                x[i, 1] = x[i, 2] = 0.0
+
+
+@numba.njit(cache=True)
+def occluded_rows(rows, x, spread, corridor, roads, bounds, radar):  # type: ignore[no-untyped-def]
+    """Which tracks of ``rows`` a nearer track may hide from the radar (bool per row).
+
+    A track hides what lies behind it within its apparent half width: twice its body spread
+    along its heading and 1 m across, seen from the radar.
+    """
+    n = x.shape[0]
+    rng = np.zeros(n)
+    az = np.zeros(n)
+    half = np.zeros(n)
+    for i in range(n):
+        road = roads[:, bounds[corridor[i], 0] : bounds[corridor[i], 1]]
+        cx, cy, th, _ = _centreline(road, x[i, 0])
+        tx, ty = math.sin(th), math.cos(th)
+        ex = cx - x[i, 3] * ty - radar[0]
+        ey = cy + x[i, 3] * tx - radar[1]
+        rng[i] = math.sqrt(ex * ex + ey * ey)
+        az[i] = math.atan2(ex, ey)
+        ux, uy = ex / max(rng[i], 1e-9), ey / max(rng[i], 1e-9)
+        across = abs(ux * ty - uy * tx) * 2.0 * spread[i] + abs(ux * tx + uy * ty) * 1.0
+        half[i] = math.atan2(across, max(rng[i], 1e-9))
+    out = np.zeros(rows.size, dtype=np.bool_)
+    for k in range(rows.size):
+        i = rows[k]
+        for j in range(n):
+            if j == i or rng[j] >= rng[i]:
+                continue
+            d = (az[i] - az[j] + math.pi) % (2.0 * math.pi) - math.pi
+            if abs(d) < half[j]:
+                out[k] = True
+                break
+    return out
+
+
+@numba.njit(cache=True)
+def miss_updates(  # type: ignore[no-untyped-def]
+    rows, x, p, spread, miss_run, corridor, roads, bounds, radar, noise_tab, noise_cnt, fields,
+    pd_tab, pd_cnt,
+):  # fmt: skip
+    """Apply what a scan without a detection tells to the tracks in ``rows``.
+
+    :func:`._ekf_kernels.gate_update_into`: a slow vehicle is hidden by the Doppler gate, so a
+    run of misses that the gate explains better than ``1 - P_D`` measures a radial speed of
+    0 within the gate; ``miss_run`` (T,) is each track's probability of its current run of
+    misses for a moving target.
+    """
+    zp = np.zeros(3)
+    h = np.zeros((3, N_STATE))
+    rm = np.zeros((3, 3))
+    jp = np.zeros((3, 2))
+    jv = np.zeros((3, 2))
+    hp = np.zeros((1, N_STATE))
+    s = np.zeros((1, 1))
+    lo = np.zeros((1, 1))
+    kt = np.zeros((1, N_STATE))
+    w = np.zeros(1)
+    ikh = np.zeros((N_STATE, N_STATE))
+    tmp = np.zeros((N_STATE, N_STATE))
+    nu1 = np.zeros(1)
+    r1 = np.zeros((1, 1))
+    xn = np.zeros(N_STATE)
+    pn = np.zeros((N_STATE, N_STATE))
+    for i in rows:
+        road = roads[:, bounds[corridor[i], 0] : bounds[corridor[i], 1]]
+        _, miss_run[i] = gate_update_into(
+            ROAD, x[i], p[i], 3, radar, noise_tab, noise_cnt, fields, pd_tab, pd_cnt, road,
+            0.0, spread[i], miss_run[i], xn, pn, zp, h, rm, jp, jv, hp, s, lo, kt, w, ikh, tmp,
+            nu1, r1,
+        )  # fmt: skip
+        x[i] = xn
+        p[i] = pn
+
+
+@numba.njit(cache=True)
+def planar_rows(  # type: ignore[no-untyped-def]
+    x, p, corridor, roads, bounds, crossing_u, pos, vel, pos_std, to_cross
+):
+    """Planar position, velocity, position sigma (trace) and distance to the crossing."""
+    for i in range(x.shape[0]):
+        road = roads[:, bounds[corridor[i], 0] : bounds[corridor[i], 1]]
+        cx, cy, th, kappa = _centreline(road, x[i, 0])
+        tx, ty = math.sin(th), math.cos(th)
+        rx, ry = -ty, tx
+        d = x[i, 3]
+        lever = 1.0 + kappa * d
+        pos[i, 0], pos[i, 1] = cx + d * rx, cy + d * ry
+        vel[i, 0], vel[i, 1] = x[i, 1] * lever * tx, x[i, 1] * lever * ty
+        # position covariance J P J^T with J = [lever t, right] on (u, d)
+        a0, a1 = lever * tx, lever * ty
+        puu, pud, pdd = p[i, 0, 0], p[i, 0, 3], p[i, 3, 3]
+        trace = (a0 * a0 + a1 * a1) * puu + 2.0 * (a0 * rx + a1 * ry) * pud + pdd
+        pos_std[i] = math.sqrt(max(trace, 0.0))
+        to_cross[i] = abs(crossing_u[corridor[i]] - x[i, 0])
