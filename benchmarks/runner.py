@@ -63,6 +63,7 @@ def run(quick: bool, only: list[str] | None = None, workers: int = 2) -> list[Re
         "rts": lambda: workloads.rts(quick, repeats),
         "stream": lambda: workloads.streaming(quick, repeats),
         "lx_mc": lambda: workloads.crossing(quick, workers),
+        "scene": lambda: workloads.scene(quick),
         "memory": lambda: workloads.memory(quick),
     }
     results: list[Result] = []

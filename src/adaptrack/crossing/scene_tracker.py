@@ -405,7 +405,7 @@ class SceneTracker:
         """Planar position, velocity, position sigma and distance to the crossing of rows."""
         tr = self.tracks
         n = rows.size
-        out = {
+        out: dict[str, FloatArray] = {
             "position": np.zeros((n, 2)),
             "velocity": np.zeros((n, 2)),
             "position_std": np.zeros(n),
@@ -464,7 +464,9 @@ def _frame(columns: list[dict[str, np.ndarray]]) -> pd.DataFrame:
     """One table of track rows from the columns of several scans (status named)."""
     names = np.array([s.name.lower() for s in TrackStatus] + ["static"])
     keys = list(columns[0]) if columns else list(ROW_COLUMNS)
-    table = {k: np.concatenate([c[k] for c in columns]) if columns else [] for k in keys}
+    table: dict[str, np.ndarray] = {
+        k: np.concatenate([c[k] for c in columns]) if columns else np.zeros(0) for k in keys
+    }
     table["status"] = names[np.asarray(table["status"], dtype=int)]
     return pd.DataFrame(table)
 
