@@ -1,0 +1,56 @@
+"""Compiled scene-tracker steps against independent computations."""
+
+import math
+
+import numpy as np
+
+from adaptrack.crossing._scene_kernels import occluded_rows, owners, unambiguous_assignment
+from adaptrack.tracking import gnn_assign
+
+GATE = 16.27
+
+
+def test_unambiguous_assignment_is_the_gnn_optimum_when_no_detection_is_shared():
+    rng = np.random.default_rng(0)
+    checked = 0
+    for _ in range(300):
+        n_t, n_d = rng.integers(1, 6), rng.integers(1, 8)
+        d2 = np.where(rng.uniform(size=(n_t, n_d)) < 0.3, rng.uniform(0, GATE, (n_t, n_d)), np.inf)
+        simple, ti, di = unambiguous_assignment(d2, GATE)
+        shared = (np.isfinite(d2).sum(axis=0) > 1).any()
+        assert simple == (not shared)
+        if simple:
+            ref_t, ref_d = gnn_assign(d2, GATE)
+            assert sorted(zip(ti.tolist(), di.tolist())) == sorted(
+                zip(ref_t.tolist(), ref_d.tolist())
+            )
+            checked += 1
+    assert checked > 50
+
+
+def test_owners_give_every_gated_detection_to_its_nearest_track_in_distance_order():
+    d2 = np.array([[1.0, 4.0, np.inf, 20.0], [np.inf, 3.0, 2.0, 30.0]])
+    owner, order = owners(d2, GATE, np.array([0, 1]), np.array([0, 2]))
+    assert owner.tolist() == [0, 1, 1, -1]  # detection 1 joins track 1 (3 < 4); 3 is outside
+    assert order.tolist() == [0, 2, 1]  # by increasing distance to the owner
+
+
+def _road(length=100.0):
+    s = np.arange(0.0, length + 0.05, 0.05)
+    return np.stack([s, np.zeros_like(s), s, np.zeros_like(s), np.zeros_like(s)])  # due north
+
+
+def test_a_nearer_body_on_the_line_of_sight_hides_what_is_behind_it():
+    roads = _road()
+    bounds = np.array([[0, roads.shape[1]]])
+    radar = np.array([0.0, 0.0, 6.0, 0.0, 1.0, 0.1])  # at the road's start, looking north
+    # tracks at 20 m (a 12 m truck: spread 3 m), 40 m behind it, and 40 m at 5 m aside
+    x = np.zeros((3, 4))
+    x[:, 0] = [20.0, 40.0, 40.0]
+    x[2, 3] = -5.0
+    spread = np.array([3.0, 1.0, 1.0])
+    out = occluded_rows(np.array([0, 1, 2]), x, spread, np.zeros(3, np.int64), roads, bounds, radar)
+    # apparent half width of the truck seen end on: 1 m across -> atan(1 / 20) = 2.9 deg;
+    # the aside track is atan(5 / 40) = 7.1 deg off the line of sight
+    assert math.degrees(math.atan2(5.0, 40.0)) > math.degrees(math.atan2(1.0, 20.0))
+    assert out.tolist() == [False, True, False]
