@@ -21,7 +21,7 @@ from datetime import datetime, timedelta
 import numpy as np
 import pandas as pd
 
-from adaptrack.crossing.corridor import site_corridors
+from adaptrack.crossing.corridor import nearest_corridor, site_corridors
 from adaptrack.crossing.scene_tracker import SceneTrackerConfig, iter_scans
 from adaptrack.crossing.site import Site
 from adaptrack.tracking import cluster_points, gate_threshold
@@ -175,11 +175,6 @@ def _polar_initiator(prior):  # type: ignore[no-untyped-def]
 
 def _from_crossing(site: Site, xy: np.ndarray) -> np.ndarray:
     """Distance along the nearest corridor to the crossing centre [m]."""
-    best = np.full(len(xy), np.inf)
-    dist = np.zeros(len(xy))
-    for cor in site_corridors(site.roads, site.zone_m + site.run_in_m):
-        u, d = cor.path.project(xy)
-        nearer = np.abs(d) < best
-        best = np.where(nearer, np.abs(d), best)
-        dist = np.where(nearer, np.abs(cor.crossing_u - u), dist)
-    return dist
+    corridors = site_corridors(site.roads, site.zone_m + site.run_in_m)
+    index, u, _ = nearest_corridor(corridors, xy)
+    return np.abs(np.array([c.crossing_u for c in corridors])[index] - u)

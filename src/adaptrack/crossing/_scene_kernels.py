@@ -22,6 +22,25 @@ from ._radar_kernel import curve_at, in_view
 N_STATE = 4
 
 
+@numba.njit(cache=True, inline="always")
+def _model_scratch():  # type: ignore[no-untyped-def]
+    """Buffers of the measurement model: detection, Jacobian, noise, polar Jacobians."""
+    return (
+        np.zeros(3), np.zeros((3, N_STATE)), np.zeros((3, 3)), np.zeros((3, 2)),
+        np.zeros((3, 2)),
+    )  # fmt: skip
+
+
+@numba.njit(cache=True, inline="always")
+def _update_scratch(m):  # type: ignore[no-untyped-def]
+    """Buffers of an ``m``-dimensional EKF update (``update_into``) and its posterior."""
+    return (
+        np.zeros((m, N_STATE)), np.zeros((m, m)), np.zeros((m, m)), np.zeros((m, N_STATE)),
+        np.zeros(m), np.zeros((N_STATE, N_STATE)), np.zeros((N_STATE, N_STATE)),
+        np.zeros(N_STATE), np.zeros((N_STATE, N_STATE)),
+    )  # fmt: skip
+
+
 @numba.njit(cache=True)
 def predict_tracks(  # type: ignore[no-untyped-def]
     x, p, t, stopped, direction, time_s, accel_psd, lateral_psd, stopped_psd
@@ -114,11 +133,7 @@ def gate_scan(  # type: ignore[no-untyped-def]
     """
     n_t, n_d = x.shape[0], z.shape[0]
     seen = np.zeros(n_t, dtype=np.bool_)
-    zp = np.zeros(3)
-    h = np.zeros((3, N_STATE))
-    rm = np.zeros((3, 3))
-    jp = np.zeros((3, 2))
-    jv = np.zeros((3, 2))
+    zp, h, rm, jp, jv = _model_scratch()
     s = np.zeros((3, 3))
     lo = np.zeros((3, 3))
     w = np.zeros(3)
@@ -238,21 +253,9 @@ def update_tracks(  # type: ignore[no-untyped-def]
     ``learning_rate``) of the squared along-track residual less the sensor's and the track's
     share, within ``[spread_lo, spread_hi]``.
     """
-    zp = np.zeros(3)
-    h = np.zeros((3, N_STATE))
-    rm = np.zeros((3, 3))
-    jp = np.zeros((3, 2))
-    jv = np.zeros((3, 2))
+    zp, h, rm, jp, jv = _model_scratch()
     nu = np.zeros(3)
-    hp = np.zeros((3, N_STATE))
-    s = np.zeros((3, 3))
-    lo = np.zeros((3, 3))
-    kt = np.zeros((3, N_STATE))
-    w = np.zeros(3)
-    ikh = np.zeros((N_STATE, N_STATE))
-    tmp = np.zeros((N_STATE, N_STATE))
-    xn = np.zeros(N_STATE)
-    pn = np.zeros((N_STATE, N_STATE))
+    hp, s, lo, kt, w, ikh, tmp, xn, pn = _update_scratch(3)
     for j in order:
         i = owner[j]
         # body spread: along-track residual of the detection's ground point
@@ -340,22 +343,10 @@ def miss_updates(  # type: ignore[no-untyped-def]
     0 within the gate; ``miss_run`` (T,) is each track's probability of its current run of
     misses for a moving target.
     """
-    zp = np.zeros(3)
-    h = np.zeros((3, N_STATE))
-    rm = np.zeros((3, 3))
-    jp = np.zeros((3, 2))
-    jv = np.zeros((3, 2))
-    hp = np.zeros((1, N_STATE))
-    s = np.zeros((1, 1))
-    lo = np.zeros((1, 1))
-    kt = np.zeros((1, N_STATE))
-    w = np.zeros(1)
-    ikh = np.zeros((N_STATE, N_STATE))
-    tmp = np.zeros((N_STATE, N_STATE))
+    zp, h, rm, jp, jv = _model_scratch()
+    hp, s, lo, kt, w, ikh, tmp, xn, pn = _update_scratch(1)
     nu1 = np.zeros(1)
     r1 = np.zeros((1, 1))
-    xn = np.zeros(N_STATE)
-    pn = np.zeros((N_STATE, N_STATE))
     for i in rows:
         road = roads[:, bounds[corridor[i], 0] : bounds[corridor[i], 1]]
         _, miss_run[i] = gate_update_into(

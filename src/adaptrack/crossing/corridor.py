@@ -31,13 +31,6 @@ class Corridor:
     path: Road
     crossing_u: float
 
-    def signed_distance_to_crossing(self, u: np.ndarray, direction: np.ndarray) -> np.ndarray:
-        """Distance still to drive to the crossing centre (negative once past it) [m].
-
-        ``direction`` is +1 for traffic moving to increasing ``u``, -1 otherwise.
-        """
-        return direction * (self.crossing_u - u)
-
 
 def build_corridor(first: Road, second: Road, length_m: float) -> Corridor:
     """Join ``first`` (driven inbound) and ``second`` (outbound), ``length_m`` of each."""
@@ -59,6 +52,19 @@ def build_corridor(first: Road, second: Road, length_m: float) -> Corridor:
         f"{first.name}-{second.name}", float(heading[0]), 0.0, (), u, xy, heading, curvature
     )
     return Corridor(first.name, second.name, path, float(u[s_in.size]))
+
+
+def nearest_corridor(corridors: list[Corridor], xy: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Index of the corridor nearest to each point (N, 2), and ``u``, ``d`` on it."""
+    best = np.full(len(xy), np.inf)
+    index = np.zeros(len(xy), dtype=int)
+    u0, d0 = np.zeros(len(xy)), np.zeros(len(xy))
+    for c, cor in enumerate(corridors):
+        u, d = cor.path.project(xy)
+        nearer = np.abs(d) < best
+        best = np.where(nearer, np.abs(d), best)
+        index[nearer], u0[nearer], d0[nearer] = c, u[nearer], d[nearer]
+    return index, u0, d0
 
 
 def site_corridors(roads: dict[str, Road], length_m: float) -> list[Corridor]:
@@ -89,4 +95,4 @@ def site_corridors(roads: dict[str, Road], length_m: float) -> list[Corridor]:
     return out
 
 
-__all__ = ["Corridor", "build_corridor", "site_corridors"]
+__all__ = ["Corridor", "build_corridor", "nearest_corridor", "site_corridors"]

@@ -12,13 +12,16 @@ One scan (all detections of one radar at one time) is processed as: predict ever
 the scan time; gate the detections of the tracks in that radar's view (chi-square on the
 three-dimensional innovation); assign one detection per track by global nearest neighbour
 (:func:`adaptrack.tracking.gnn_assign`); give every further gated detection to the track it
-is closest to (the body's other reflections); update; record hits and misses (M-of-N
-confirmation, deletion by coasting time: :mod:`adaptrack.tracking.lifecycle`); open tentative
-tracks from the detections left over, clustered within ``cluster_radius_m``.
+is closest to (the body's other reflections); update; apply what a miss tells (the Doppler
+gate hides slow vehicles; a miss behind a nearer track tells nothing); record hits and misses
+(M-of-N confirmation, deletion by coasting time: :mod:`adaptrack.tracking.lifecycle`); open
+tentative tracks from the detections left over, clustered within ``cluster_radius_m``. The
+per-track arithmetic runs compiled (:mod:`._scene_kernels`).
 
 Stopped mode: a confirmed track slower than ``stop_speed_mps`` for ``stop_confirm_s`` is held
 at zero velocity with a small position noise (its covariance stays bounded through closures of
-minutes, seen or not), and leaves the mode when a detection's radial speed shows motion. A
+minutes, seen or not), and leaves the mode when a detection's radial speed shows motion along
+its direction of travel (a stopped track's gate allows a start-up speed in that direction). A
 track that has never moved faster than ``moved_speed_mps`` and further than
 ``moved_distance_m`` from where it opened is a *static* object (a barrier
 arm, a pole, rails: zero Doppler since the start); a stopped vehicle had moved. Hazard event:
@@ -58,7 +61,7 @@ from ._scene_kernels import (
     unambiguous_assignment,
     update_tracks,
 )
-from .corridor import Corridor, site_corridors
+from .corridor import Corridor, nearest_corridor, site_corridors
 from .sensor import RadarSpec, curve_tables
 from .site import Site
 from .tracking import _initial_point
@@ -116,13 +119,25 @@ class _Tracks:
     occluded: np.ndarray  # hidden behind a nearer track at its last scan without a detection
 
     @classmethod
-    def empty(cls) -> _Tracks:
+    def opened(
+        cls, corridor: np.ndarray, x: FloatArray, p: FloatArray, time_s: float, spread_m: float
+    ) -> _Tracks:
+        """Return new tracks on ``corridor`` rows with states ``x``, ``p`` at ``time_s``."""
+        n = corridor.size
+        no = np.zeros(n, bool)
         return cls(
-            np.zeros(0, int), np.zeros((0, N_STATE)), np.zeros((0, N_STATE, N_STATE)),
-            np.zeros(0), np.zeros(0, bool), np.full(0, np.nan), np.zeros(0, bool),
-            np.zeros(0, bool), np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0),
-            np.zeros(0, bool),
+            corridor, x, p, np.full(n, time_s), stopped=no, slow_since=np.full(n, np.nan),
+            moved=no.copy(), event_raised=no.copy(), born_u=x[:, 0].copy(),
+            spread=np.full(n, spread_m), direction=np.zeros(n), miss_run=np.ones(n),
+            occluded=no.copy(),
         )  # fmt: skip
+
+    @classmethod
+    def empty(cls) -> _Tracks:
+        """Return no track."""
+        return cls.opened(
+            np.zeros(0, int), np.zeros((0, N_STATE)), np.zeros((0, N_STATE, N_STATE)), 0.0, 0.0
+        )
 
     def append(self, other: _Tracks) -> None:
         for name in self.__dataclass_fields__:
@@ -151,8 +166,9 @@ class ScanLog:
 class SceneTracker:
     """Incremental many-object tracker of one site (module docstring).
 
-    ``step(radar, time_s, detections)`` processes one scan and returns the rows of the tracks
-    at that time; ``events`` and ``log`` collect hazard events and detection outcomes.
+    ``step(radar, time_s, detections)`` processes one scan; ``rows(time_s)`` (or the arrays
+    of ``columns``) gives the confirmed tracks after it; ``events`` and ``log`` collect hazard
+    events and detection outcomes.
     """
 
     def __init__(self, site: Site, config: SceneTrackerConfig | None = None) -> None:
@@ -189,20 +205,7 @@ class SceneTracker:
         centre /= np.bincount(labels)[:, None]
         first = np.array([np.flatnonzero(labels == g)[0] for g in range(n_new)])
         vr = z[first, 2]
-        best_c = np.zeros(n_new, int)
-        best = np.full(n_new, np.inf)
-        u0 = np.zeros(n_new)
-        d0 = np.zeros(n_new)
-        for c, cor in enumerate(self.corridors):
-            u, d = cor.path.project(centre)
-            far = np.abs(d)
-            better = far < best
-            best_c[better], best[better], u0[better], d0[better] = (
-                c,
-                far[better],
-                u[better],
-                d[better],
-            )
+        best_c, u0, d0 = nearest_corridor(self.corridors, centre)
         x = np.zeros((n_new, N_STATE))
         p = np.zeros((n_new, N_STATE, N_STATE))
         for c, cor in enumerate(self.corridors):
@@ -226,14 +229,7 @@ class SceneTracker:
         p[:, 2, 2] = 9.0
         p[:, 3, 3] = 1.0
         self.book.add(n_new, time_s)
-        self.tracks.append(
-            _Tracks(
-                best_c, x, p, np.full(n_new, time_s), np.zeros(n_new, bool),
-                np.full(n_new, np.nan), np.zeros(n_new, bool), np.zeros(n_new, bool), u0,
-                np.full(n_new, self.config.body_along_std_m), np.zeros(n_new), np.ones(n_new),
-                np.zeros(n_new, bool),
-            )
-        )  # fmt: skip
+        self.tracks.append(_Tracks.opened(best_c, x, p, time_s, self.config.body_along_std_m))
         return n_new
 
     # -- one scan ---------------------------------------------------------------------------
