@@ -117,6 +117,10 @@ def test_bad_scene_settings_are_named():
         from adaptrack.crossing.scene import Flow
 
         scene_spec(SITE, flows=(Flow("A", "Z", 100.0),))
+    with pytest.raises(ValueError, match="no traffic flow"):
+        scene_spec(SITE, flows=(Flow("A", "B", 0.0),))
+    with pytest.raises(ValueError, match="no traffic flow"):
+        scene_spec(load_site("lx_curve_near"))  # one road: no corridor to drive through
     from adaptrack.crossing.site import site_from_mapping
 
     data = dict(SITE.source)

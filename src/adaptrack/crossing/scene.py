@@ -145,6 +145,12 @@ def scene_spec(site: Site, **changes: Any) -> SceneSpec:
 
 
 def _check_spec(spec: SceneSpec, site: Site) -> None:
+    if not any(f.vehicles_per_h > 0 for f in spec.flows):
+        raise ValueError(
+            f"scene of site {site.name!r}: no traffic flow; flows run between two roads that "
+            "continue each other through the crossing (set [scene] flows; a site with one "
+            "road, or roads that all turn at the crossing, has none)"
+        )
     for f in spec.flows:
         for road in (f.entry, f.exit):
             if road not in site.roads:
