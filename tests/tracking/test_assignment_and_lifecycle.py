@@ -105,3 +105,13 @@ def test_m_of_n_confirmation_coasting_and_stable_ids():
     assert book.expired(5.1, none, first).tolist() == [1]  # 4.9 s hidden: kept
     assert book.expired(5.3, none, first).tolist() == [0, 1]  # 5.1 s hidden: deleted
     assert book.expired(5.3, first, none).tolist() == [1]
+
+
+def test_confirmation_waits_until_the_track_is_ready():
+    book = TrackBook(LifecycleRules(confirm_hits=2, confirm_window=3))
+    book.add(2, 0.0)
+    rows = np.arange(2)
+    hits = np.array([True, True])
+    assert book.record(rows, hits, 0.1, np.array([True, False])).tolist() == [0]
+    assert book.record(rows, hits, 0.2, np.array([True, False])).tolist() == []
+    assert book.record(rows, hits, 0.3, np.array([True, True])).tolist() == [1]

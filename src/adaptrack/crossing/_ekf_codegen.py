@@ -17,7 +17,7 @@ from typing import Any
 from .._typing import FloatArray
 from ..filters._codegen import GENERATED_MAX_STATES, kf_step_lines, load, module_source
 
-_VERSION = 5
+_VERSION = 6
 _M = 3  # range, azimuth, radial speed
 
 
@@ -90,7 +90,7 @@ def _ekf_source(n: int, pattern: tuple[Pattern, Pattern]) -> str:
         "    continue",
         f"phi, qd, tmp = np.empty(({n}, {n})), np.empty(({n}, {n})), np.empty(({n}, {n}))",
         f"xa, pa, uo = np.empty({n}), np.empty(({n}, {n})), np.empty({n})",
-        f"zp, h, rm = np.empty(3), np.zeros((3, {n})), np.empty((3, 3))",
+        f"zp, h, rm, nu = np.empty(3), np.zeros((3, {n})), np.empty((3, 3)), np.empty(3)",
         "jp, jv = np.empty((3, 2)), np.empty((3, 2))",
         f"gate_x, gate_p = np.empty({n}), np.empty(({n}, {n}))",
         f"gate_ikh, gate_hp, gate_kt = np.empty(({n}, {n})), np.empty((1, {n})), "
@@ -115,11 +115,12 @@ def _ekf_source(n: int, pattern: tuple[Pattern, Pattern]) -> str:
         *(f"    xa[{j}] = xp{j}" for j in range(n)),
         "    measure(kind, xa, k, radar, noise_tab, noise_cnt, road, half_width, scatter_std, "
         "zp, h, rm, jp, jv)",
+        *(f"    pa[{a}, {b}] = pa[{b}, {a}] = pp{a}_{b}" for a in range(n) for b in range(a, n)),
+        "    doppler = doppler_usable(h, pa, rm, radar)",
+        "    innovation_into(z[i, t], zp, radar, doppler, nu)",
+        "    nu0, nu1, nu2 = nu[0], nu[1], nu[2]",
         *(f"    H{a}_{j} = h[{a}, {j}]" for a in range(_M) for j in range(n)),
         *(f"    R{a}_{b} = rm[{a}, {b}]" for a in range(_M) for b in range(a, _M)),
-        "    nu0 = z[i, t, 0] - zp[0]",
-        "    nu1 = (z[i, t, 1] - zp[1] + np.pi) % (2 * np.pi) - np.pi",
-        "    nu2 = z[i, t, 2] - zp[2]",
         "    miss_run = 1.0",
     ]
     for line in update:
@@ -155,7 +156,8 @@ def _ekf_source(n: int, pattern: tuple[Pattern, Pattern]) -> str:
         body,
         parallel=True,
         imports=(
-            "from adaptrack.crossing._ekf_kernels import ROAD, measure",
+            "from adaptrack.crossing._ekf_kernels import ROAD, doppler_usable, innovation_into",
+            "from adaptrack.crossing._ekf_kernels import measure",
             "from adaptrack.crossing._ekf_kernels import gate_update_into as gate_update",
             "from adaptrack.crossing._ekf_kernels import _planar_into as planar",
             "from adaptrack.filters._kernels import series_transition_into as transition",

@@ -22,6 +22,7 @@ from ._radar_kernel import curve_at, in_view
 ROAD, FREE = 0, 1  # measurement models
 GATE_MIN_COS = 0.3  # the gate informs on speed only where |d v_r / d speed| is at least this
 MISS_RUN_FLOOR = 1e-4  # a run of misses has at least this probability (occlusion, interference)
+UNFOLD_SIGMAS = 5.0  # a folded radial speed is used once its prediction sigma is below fold / this
 
 
 @numba.njit(cache=True, inline="always")
@@ -61,6 +62,61 @@ def _noise_into(radar, noise_tab, noise_cnt, zp, jp, ux, uy, scatter_std, rm):  
     for a in range(3):
         for c in range(3):
             rm[a, c] += s2 * bb[a] * bb[c]
+
+
+@numba.njit(cache=True, inline="always")
+def doppler_usable(h, p, rm, radar):  # type: ignore[no-untyped-def]
+    """Whether a detection's radial speed can be used at this prediction (else leave it out).
+
+    A radar folding radial speeds at ``+-radar[6]`` (> 0) reports them modulo twice that; the
+    prediction (Jacobian ``h`` (3, n), covariance ``p``, noise ``rm``) tells the alias while
+    the radial speed's innovation sigma is below ``radar[6] / UNFOLD_SIGMAS``. Otherwise the
+    radial-speed row of ``h`` and the noise's cross terms with it are zeroed: an update with a
+    zero radial-speed residual then uses range and azimuth alone.
+    """
+    fold = radar[6]
+    if fold <= 0.0:
+        return True
+    n = h.shape[1]
+    var = rm[2, 2]
+    for a in range(n):
+        for b in range(n):
+            var += h[2, a] * p[a, b] * h[2, b]
+    if var * UNFOLD_SIGMAS * UNFOLD_SIGMAS < fold * fold:
+        return True
+    for a in range(n):
+        h[2, a] = 0.0
+    rm[0, 2] = rm[2, 0] = rm[1, 2] = rm[2, 1] = 0.0
+    return False
+
+
+@numba.njit(cache=True, inline="always")
+def innovation_into(z, zp, radar, doppler, nu):  # type: ignore[no-untyped-def]
+    """Innovation ``nu`` (3,) of detection ``z`` at the prediction ``zp``.
+
+    Azimuth wrapped to ``[-pi, pi)``; the radial speed unfolded to the alias nearest the
+    prediction where the radar folds (``radar[6] > 0``), or 0 where it is left out
+    (``doppler`` false: :func:`doppler_usable`).
+    """
+    fold = radar[6]
+    nu[0] = z[0] - zp[0]
+    nu[1] = (z[1] - zp[1] + math.pi) % (2.0 * math.pi) - math.pi
+    if not doppler:
+        nu[2] = 0.0
+    elif fold > 0.0:
+        nu[2] = (z[2] - zp[2] + fold) % (2.0 * fold) - fold
+    else:
+        nu[2] = z[2] - zp[2]
+
+
+@numba.njit(cache=True, inline="always")
+def folded_log_likelihood_gap(rm, radar):  # type: ignore[no-untyped-def]
+    """Return the log-likelihood correction of a left-out folded radial speed.
+
+    The update counted ``N(0; 0, rm[2, 2])`` for it; a folded radial speed the prediction
+    cannot place is uniform over the folding interval ``2 radar[6]``.
+    """
+    return 0.5 * math.log(2.0 * math.pi * rm[2, 2]) - math.log(2.0 * radar[6])
 
 
 @numba.njit(cache=True, inline="always")
@@ -165,7 +221,8 @@ def gate_update_into(  # type: ignore[no-untyped-def]
     """Posterior ``x``, ``p`` of the prior ``xp``, ``pp`` after a scan without a detection.
 
     Inside the field of view, where the radial speed measures the speed
-    (``|d v_r / d speed| >= GATE_MIN_COS``) and the Doppler gate ``g = radar[5]`` explains the
+    (``|d v_r / d speed| >= GATE_MIN_COS``; with a folding radar, once the prediction tells
+    the alias: :func:`doppler_usable`) and the Doppler gate ``g = radar[5]`` explains the
     run of misses better than ``1 - P_D`` (``miss_run``: its probability for a moving target
     so far; :mod:`adaptrack.crossing.tracking`), the pseudo-measurement ``v_r = 0`` with
     variance ``g^2 / 3`` is applied. Returns ``log P(no detection)`` (0 outside the view) and the
@@ -197,7 +254,9 @@ def gate_update_into(  # type: ignore[no-untyped-def]
     p_gate = _normal_cdf((gate - mu) / sd) - _normal_cdf((-gate - mu) / sd)
     p_det = curve_at(pd_tab, pd_cnt, 0, zp[0])
     p_miss = p_gate + (1.0 - p_det) * (1.0 - p_gate)
-    if along < GATE_MIN_COS:  # line of sight across the road: the miss says little on speed
+    fold = radar[6]
+    ambiguous = fold > 0.0 and (var + rm[2, 2]) * UNFOLD_SIGMAS * UNFOLD_SIGMAS >= fold * fold
+    if along < GATE_MIN_COS or ambiguous:  # the miss says little on the speed
         return math.log(p_miss) if p_miss > 0.0 else -math.inf, miss_run
     miss_run = max(miss_run * (1.0 - p_det), MISS_RUN_FLOOR)
     if gate > 0.0 and p_gate > miss_run * (1.0 - p_gate):
@@ -282,9 +341,8 @@ def ekf_kernel(  # type: ignore[no-untyped-def]
                     kind, xp, k, radar, noise_tab, noise_cnt, road, half_width, scatter_std,
                     zp, h, rm, jp, jv,
                 )  # fmt: skip
-                for a in range(3):
-                    resid[a] = z[i, t, a] - zp[a]
-                resid[1] = (resid[1] + np.pi) % (2 * np.pi) - np.pi
+                doppler = doppler_usable(h, pp, rm, radar)
+                innovation_into(z[i, t], zp, radar, doppler, resid)
                 ok, _, _ = update_into(xp, pp, resid, h, rm, True, x, p, hp, s, lo, kt, w, ikh, tmp)
                 if not ok:
                     status[i] = t + 1

@@ -20,7 +20,15 @@ from numba import prange
 
 from ..filters._imm_kernel import combine_into, mix_into, mode_update_into
 from ..filters._kernels import _LOG_2PI, predict_into, series_transition_into, update_into
-from ._ekf_kernels import ROAD, _planar_into, gate_update_into, measure
+from ._ekf_kernels import (
+    ROAD,
+    _planar_into,
+    doppler_usable,
+    folded_log_likelihood_gap,
+    gate_update_into,
+    innovation_into,
+    measure,
+)
 
 
 @numba.njit(cache=True, parallel=True)
@@ -140,9 +148,8 @@ def road_imm_kernel(  # type: ignore[no-untyped-def]
                         ROAD, xp[:nj], k, radar, noise_tab, noise_cnt, road, half_width,
                         scatter_std, zp, h[:, :nj], rm, jp, jv,
                     )  # fmt: skip
-                    for a in range(3):
-                        resid[a] = z[i, t, a] - zp[a]
-                    resid[1] = (resid[1] + np.pi) % (2 * np.pi) - np.pi
+                    doppler = doppler_usable(h[:, :nj], pp[:nj, :nj], rm, radar)
+                    innovation_into(z[i, t], zp, radar, doppler, resid)
                     ok, nis, logdet = update_into(
                         xp[:nj], pp[:nj, :nj], resid, h[:, :nj], rm, True, xs[j, :nj],
                         ps[j, :nj, :nj], hp[:, :nj], s, lo, kt[:, :nj], wv, ikh[:nj, :nj],
@@ -152,6 +159,8 @@ def road_imm_kernel(  # type: ignore[no-untyped-def]
                         status[i] = t + 1
                         break
                     ll[j] = -0.5 * (logdet + nis + 3.0 * _LOG_2PI)
+                    if not doppler:
+                        ll[j] += folded_log_likelihood_gap(rm, radar)
                     miss_run[j] = 1.0
                 else:  # a missed detection: its probability weighs the modes
                     ll[j], miss_run[j] = gate_update_into(

@@ -4,8 +4,9 @@ Tracks are rows of arrays: state ``x`` (T, 4) = ``[u, du/dt, d2u/dt2, d]`` in co
 coordinates, covariance ``p`` (T, 4, 4), the corridor index of each row and the learnt body
 spread. Corridors are packed as one (5, S) table of centreline samples (``u``, east, north,
 heading, curvature) with ``bounds`` (C, 2) the column range of each. The radar row is
-``x, y, height, boresight, min range, Doppler gate`` as in :mod:`._ekf_kernels`, whose
-measurement model (:func:`._ekf_kernels.measure`, lane half width 0) they evaluate.
+``x, y, height, boresight, min range, Doppler gate, folding speed`` as in
+:mod:`._ekf_kernels`, whose measurement model (:func:`._ekf_kernels.measure`, lane half
+width 0) and radial-speed unfolding they evaluate.
 """
 
 from __future__ import annotations
@@ -16,7 +17,14 @@ import numba
 import numpy as np
 
 from ..filters._kernels import cholesky_into, update_into
-from ._ekf_kernels import ROAD, _centreline, gate_update_into, measure
+from ._ekf_kernels import (
+    ROAD,
+    _centreline,
+    doppler_usable,
+    gate_update_into,
+    innovation_into,
+    measure,
+)
 from ._radar_kernel import curve_at, in_view
 
 N_STATE = 4
@@ -147,6 +155,7 @@ def gate_scan(  # type: ignore[no-untyped-def]
         if not seen[i] or n_d == 0:
             d2[i, :] = np.inf
             continue
+        doppler = doppler_usable(h, p[i], rm, radar)
         for a in range(3):
             for b in range(3):
                 acc = rm[a, b]
@@ -158,9 +167,7 @@ def gate_scan(  # type: ignore[no-untyped-def]
             d2[i, :] = np.inf
             continue
         for j in range(n_d):
-            w[0] = z[j, 0] - zp[0]
-            w[1] = (z[j, 1] - zp[1] + math.pi) % (2.0 * math.pi) - math.pi
-            w[2] = z[j, 2] - zp[2]
+            innovation_into(z[j], zp, radar, doppler, w)
             if starting[i] and h[2, 1] != 0.0:
                 v = min(max(direction[i] * w[2] / h[2, 1], 0.0), start_speed_max)
                 for a in range(3):
@@ -243,9 +250,18 @@ def unambiguous_assignment(d2, gate):  # type: ignore[no-untyped-def]
 def update_tracks(  # type: ignore[no-untyped-def]
     order, owner, z, x, p, spread, stopped, moved, direction, slow_since, corridor, roads,
     bounds, radar, noise_tab, noise_cnt, across_std, moving_radial, start_speed_var,
-    learning_rate, spread_lo, spread_hi,
+    learning_rate, spread_lo, spread_hi, lane_half_width, bias, bias_stats, bias_forget,
+    bias_gate,
 ):  # fmt: skip
     """Update each owning track with its detections in ``order`` (sequential EKF updates).
+
+    Azimuth alignment: before its update, a detection of a moving track (``moved``, not
+    stopped, ``direction`` known) is compared with the centre of the lane it drives in
+    (``lane_half_width`` per corridor to the right of travel): its raw azimuth (``z`` plus the
+    ``bias`` already taken off) less the lane centre's, weighted by the squared ground range,
+    goes into ``bias_stats`` = [sum of weights, sum of weighted angles, count] with forgetting
+    factor ``bias_forget`` per detection, unless the detection lies further than ``bias_gate`` [m]
+    across from the lane centre corrected by the current bias (another lane, a footway).
 
     A detection whose radial speed exceeds ``moving_radial`` along the vehicle's ``direction``
     ends the stop of a vehicle that had moved (speed and acceleration freed with variance
@@ -267,6 +283,14 @@ def update_tracks(  # type: ignore[no-untyped-def]
         gx = radar[0] + rho * math.sin(z[j, 1])
         gy = radar[1] + rho * math.cos(z[j, 1])
         along = (gx - px) * tx + (gy - py) * ty
+        if moved[i] and not stopped[i] and direction[i] != 0.0:
+            lane = -direction[i] * lane_half_width[corridor[i]]
+            lx, ly = cx - lane * ty - radar[0], cy + lane * tx - radar[1]
+            err = (z[j, 1] + bias - math.atan2(lx, ly) + math.pi) % (2.0 * math.pi) - math.pi
+            if abs((err - bias) * rho) <= bias_gate:
+                bias_stats[0] = bias_forget * bias_stats[0] + rho * rho
+                bias_stats[1] = bias_forget * bias_stats[1] + rho * rho * err
+                bias_stats[2] = bias_forget * bias_stats[2] + 1.0
         off = abs((z[j, 1] - radar[3] + math.pi) % (2.0 * math.pi) - math.pi)
         sr = curve_at(noise_tab, noise_cnt, 0, z[j, 0])
         sa = curve_at(noise_tab, noise_cnt, 1, off)
@@ -277,9 +301,7 @@ def update_tracks(  # type: ignore[no-untyped-def]
             i, x, spread, corridor, roads, bounds, radar, noise_tab, noise_cnt, across_std,
             zp, h, rm, jp, jv,
         )  # fmt: skip
-        nu[0] = z[j, 0] - zp[0]
-        nu[1] = (z[j, 1] - zp[1] + math.pi) % (2.0 * math.pi) - math.pi
-        nu[2] = z[j, 2] - zp[2]
+        innovation_into(z[j], zp, radar, doppler_usable(h, p[i], rm, radar), nu)
         if (
             stopped[i] and moved[i] and abs(z[j, 2]) > moving_radial
             and direction[i] * z[j, 2] * h[2, 1] > 0.0

@@ -60,7 +60,11 @@ def detections_frame(
 
 @dataclass(frozen=True, eq=False)
 class ObjectDetections:
-    """Detections of one radar object: times (T,), measurements (T, 3) and its radar."""
+    """Detections of one radar object: times (T,), measurements (T, 3) and its radar.
+
+    ``times`` are when the detections were made: the timestamps less the radar's declared
+    latency.
+    """
 
     object_id: int
     radar: str
@@ -159,11 +163,9 @@ def read_detections(path: str | Path, site: Site) -> list[ObjectDetections]:
                     f"{p}: row {sel[0] + 1}, column 'vehicle_class': unknown "
                     f"class {cls!r}; expected one of {sorted(site.classes)}"
                 )
-        out.append(
-            ObjectDetections(
-                int(obj), str(names[sel[0]]), ts, np.stack([r[sel], az[sel], vr[sel]], -1), cls
-            )
-        )
+        made = site.radar(str(names[sel[0]])).measured_at(ts)
+        z = np.stack([r[sel], az[sel], vr[sel]], -1)
+        out.append(ObjectDetections(int(obj), str(names[sel[0]]), made, z, cls))
     return out
 
 

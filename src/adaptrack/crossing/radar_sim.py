@@ -123,7 +123,7 @@ def simulate_case(
         detected,
     )
     return CrossingRuns(
-        t_true + jitter,
+        t_true + jitter + radar.latency_s,
         np.broadcast_to(t_true, (n_runs, n)).copy(),
         meas,
         detected,

@@ -545,7 +545,7 @@ def detect(
         frame = pd.DataFrame(
             {
                 "radar": radar.name,
-                "time_s": all_t + jitter[np.minimum(scan_idx, scans.size - 1)],
+                "time_s": all_t + jitter[np.minimum(scan_idx, scans.size - 1)] + radar.latency_s,
                 "range_m": np.maximum(z_r, radar.min_range_m),
                 "azimuth_rad": (z_a + np.pi) % (2 * np.pi) - np.pi,
                 "radial_speed_mps": z_v,

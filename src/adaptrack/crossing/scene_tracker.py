@@ -14,7 +14,8 @@ three-dimensional innovation); assign one detection per track by global nearest 
 (:func:`adaptrack.tracking.gnn_assign`); give every further gated detection to the track it
 is closest to (the body's other reflections); update; apply what a miss tells (the Doppler
 gate hides slow vehicles; a miss behind a nearer track tells nothing); record hits and misses
-(M-of-N confirmation, deletion by coasting time: :mod:`adaptrack.tracking.lifecycle`); open
+(M-of-N confirmation once the speed sigma is below ``confirm_speed_std_mps``, deletion by
+coasting time: :mod:`adaptrack.tracking.lifecycle`); open
 tentative tracks from the detections left over, clustered within ``cluster_radius_m``. The
 per-track arithmetic runs compiled (:mod:`._scene_kernels`).
 
@@ -22,11 +23,18 @@ Stopped mode: a confirmed track slower than ``stop_speed_mps`` for ``stop_confir
 at zero velocity with a small position noise (its covariance stays bounded through closures of
 minutes, seen or not), and leaves the mode when a detection's radial speed shows motion along
 its direction of travel (a stopped track's gate allows a start-up speed in that direction). A
-track that has never moved faster than ``moved_speed_mps`` and further than
+track that has never moved faster than ``moved_speed_mps`` (with a speed sigma below
+``moving_speed_std_mps``: not the first guess of a folding radar's track) and further than
 ``moved_distance_m`` from where it opened is a *static* object (a barrier
 arm, a pole, rails: zero Doppler since the start); a stopped vehicle had moved. Hazard event:
 a moved track stopped within ``barrier_m`` of the crossing raises
 "object stopped between the barriers".
+
+Sensor effects: each radar's declared latency is taken off its timestamps; radial speeds of a
+folding radar are unfolded (:func:`._ekf_kernels.doppler_usable`); a constant azimuth bias of
+each radar is estimated from the detections of moving tracks against the centre of the lane
+they drive in (vehicles keep to their lane on average; ``bias_*`` settings) and taken off the
+radar's next scans (``azimuth_bias_rad``).
 
 No detection is dropped silently: every one is recorded as used by a track, opening a track,
 or rejected with a reason (``ScanLog``).
@@ -93,10 +101,16 @@ class SceneTrackerConfig:
     moving_radial_mps: float = 0.3  # a detection this fast (beyond 3 sigma) ends a stop
     start_speed_max_mps: float = 3.0  # a stopped vehicle's gate allows starting up to this
     moved_speed_mps: float = 0.8
+    moving_speed_std_mps: float = 1.0  # ... known this well (not a first guess) ...
     moved_distance_m: float = 3.0  # ... and has moved this far from where it was opened
     initial_speed_std_mps: float = 15.0
+    confirm_speed_std_mps: float = 3.0  # a track is confirmed once its speed is known this well
     merge_lateral_m: float = 1.2  # two tracks this close across (and along: the spread) ...
     merge_speed_mps: float = 1.0  # ... and this similar in speed are one body
+    estimate_azimuth_bias: bool = True  # align each radar's azimuths to the lanes
+    bias_memory: float = 20000.0  # detections the alignment remembers (forgetting 1 - 1/this)
+    bias_min_samples: float = 300.0  # ... before it is applied
+    bias_gate_m: float = 2.0  # detections further across from the lane centre are left out
     rules: LifecycleRules = field(default_factory=LifecycleRules)
 
 
@@ -192,6 +206,10 @@ class SceneTracker:
         self._length_m = np.array([c.path.length_m for c in self.corridors])
         self._gate = gate_threshold(3, self.config.gate_probability)
         self._last_time: dict[str, float] = {}
+        self._half_lane = np.array([0.5 * site.roads[c.first].lane_width_m for c in self.corridors])
+        self.azimuth_bias_rad = {r.name: 0.0 for r in site.radars}  # estimated, taken off
+        self._bias_stats = {r.name: np.zeros(3) for r in site.radars}
+        self.last_scan_s = -np.inf  # when the last scan was made (timestamp less latency) [s]
 
     # -- track opening ----------------------------------------------------------------------
     def _open(self, z: FloatArray, radar: RadarSpec, time_s: float) -> int:
@@ -217,7 +235,7 @@ class SceneTracker:
             cos = np.einsum("ti,ti->t", rel, tangent) / np.hypot(
                 np.linalg.norm(rel, axis=-1), radar.height_m
             )
-            ok = np.abs(cos) > 0.3
+            ok = (np.abs(cos) > 0.3) & (radar.max_unambiguous_speed_mps is None)
             x[sel, 1] = np.where(ok, vr[sel] / np.where(ok, cos, 1.0), 0.0)
             sv = radar.noise_std(z[first[sel], 0], z[first[sel], 1])[2]
             p[sel, 1, 1] = np.where(
@@ -234,7 +252,11 @@ class SceneTracker:
 
     # -- one scan ---------------------------------------------------------------------------
     def step(self, radar_name: str, time_s: float, z: FloatArray) -> None:
-        """Process the detections ``z`` (n, 3) of one radar scan (see :meth:`rows`)."""
+        """Process the detections ``z`` (n, 3) of one radar scan stamped ``time_s``.
+
+        The scan was made at ``time_s`` less the radar's declared latency
+        (:attr:`last_scan_s` after the call; see :meth:`rows`).
+        """
         radar = self._radars.get(radar_name)
         if radar is None:
             raise ValueError(f"unknown radar {radar_name!r}; the site has {sorted(self._radars)}")
@@ -248,7 +270,13 @@ class SceneTracker:
         if not np.all(np.isfinite(z)):
             raise ValueError(f"radar {radar_name!r} at {time_s} s: a detection is not finite")
         self._last_time[radar_name] = time_s
+        time_s = float(radar.measured_at(time_s))
+        self.last_scan_s = time_s
         cfg = self.config
+        bias = self.azimuth_bias_rad[radar_name]
+        if bias:
+            z = z.copy()
+            z[:, 1] = (z[:, 1] - bias + np.pi) % (2 * np.pi) - np.pi
         tr = self.tracks
         predict_tracks(
             tr.x, tr.p, tr.time_s, tr.stopped, tr.direction, time_s,
@@ -261,6 +289,7 @@ class SceneTracker:
         used = np.zeros(z.shape[0], dtype=bool)
         if n_t:
             radar_row, noise_tab, noise_cnt, fields, pd_tab, pd_cnt = self._radar_tables[radar_name]
+            stats = self._bias_stats[radar_name]
             d2 = np.empty((n_t, z.shape[0]))
             seen = gate_scan(
                 tr.x, tr.p, tr.spread, tr.stopped & tr.moved, tr.direction, tr.corridor,
@@ -279,8 +308,11 @@ class SceneTracker:
                     tr.direction, tr.slow_since, tr.corridor, self._roads, self._bounds,
                     radar_row, noise_tab, noise_cnt, cfg.body_across_std_m,
                     cfg.moving_radial_mps, cfg.start_speed_max_mps**2,
-                    cfg.spread_learning_rate, lo, hi,
+                    cfg.spread_learning_rate, lo, hi, self._half_lane, bias, stats,
+                    1.0 - 1.0 / cfg.bias_memory, cfg.bias_gate_m,
                 )  # fmt: skip
+                if cfg.estimate_azimuth_bias and stats[2] >= cfg.bias_min_samples:
+                    self.azimuth_bias_rad[radar_name] = float(stats[1] / stats[0])
                 used[order] = True
                 hit[owner[order]] = True
             tr.miss_run[hit] = 1.0
@@ -297,7 +329,8 @@ class SceneTracker:
                 pd_cnt,
             )  # fmt: skip
             rows = np.flatnonzero(seen & ~tr.occluded)
-            self.book.record(rows, hit[rows], time_s)
+            ready = tr.p[rows, 1, 1] < cfg.confirm_speed_std_mps**2
+            self.book.record(rows, hit[rows], time_s, ready)
         self.log.updated += int(used.sum())
         left = z[~used]
         if left.shape[0]:
@@ -353,7 +386,10 @@ class SceneTracker:
         speed = np.abs(tr.x[:, 1])
         sd = np.sqrt(tr.p[:, 1, 1])
         travelled = np.abs(tr.x[:, 0] - tr.born_u)
-        moving = conf & (speed > cfg.moved_speed_mps) & (sd < 0.5 * speed)
+        moving = (
+            conf & (speed > cfg.moved_speed_mps) & (sd < 0.5 * speed)
+            & (sd < cfg.moving_speed_std_mps)
+        )  # fmt: skip
         tr.direction[moving] = np.sign(tr.x[moving, 1])
         tr.moved |= moving & (travelled > cfg.moved_distance_m)
         slow = conf & ~tr.stopped & (speed < cfg.stop_speed_mps) & (sd < 0.5)
@@ -477,15 +513,20 @@ def _corridor_tables(corridors: list[Corridor]) -> tuple[FloatArray, np.ndarray]
     return table, np.stack([stops - [p.s.size for p in paths], stops], -1).astype(np.int64)
 
 
-def iter_scans(detections: pd.DataFrame) -> Iterator[tuple[str, float, FloatArray]]:
+def iter_scans(
+    detections: pd.DataFrame, latency_s: dict[str, float] | None = None
+) -> Iterator[tuple[str, float, FloatArray]]:
     """Yield the scans of a detection table in time order (radar name breaks ties).
 
-    A scan is the detections (range_m, azimuth_rad, radial_speed_mps) of one radar at one time.
+    A scan is the detections (range_m, azimuth_rad, radial_speed_mps) of one radar at one
+    timestamp. With radars' ``latency_s``, the order is that of the times the scans were made
+    (timestamps less latency); the timestamps are yielded.
     """
     t = detections["time_s"].to_numpy()
     radar = detections["radar"].astype(str).to_numpy()
     z = detections[["range_m", "azimuth_rad", "radial_speed_mps"]].to_numpy(dtype=float)
-    order = np.lexsort((radar, t))
+    made = t - pd.Series(radar).map(latency_s or {}).fillna(0.0).to_numpy()
+    order = np.lexsort((radar, made))
     t, radar, z = t[order], radar[order], z[order]
     cut = np.flatnonzero((np.diff(t) != 0) | (radar[1:] != radar[:-1])) + 1
     starts = np.concatenate([[0], cut, [t.size]]) if t.size else np.zeros(1, int)
@@ -505,11 +546,11 @@ def track_scene(
     every scan, the hazard events and the detection log.
     """
     tracker = SceneTracker(site, config)
-    scans = list(iter_scans(detections))
+    scans = list(iter_scans(detections, {r.name: r.latency_s for r in site.radars}))
     out = []
     for i, (radar, t, z) in enumerate(scans):
         tracker.step(radar, t, z)
-        out.append(tracker.columns(t))
+        out.append(tracker.columns(tracker.last_scan_s))
         if on_scan is not None:
             on_scan(i + 1, len(scans))
     return _frame(out), pd.DataFrame(tracker.events, columns=EVENT_COLUMNS), tracker.log

@@ -115,6 +115,9 @@ class RadarSpec:
         Calibration error added to every azimuth (unknown to the trackers) [rad].
     time_jitter_s : float
         Timestamp error, uniform in ``+-time_jitter_s`` [s].
+    latency_s : float
+        Declared timestamp delay: a detection made at ``t`` is stamped ``t + latency_s`` [s]
+        (the simulator stamps it so; the trackers take it off: :meth:`measured_at`).
     max_unambiguous_speed_mps : float or None
         Radial speeds fold at this value (None: no folding) [m/s].
     """
@@ -136,6 +139,11 @@ class RadarSpec:
     azimuth_bias_rad: float = 0.0
     time_jitter_s: float = 0.0
     max_unambiguous_speed_mps: float | None = None
+    latency_s: float = 0.0
+
+    def measured_at(self, stamped_s: ArrayLike) -> FloatArray:
+        """Return when detections were made [s]: their timestamps less the latency."""
+        return np.asarray(stamped_s, dtype=float) - self.latency_s
 
     @property
     def max_range_m(self) -> float:
@@ -191,10 +199,13 @@ class RadarSpec:
         return curve_tables((self.range_std_m, self.azimuth_std_rad, self.radial_speed_std_mps))
 
     def kernel_row(self) -> FloatArray:
-        """Geometry for compiled code: x, y, height, boresight, min range, Doppler gate (6,)."""
+        """Geometry for compiled code (7,).
+
+        x, y, height, boresight, min range, Doppler gate, folding speed (0: none).
+        """
         return np.array(
             [*self.position_m, self.height_m, self.boresight_rad, self.min_range_m,
-             self.min_radial_speed_mps],
+             self.min_radial_speed_mps, self.max_unambiguous_speed_mps or 0.0],
         )  # fmt: skip
 
     def field_table(self) -> FloatArray:

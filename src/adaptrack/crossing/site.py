@@ -215,6 +215,7 @@ def _radar(r: RadarFile) -> RadarSpec:
         azimuth_bias_rad=math.radians(r.azimuth_bias_deg),
         time_jitter_s=r.time_jitter_s,
         max_unambiguous_speed_mps=r.max_unambiguous_speed_mps,
+        latency_s=r.latency_s,
     )
 
 

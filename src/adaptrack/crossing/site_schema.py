@@ -168,6 +168,7 @@ class RadarFile(_Strict):
     azimuth_bias_deg: float = 0.0
     time_jitter_s: NonNegative = 0.0
     max_unambiguous_speed_mps: Positive | None = None
+    latency_s: Annotated[float, Field(ge=-1.0, le=1.0)] = 0.0
 
     @model_validator(mode="after")
     def _one_field_form(self) -> RadarFile:

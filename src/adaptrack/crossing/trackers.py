@@ -44,7 +44,8 @@ class PlanarTracker:
         kw: dict[str, object] = {"scatter_std_m": veh.scatter_std_m}
         if self.reads_misses:
             kw["detection_probability"] = radar.detection_curve(veh.name)
-        return self.track(runs.times, runs.measurements, runs.detected, radar, **kw)
+        times = radar.measured_at(runs.times)
+        return self.track(times, runs.measurements, runs.detected, radar, **kw)
 
 
 @dataclass(frozen=True)
@@ -74,7 +75,7 @@ class _RoadTrackerBase:
         """Track the runs of one class x case."""
         radar = site.radar_for(case.road)
         return self.estimate(
-            runs.times,
+            radar.measured_at(runs.times),
             runs.measurements,
             runs.detected,
             radar,

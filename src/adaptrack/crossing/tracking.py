@@ -50,11 +50,12 @@ from ..models.continuous import ConstantVelocity, MotionModel
 from ..models.discretize import discretize
 from ..models.series_table import SeriesTable, model_series_table
 from ..types import GaussianState, _trusted
-from ._ekf_kernels import FREE, GATE_MIN_COS, MISS_RUN_FLOOR, ROAD
+from ._ekf_kernels import FREE, GATE_MIN_COS, MISS_RUN_FLOOR, ROAD, UNFOLD_SIGMAS
 from .road import Road
 from .sensor import Curve, RadarSpec, curve_tables
 
 CROSS_LOS_SPEED_STD_MPS = 10.0
+VAGUE_SPEED_STD_MPS = 30.0  # a first detection that cannot tell the speed (road across, folding)
 COMPILED_MIN_RUN_STEPS = 0  # "auto" always runs the compiled EKFs (the kernel wins at any size)
 
 
@@ -169,6 +170,26 @@ def _misses(radar: RadarSpec, detection_probability: Curve | None, kind: int) ->
     return _Misses(radar, curve, kind)
 
 
+def _doppler_usable(
+    h: FloatArray, cov: FloatArray, r: FloatArray, radar: RadarSpec
+) -> tuple[BoolArray, FloatArray, FloatArray]:
+    """Where a folded radial speed can be used (N,), and ``h``, ``r`` with it left out elsewhere.
+
+    NumPy form of :func:`._ekf_kernels.doppler_usable`: the prediction tells the alias while
+    the radial speed's innovation sigma is below ``fold / UNFOLD_SIGMAS``; elsewhere its
+    Jacobian row and its noise cross terms are zeroed (returned copies).
+    """
+    fold = radar.max_unambiguous_speed_mps or 0.0
+    if fold <= 0:
+        return np.ones(h.shape[0], dtype=bool), h, r
+    var = np.einsum("na,nab,nb->n", h[:, 2], cov, h[:, 2]) + r[:, 2, 2]
+    usable = var * UNFOLD_SIGMAS**2 < fold**2
+    h, r = h.copy(), r.copy()
+    h[~usable, 2] = 0.0
+    r[~usable, 2, :2] = r[~usable, :2, 2] = 0.0
+    return usable, h, r
+
+
 def _detection_step(
     prior: GaussianState,
     zpred: FloatArray,
@@ -192,15 +213,25 @@ def _detection_step(
     z_eff = np.where(upd[:, None], np.nan_to_num(z), zpred)
     resid = z_eff - zpred
     resid[:, 1] = _wrap(resid[:, 1])
-    lin = resid + np.einsum("nij,nj->ni", h, prior.mean)
-    post, info = _update(prior, lin, h, r, np.broadcast_to(upd[:, None], (n_runs, 3)), "joseph")
+    doppler, h_upd, r_upd = _doppler_usable(h, prior.cov, r, misses.radar)
+    fold = misses.radar.max_unambiguous_speed_mps or 0.0
+    if fold > 0:
+        resid[:, 2] = np.where(doppler, (resid[:, 2] + fold) % (2 * fold) - fold, 0.0)
+    lin = resid + np.einsum("nij,nj->ni", h_upd, prior.mean)
+    post, info = _update(
+        prior, lin, h_upd, r_upd, np.broadcast_to(upd[:, None], (n_runs, 3)), "joseph"
+    )
     loglik = np.where(upd, info.log_likelihood, 0.0)
+    if fold > 0:  # a left-out folded radial speed is uniform over the folding interval
+        gap = 0.5 * np.log(2 * np.pi * r[:, 2, 2]) - np.log(2 * fold)
+        loglik = np.where(upd & ~doppler, loglik + gap, loglik)
     miss_run = np.where(detected, 1.0, miss_run)
     miss = started & ~detected & misses.radar.in_view(zpred[:, 0], zpred[:, 1])
     if not miss.any():
         return post, loglik, miss_run
     h_vr = h[:, 2, :]
-    informs = misses.speed_sensitivity(prior.mean, h_vr) >= GATE_MIN_COS
+    # a miss tells on the speed where the radial speed measures it, once its alias is known
+    informs = (misses.speed_sensitivity(prior.mean, h_vr) >= GATE_MIN_COS) & doppler
     var = np.einsum("na,nab,nb->n", h_vr, prior.cov, h_vr)
     sd = np.sqrt(np.maximum(var, 1e-24))
     gate = misses.radar.min_radial_speed_mps
@@ -408,9 +439,13 @@ def track_free_2d(
         pos_cov = _polar_cov(jac, sr**2 + scatter_std_m**2, saz**2)
         cov = np.zeros((m, n, n))
         cov[:, :2, :2] = pos_cov
-        cov[:, 2:4, 2:4] = ((svr * zk[:, 0] / rho) ** 2)[:, None, None] * (
-            los[:, :, None] * los[:, None, :]
-        ) + CROSS_LOS_SPEED_STD_MPS**2 * (perp[:, :, None] * perp[:, None, :])
+        if radar.max_unambiguous_speed_mps is None:
+            cov[:, 2:4, 2:4] = ((svr * zk[:, 0] / rho) ** 2)[:, None, None] * (
+                los[:, :, None] * los[:, None, :]
+            ) + CROSS_LOS_SPEED_STD_MPS**2 * (perp[:, :, None] * perp[:, None, :])
+        else:  # a folded radial speed does not tell the speed: the next positions will
+            mean[:, 2:4] = 0.0
+            cov[:, 2:4, 2:4] = VAGUE_SPEED_STD_MPS**2 * np.eye(2)
         for i in range(4, n):
             cov[:, i, i] = 9.0
         return mean, cov
@@ -487,7 +522,8 @@ def _road_initial(
     """Road state ``[model states, d]`` (m, k + 1) and covariance of first detections (m, 3).
 
     Along-road position and lateral offset from the projected detection, speed from the
-    radial speed along the line of sight (vague where the road runs across it).
+    radial speed along the line of sight (vague where the road runs across it, or where the
+    radar folds radial speeds: the first detections' positions then tell the alias).
     """
     k = model.state_dim
     n = k + 1
@@ -497,7 +533,7 @@ def _road_initial(
     rel = road.lane_point(s0, d0) - np.asarray(radar.position_m)
     r = np.sqrt(np.sum(rel**2, -1) + radar.height_m**2)
     along = np.einsum("ni,ni->n", rel, tangent) / r * road.lane_speed_factor(s0, d0)
-    ok = np.abs(along) > 0.3
+    ok = (np.abs(along) > 0.3) & (radar.max_unambiguous_speed_mps is None)
     vs0 = np.where(ok, zk[:, 2] / np.where(ok, along, 1.0), 0.0)
     m = zk.shape[0]
     mean = np.zeros((m, n))
@@ -505,7 +541,8 @@ def _road_initial(
     cov = np.zeros((m, n, n))
     cov[:, 0, 0] = 1.0 + scatter_std_m**2
     svr = radar.noise_std(zk[:, 0], zk[:, 1])[2]
-    cov[:, 1, 1] = np.where(ok, (svr / np.where(ok, np.abs(along), 1.0)) ** 2 + 1.0, 30.0**2)
+    speed_var = (svr / np.where(ok, np.abs(along), 1.0)) ** 2 + 1.0
+    cov[:, 1, 1] = np.where(ok, speed_var, VAGUE_SPEED_STD_MPS**2)
     for i in range(2, k):
         cov[:, i, i] = 9.0 if model.state_names[i].startswith("a") else 25.0
     cov[:, k, k] = lateral_std_m**2

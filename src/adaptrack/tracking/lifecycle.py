@@ -71,14 +71,23 @@ class TrackBook:
         self.born_s = np.concatenate([self.born_s, np.full(n, time_s)])
         return new
 
-    def record(self, rows: np.ndarray, hit: np.ndarray, time_s: float) -> np.ndarray:
-        """Record a scan's hits (bool) of the tracks in ``rows``; return the rows confirmed now."""
+    def record(
+        self, rows: np.ndarray, hit: np.ndarray, time_s: float, ready: np.ndarray | None = None
+    ) -> np.ndarray:
+        """Record a scan's hits (bool) of the tracks in ``rows``; return the rows confirmed now.
+
+        ``ready`` (bool per row, default all): a track is confirmed only once its state is
+        determined well enough (e.g. its speed), whatever its hits.
+        """
         mask = (1 << self.rules.confirm_window) - 1
         self.history[rows] = ((self.history[rows] << 1) | hit.astype(np.int64)) & mask
         self.misses[rows] = np.where(hit, 0, self.misses[rows] + 1)
         self.last_hit_s[rows] = np.where(hit, time_s, self.last_hit_s[rows])
         hits = np.array([int(h).bit_count() for h in self.history[rows]], dtype=np.int64)
-        now = rows[~self.confirmed[rows] & (hits >= self.rules.confirm_hits)]
+        ok = hits >= self.rules.confirm_hits
+        if ready is not None:
+            ok &= ready
+        now = rows[~self.confirmed[rows] & ok]
         self.confirmed[now] = True
         return now
 
