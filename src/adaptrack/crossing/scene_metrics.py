@@ -17,7 +17,7 @@ import numpy as np
 import pandas as pd
 
 from ..analysis.gospa import gospa, identity_counts
-from .scene import STEP_S, SceneTruth
+from .scene import STEP_S, STOPPED_MPS, SceneTruth
 
 
 @dataclass(frozen=True)
@@ -117,24 +117,58 @@ def score_scene(
     )
 
 
-def event_delays(truth: SceneTruth, events: pd.DataFrame, window_s: float = 30.0) -> pd.DataFrame:
-    """Return the delay of the first "stopped between the barriers" event of each stall.
+def hazard_stops(truth: SceneTruth, barrier_m: float, *, confirm_s: float = 0.5) -> pd.DataFrame:
+    """Road users standing still between the barriers: the true "stopped" hazards.
 
-    ``delay_s`` is NaN when no event follows within ``window_s``.
+    A user slower than ``STOPPED_MPS`` within ``barrier_m`` of the crossing for at least
+    ``confirm_s`` (its first such standstill). Returns object_id, stop_time_s (the standstill's
+    first epoch), east_m, north_m.
     """
+    tab = truth.table
+    still = (tab["speed_mps"].to_numpy() < STOPPED_MPS) & (
+        np.abs(tab["to_crossing_m"].to_numpy()) <= barrier_m
+    )
+    rows = []
+    for oid, g in tab[still].groupby("object_id"):
+        t = g["time_s"].to_numpy()
+        runs = np.split(np.arange(t.size), np.flatnonzero(np.diff(t) > 1.5 * STEP_S) + 1)
+        long = [r for r in runs if t[r[-1]] - t[r[0]] >= confirm_s - 1e-9]
+        if long:
+            first = g.iloc[long[0][0]]
+            rows.append((int(oid), float(first.time_s), float(first.east_m), float(first.north_m)))
+    return pd.DataFrame(rows, columns=["object_id", "stop_time_s", "east_m", "north_m"])
+
+
+def event_outcomes(
+    truth: SceneTruth,
+    events: pd.DataFrame,
+    barrier_m: float,
+    *,
+    window_s: float = 30.0,
+    match_m: float = 5.0,
+) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Match "stopped between the barriers" events with the true hazards (:func:`hazard_stops`).
+
+    Each hazard takes the first unmatched event from 2 s before its stop to ``window_s`` after,
+    within ``match_m`` of where it stopped. Returns the hazards with ``delay_s`` (NaN: missed)
+    and the events that match no hazard (false events).
+    """
+    stops = hazard_stops(truth, barrier_m)
     ev = events[events["event"] == "stopped_between_barriers"] if len(events) else events
-    times = np.sort(ev["time_s"].to_numpy()) if len(ev) else np.zeros(0)
-    out = []
-    for _, st in truth.stall_stops.iterrows():
-        after = times[(times >= st.stop_time_s - 2.0) & (times <= st.stop_time_s + window_s)]
-        out.append(
-            (
-                int(st.object_id),
-                float(st.stop_time_s),
-                float(after[0] - st.stop_time_s) if after.size else np.nan,
-            )
-        )
-    return pd.DataFrame(out, columns=["object_id", "stop_time_s", "delay_s"])
+    ev = ev.sort_values("time_s") if len(ev) else ev
+    t = ev["time_s"].to_numpy() if len(ev) else np.zeros(0)
+    xy = ev[["east_m", "north_m"]].to_numpy() if len(ev) else np.zeros((0, 2))
+    used = np.zeros(t.size, dtype=bool)
+    delays = []
+    for st in stops.itertuples():
+        near = np.hypot(xy[:, 0] - st.east_m, xy[:, 1] - st.north_m) <= match_m
+        ok = ~used & near & (t >= st.stop_time_s - 2.0) & (t <= st.stop_time_s + window_s)
+        k = int(np.argmax(ok)) if ok.any() else -1
+        if k >= 0:
+            used[k] = True
+        delays.append(t[k] - st.stop_time_s if k >= 0 else np.nan)
+    false = ev[~used] if len(ev) else ev
+    return stops.assign(delay_s=np.array(delays, dtype=float)), false
 
 
-__all__ = ["SceneScore", "event_delays", "score_scene"]
+__all__ = ["SceneScore", "event_outcomes", "hazard_stops", "score_scene"]

@@ -19,7 +19,9 @@ coasting time: :mod:`adaptrack.tracking.lifecycle`); open
 tentative tracks from the detections left over, clustered within ``cluster_radius_m``. The
 per-track arithmetic runs compiled (:mod:`._scene_kernels`).
 
-Stopped mode: a confirmed track slower than ``stop_speed_mps`` for ``stop_confirm_s`` is held
+Stopped mode: a confirmed track slower than ``stop_speed_mps`` for ``stop_confirm_s`` (and,
+where the radars report stationary objects, ``stationary_detections``, detected within
+``stop_seen_s``: a track that loses its detections is not taken for stopped) is held
 at zero velocity with a small position noise (its covariance stays bounded through closures of
 minutes, seen or not), and leaves the mode when a detection's radial speed shows motion along
 its direction of travel (a stopped track's gate allows a start-up speed in that direction). A
@@ -27,8 +29,9 @@ track that has never moved faster than ``moved_speed_mps`` (with a speed sigma b
 ``moving_speed_std_mps``: not the first guess of a folding radar's track) and further than
 ``moved_distance_m`` from where it opened is a *static* object (a barrier
 arm, a pole, rails: zero Doppler since the start); a stopped vehicle had moved. Hazard event:
-a moved track stopped within ``barrier_m`` of the crossing raises
-"object stopped between the barriers".
+a moved track stopped on the carriageway (both lanes) within ``barrier_m`` of the crossing
+raises "object stopped between the barriers" (a reflection of a barrier post beside the road
+is not in the way).
 
 Sensor effects: each radar's declared latency is taken off its timestamps; radial speeds of a
 folding radar are unfolded (:func:`._ekf_kernels.doppler_usable`); a constant azimuth bias of
@@ -109,6 +112,8 @@ class SceneTrackerConfig:
     confirm_speed_std_mps: float = 3.0  # a track is confirmed once its speed is known this well
     merge_lateral_m: float = 1.2  # two tracks this close across (and along: the spread) ...
     merge_speed_mps: float = 1.0  # ... and this similar in speed are one body
+    stationary_detections: bool = True  # the radars report stopped objects at zero Doppler
+    stop_seen_s: float = 0.3  # ... so a stop counts only while detections show it
     estimate_azimuth_bias: bool = False  # align each radar's azimuths to the lanes (opt-in)
     bias_memory: float = 20000.0  # detections the alignment remembers (forgetting 1 - 1/this)
     bias_min_samples: float = 300.0  # ... before it is applied
@@ -395,6 +400,8 @@ class SceneTracker:
         tr.direction[moving] = np.sign(tr.x[moving, 1])
         tr.moved |= moving & (travelled > cfg.moved_distance_m)
         slow = conf & ~tr.stopped & (speed < cfg.stop_speed_mps) & (sd < 0.5)
+        if cfg.stationary_detections:  # a stop is seen, not inferred from missing detections
+            slow &= time_s - self.book.last_hit_s <= cfg.stop_seen_s
         tr.slow_since = np.where(
             slow, np.where(np.isnan(tr.slow_since), time_s, tr.slow_since), np.nan
         )
@@ -406,7 +413,10 @@ class SceneTracker:
             tr.p[enter, :, 1:3] = 0.0
         # hazard: a road user stopped between the barriers
         to_cross = np.abs(self._crossing_u[tr.corridor] - tr.x[:, 0])
-        hazard = tr.stopped & tr.moved & ~tr.event_raised & (to_cross <= self.site.barrier_m)
+        on_road = np.abs(tr.x[:, 3]) <= 2.0 * self._half_lane[tr.corridor]  # both lanes
+        hazard = (
+            tr.stopped & tr.moved & ~tr.event_raised & (to_cross <= self.site.barrier_m) & on_road
+        )
         for i in np.flatnonzero(hazard):
             pos = self._planar(np.array([i]))["position"][0]
             self.events.append(
