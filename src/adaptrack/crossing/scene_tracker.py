@@ -100,6 +100,8 @@ class SceneTrackerConfig:
     spread_limits_m: tuple[float, float] = (0.3, 3.0)
     body_across_std_m: float = 0.5
     gate_probability: float = 0.999
+    clutter_gate_probability: float = 0.99  # a static object's own detections (reserved) ...
+    clutter_age_s: float = 300.0  # ... once it has stood longer than any closure
     cluster_radius_m: float = 3.0
     stop_speed_mps: float = 0.3
     stop_confirm_s: float = 0.5
@@ -212,6 +214,7 @@ class SceneTracker:
         self._crossing_u = np.array([c.crossing_u for c in self.corridors])
         self._length_m = np.array([c.path.length_m for c in self.corridors])
         self._gate = gate_threshold(3, self.config.gate_probability)
+        self._clutter_gate = gate_threshold(3, self.config.clutter_gate_probability)
         self._last_time: dict[str, float] = {}
         self._half_lane = np.array([0.5 * site.roads[c.first].lane_width_m for c in self.corridors])
         self.azimuth_bias_rad = {r.name: 0.0 for r in site.radars}  # estimated, taken off
@@ -305,6 +308,7 @@ class SceneTracker:
             )  # fmt: skip
             hit = np.zeros(n_t, dtype=bool)
             if z.shape[0]:
+                self._reserve_clutter(d2)
                 simple, ti, di = unambiguous_assignment(d2, self._gate)
                 if not simple:
                     ti, di = gnn_assign(np.where(d2 <= self._gate, d2, np.inf), self._gate)
@@ -347,6 +351,20 @@ class SceneTracker:
         self._modes(time_s)
         self._delete(time_s)
         self._merge()
+
+    def _reserve_clutter(self, d2: FloatArray) -> None:
+        """Give a static object's detections to it alone (``d2`` rows of others set to inf).
+
+        A detection within ``clutter_gate`` of a static object (never moved: a barrier post,
+        a rail) is its reflection; a road user passing over it would otherwise take it and
+        leave a track behind on the clutter when it drives on.
+        """
+        static = self.tracks.stopped & ~self.tracks.moved
+        static &= self.tracks.time_s - self.book.born_s >= self.config.clutter_age_s
+        if not static.any() or static.all():
+            return
+        mine = (d2[static] <= self._clutter_gate).any(axis=0)
+        d2[np.ix_(~static, mine)] = np.inf
 
     def _merge(self) -> None:
         """Drop the younger of two tracks on one body.
