@@ -11,7 +11,9 @@ the body spread along (``body_along_std_m``) and across (``body_across_std_m``).
 One scan (all detections of one radar at one time) is processed as: predict every track to
 the scan time; gate the detections of the tracks in that radar's view (chi-square on the
 three-dimensional innovation); assign one detection per track by global nearest neighbour
-(:func:`adaptrack.tracking.gnn_assign`); give every further gated detection to the track it
+(:func:`adaptrack.tracking.gnn_assign`; a static object that has stood longer than
+``clutter_age_s`` keeps the detections in its own tight gate: learnt clutter such as a rail);
+give every further gated detection to the track it
 is closest to (the body's other reflections); update; apply what a miss tells (the Doppler
 gate hides slow vehicles; a miss behind a nearer track tells nothing); record hits and misses
 (M-of-N confirmation once the speed sigma is below ``confirm_speed_std_mps``, deletion by
