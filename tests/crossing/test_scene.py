@@ -174,3 +174,23 @@ def test_events_over_closures_queues_and_a_stall(seed):
     assert len(hazards) >= 1
     assert (hazards["delay_s"].abs() <= 1.0).all(), hazards
     assert len(false) == 0, false
+
+
+def test_learnt_clutter_reserves_its_own_detections():
+    """A static object older than clutter_age_s keeps the detections in its tight gate; a
+    young one (a vehicle waiting at a closure may look static) and moving tracks do not."""
+    from adaptrack.crossing.scene_tracker import SceneTrackerConfig, _Tracks
+
+    tracker = SceneTracker(SITE, SceneTrackerConfig(clutter_age_s=100.0))
+    tracker.book.add(2, 0.0)  # an old static object and a road user
+    tracker.book.add(1, 150.0)  # a young static object
+    x, p = np.zeros((3, 4)), np.tile(np.eye(4), (3, 1, 1))
+    tracker.tracks = _Tracks.opened(np.zeros(3, int), x, p, 200.0, 1.0)
+    tracker.tracks.stopped[[0, 2]] = True  # rows 0 and 2 never moved: static
+    d2 = np.array([[1.0, 50.0, 2.0], [3.0, 4.0, 5.0], [60.0, 0.5, 70.0]])
+    tracker._reserve_clutter(d2)
+    # the old object's detections 0 and 2 (gate 11.3 at 0.99) are its own against everyone
+    # else; detection 1, within only the young one's gate, stays open to the road user
+    np.testing.assert_array_equal(d2[0], [1.0, 50.0, 2.0])
+    np.testing.assert_array_equal(d2[1], [np.inf, 4.0, np.inf])
+    np.testing.assert_array_equal(d2[2], [np.inf, 0.5, np.inf])
