@@ -6,7 +6,9 @@ of the duration for 90 s), tracks it and prints per seed: time per simulated sec
 id switches, per-class position / speed RMS through association, the delay of every true
 hazard (a standstill between the barriers) and the false "stopped" events; then the false
 events per simulated hour over all seeds. ``--fold-kmh`` makes every radar fold its radial
-speeds at that value. Not a timing benchmark (accuracy and events; the time is indicative).
+speeds at that value; ``--set NAME=VALUE`` changes a
+:class:`~adaptrack.crossing.scene_tracker.SceneTrackerConfig` setting (numbers, true/false).
+Not a timing benchmark (accuracy and events; the time is indicative).
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ import time
 
 from adaptrack.crossing.scene import Stall, scene_spec, simulate_scene
 from adaptrack.crossing.scene_metrics import event_outcomes, score_scene
-from adaptrack.crossing.scene_tracker import track_scene
+from adaptrack.crossing.scene_tracker import SceneTrackerConfig, track_scene
 from adaptrack.crossing.site import load_site
 
 
@@ -28,7 +30,13 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, nargs="+", default=[31, 32, 33])
     ap.add_argument("--duration", type=float, default=1200.0, help="per seed [s]")
     ap.add_argument("--fold-kmh", type=float, default=None)
+    ap.add_argument("--set", action="append", default=[], metavar="NAME=VALUE")
     args = ap.parse_args()
+    changes: dict[str, float | bool] = {}
+    for item in args.set:
+        name, _, value = item.partition("=")
+        changes[name] = value == "true" if value in ("true", "false") else float(value)
+    config = SceneTrackerConfig(**changes)  # type: ignore[arg-type]
     site = load_site(args.site)
     if args.fold_kmh:
         radars = tuple(
@@ -44,7 +52,7 @@ def main() -> None:
     for seed in args.seeds:
         rec = simulate_scene(site, spec, seed)
         start = time.perf_counter()
-        tracks, events, _ = track_scene(site, rec.detections)
+        tracks, events, _ = track_scene(site, rec.detections, config)
         elapsed = time.perf_counter() - start
         score = score_scene(rec.truth, tracks, site.zone_m)
         hazards, false = event_outcomes(rec.truth, events, site.barrier_m)
