@@ -194,3 +194,38 @@ def test_learnt_clutter_reserves_its_own_detections():
     np.testing.assert_array_equal(d2[0], [1.0, 50.0, 2.0])
     np.testing.assert_array_equal(d2[1], [np.inf, 4.0, np.inf])
     np.testing.assert_array_equal(d2[2], [np.inf, 0.5, np.inf])
+
+
+def test_will_not_stop_before_the_stop_line_rule():
+    """Hand-made tracks on corridor 0 approaching the crossing (u increasing), lights flashing.
+
+    At 20 m/s, 30 m before the stop line (front 2.6 m ahead of the centre) a driver needs
+    20^2 / (2 * 27.4) = 7.3 m/s^2 > 4: the event, lead 27.4 / 20 s. At 10 m/s it needs
+    1.8 m/s^2: none. A car following the first one stops behind it: none.
+    """
+    from adaptrack.crossing.scene_tracker import _Tracks
+
+    tracker = SceneTracker(SITE, warnings=np.array([[0.0, 100.0]]))
+    cor = tracker.corridors[0]
+    line_u = cor.crossing_u - SITE.stop_line_m
+    half_lane = 0.5 * SITE.roads[cor.first].lane_width_m
+    u = np.array([line_u - 30.0, line_u - 80.0, line_u - 45.0])
+    x = np.stack([u, [20.0, 10.0, 20.0], np.zeros(3), np.full(3, -half_lane)], -1)
+    tracker.book.add(3, 0.0)
+    tracker.book.confirmed[:] = True
+    tracker.tracks = _Tracks.opened(np.zeros(3, int), x, np.tile(np.eye(4), (3, 1, 1)), 10.0, 1.5)
+    tracker.tracks.moved[:] = True
+    tracker._stop_line_events(10.0)
+    ev = tracker.events
+    assert [e["track_id"] for e in ev] == [1]
+    front = np.sqrt(3.0) * 1.5
+    assert ev[0]["lead_s"] == pytest.approx((30.0 - front) / 20.0)
+    tracker._stop_line_events(10.05)
+    assert len(tracker.events) == 1  # once per track
+    quiet = SceneTracker(SITE)  # no warning: no prediction
+    quiet.book.add(1, 0.0)
+    quiet.book.confirmed[:] = True
+    quiet.tracks = _Tracks.opened(np.zeros(1, int), x[:1], np.eye(4)[None], 10.0, 1.5)
+    quiet.tracks.moved[:] = True
+    quiet._modes(10.0)
+    assert quiet.events == []

@@ -109,6 +109,15 @@ class SceneSpec:
         start = np.arange(self.first_closure_s, self.duration_s, self.closure_every_s)
         return np.stack([start, start + self.closure_s], -1)
 
+    def warnings(self) -> FloatArray:
+        """Return the warning intervals (K, 2) [s]: lights flashing, then barriers down.
+
+        From ``WARNING_S`` before each closure until the barriers open (what the crossing
+        controller tells a tracker).
+        """
+        closures = self.closures()
+        return np.stack([closures[:, 0] - WARNING_S, closures[:, 1]], -1)
+
 
 def scene_spec(site: Site, **changes: Any) -> SceneSpec:
     """Return the site's scene (its ``[scene]`` table) with ``changes``.
@@ -174,6 +183,7 @@ class SceneTruth:
     users: pd.DataFrame  # object_id, vehicle_class, corridor, direction, arrival_s, ...
     closures: FloatArray
     stall_stops: pd.DataFrame  # object_id, stop_time_s (the stall's standstill between barriers)
+    stop_line_runs: pd.DataFrame  # object_id, cross_time_s: front over the stop line in a warning
 
 
 @dataclass(frozen=True, eq=False)
@@ -294,6 +304,7 @@ def simulate_traffic(site: Site, spec: SceneSpec, rng: np.random.Generator) -> S
     )
     stall_until = np.full(n, np.inf)
     stall_stop_time = np.full(n, np.nan)
+    line_run_time = np.full(n, np.nan)
     stop_line = x_cross - site.stop_line_m
     closures = spec.closures()
     steps = math.ceil(spec.duration_s / STEP_S) + 1
@@ -352,6 +363,9 @@ def simulate_traffic(site: Site, spec: SceneSpec, rng: np.random.Generator) -> S
         vn = np.maximum(va + acc * STEP_S, 0.0)
         x[idx] = xa + 0.5 * (va + vn) * STEP_S
         v[idx] = vn
+        if warn:  # fronts over the stop line while the lights flash or the barriers are down
+            over = (xa < stop_line[idx]) & (x[idx] >= stop_line[idx])
+            line_run_time[idx[over]] = np.fmin(line_run_time[idx[over]], t + STEP_S)
         if stalling.any():
             for j in np.flatnonzero(stalling).tolist():
                 i = int(idx[j])
@@ -417,7 +431,9 @@ def simulate_traffic(site: Site, spec: SceneSpec, rng: np.random.Generator) -> S
     )
     stalled = np.flatnonzero(~np.isnan(stall_stop_time))
     stops = pd.DataFrame({"object_id": stalled, "stop_time_s": stall_stop_time[stalled]})
-    return SceneTruth(table, users_t, closures, stops)
+    ran = np.flatnonzero(~np.isnan(line_run_time))
+    runs = pd.DataFrame({"object_id": ran, "cross_time_s": line_run_time[ran]})
+    return SceneTruth(table, users_t, closures, stops, runs)
 
 
 @numba.njit(cache=True)

@@ -171,4 +171,40 @@ def event_outcomes(
     return stops.assign(delay_s=np.array(delays, dtype=float)), false
 
 
-__all__ = ["SceneScore", "event_outcomes", "hazard_stops", "score_scene"]
+def stop_line_outcomes(
+    truth: SceneTruth, events: pd.DataFrame, *, horizon_s: float = 15.0, match_m: float = 5.0
+) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Match "will not stop before the stop line" events with the users that ran the line.
+
+    A user that ran it (``truth.stop_line_runs``: its front crossed the stop line while the
+    lights flashed or the barriers were down) takes the first unmatched event from
+    ``horizon_s`` before it crossed until 0.5 s after, raised within ``match_m`` of where the
+    user was at the event. Returns the runs with ``lead_s`` (crossing time less event time;
+    NaN: missed) and the events that match no run (false).
+    """
+    runs = truth.stop_line_runs
+    ev = events[events["event"] == "will_not_stop_before_stop_line"] if len(events) else events
+    ev = ev.sort_values("time_s") if len(ev) else ev
+    t = ev["time_s"].to_numpy() if len(ev) else np.zeros(0)
+    xy = ev[["east_m", "north_m"]].to_numpy() if len(ev) else np.zeros((0, 2))
+    used = np.zeros(t.size, dtype=bool)
+    tab = truth.table
+    lead = []
+    for run in runs.itertuples():
+        path = tab[tab["object_id"] == run.object_id]
+        k = -1
+        for j in np.flatnonzero(
+            ~used & (t >= run.cross_time_s - horizon_s) & (t <= run.cross_time_s + 0.5)
+        ):
+            at = path.iloc[int(np.argmin(np.abs(path["time_s"].to_numpy() - t[j])))]
+            if np.hypot(at.east_m - xy[j, 0], at.north_m - xy[j, 1]) <= match_m:
+                k = int(j)
+                break
+        if k >= 0:
+            used[k] = True
+        lead.append(run.cross_time_s - t[k] if k >= 0 else np.nan)
+    false = ev[~used] if len(ev) else ev
+    return runs.assign(lead_s=np.array(lead, dtype=float)), false
+
+
+__all__ = ["SceneScore", "event_outcomes", "hazard_stops", "score_scene", "stop_line_outcomes"]

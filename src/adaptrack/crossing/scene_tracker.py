@@ -33,7 +33,10 @@ track that has never moved faster than ``moved_speed_mps`` (with a speed sigma b
 arm, a pole, rails: zero Doppler since the start); a stopped vehicle had moved. Hazard event:
 a moved track stopped on the carriageway (both lanes) within ``barrier_m`` of the crossing
 raises "object stopped between the barriers" (a reflection of a barrier post beside the road
-is not in the way).
+is not in the way). Given the controller's warning intervals (lights flashing, barriers
+down), a confirmed track approaching the stop line that would need more than
+``stop_decel_mps2`` to stop its front there raises "vehicle will not stop before the stop
+line", with its lead time (distance to the line over speed).
 
 Sensor effects: each radar's declared latency is taken off its timestamps; radial speeds of a
 folding radar are unfolded (:func:`._ekf_kernels.doppler_usable`); a constant azimuth bias of
@@ -87,7 +90,7 @@ ROW_COLUMNS = (
     "track_id", "time_s", "east_m", "north_m", "speed_mps", "east_speed_mps", "north_speed_mps",
     "from_crossing_m", "status", "moved", "position_std_m", "speed_std_mps",
 )  # fmt: skip
-EVENT_COLUMNS = ["time_s", "event", "track_id", "east_m", "north_m"]
+EVENT_COLUMNS = ["time_s", "event", "track_id", "east_m", "north_m", "lead_s"]
 
 
 @dataclass(frozen=True)
@@ -116,6 +119,7 @@ class SceneTrackerConfig:
     confirm_speed_std_mps: float = 3.0  # a track is confirmed once its speed is known this well
     merge_lateral_m: float = 1.2  # two tracks this close across (and along: the spread) ...
     merge_speed_mps: float = 1.0  # ... and this similar in speed are one body
+    stop_decel_mps2: float = 4.0  # a driver is expected to stop for the lights at this
     stationary_detections: bool = True  # the radars report stopped objects at zero Doppler
     stop_seen_s: float = 0.3  # ... so a stop counts only while detections show it
     estimate_azimuth_bias: bool = False  # align each radar's azimuths to the lanes (opt-in)
@@ -137,6 +141,7 @@ class _Tracks:
     slow_since: FloatArray
     moved: np.ndarray
     event_raised: np.ndarray
+    line_event_raised: np.ndarray  # "will not stop before the stop line" raised
     born_u: FloatArray
     spread: FloatArray  # body spread of the reflections along the track [m]
     direction: FloatArray  # +1 / -1: direction of travel along u once known, else 0
@@ -152,7 +157,8 @@ class _Tracks:
         no = np.zeros(n, bool)
         return cls(
             corridor, x, p, np.full(n, time_s), stopped=no, slow_since=np.full(n, np.nan),
-            moved=no.copy(), event_raised=no.copy(), born_u=x[:, 0].copy(),
+            moved=no.copy(), event_raised=no.copy(), line_event_raised=no.copy(),
+            born_u=x[:, 0].copy(),
             spread=np.full(n, spread_m), direction=np.zeros(n), miss_run=np.ones(n),
             occluded=no.copy(),
         )  # fmt: skip
@@ -196,9 +202,17 @@ class SceneTracker:
     events and detection outcomes.
     """
 
-    def __init__(self, site: Site, config: SceneTrackerConfig | None = None) -> None:
+    def __init__(
+        self,
+        site: Site,
+        config: SceneTrackerConfig | None = None,
+        warnings: FloatArray | None = None,
+    ) -> None:
         self.site = site
         self.config = config or SceneTrackerConfig()
+        # the controller's warning intervals (K, 2) [s]: lights flashing or barriers down
+        self.warnings = np.asarray(warnings if warnings is not None else np.zeros((0, 2)))
+        self.warnings = self.warnings.reshape(-1, 2).astype(float)
         self.corridors = site_corridors(site.roads, site.zone_m + site.run_in_m)
         self.book = TrackBook(self.config.rules)
         self.tracks = _Tracks.empty()
@@ -437,18 +451,68 @@ class SceneTracker:
         hazard = (
             tr.stopped & tr.moved & ~tr.event_raised & (to_cross <= self.site.barrier_m) & on_road
         )
-        for i in np.flatnonzero(hazard):
-            pos = self._planar(np.array([i]))["position"][0]
+        self._raise("stopped_between_barriers", np.flatnonzero(hazard), time_s)
+        tr.event_raised |= hazard
+        if self._warning(time_s):
+            self._stop_line_events(time_s)
+
+    def _warning(self, time_s: float) -> bool:
+        """Whether the crossing's lights flash or its barriers are down at ``time_s``."""
+        w = self.warnings
+        return bool(np.any((w[:, 0] <= time_s) & (time_s < w[:, 1])))
+
+    def _stop_line_events(self, time_s: float) -> None:
+        """Raise "will not stop before the stop line" for tracks that cannot stop there.
+
+        A moving confirmed road user on the carriageway, first in its lane (one who follows
+        another stops behind it), whose front needs more than ``stop_decel_mps2`` to stop at
+        the line; its lead is the time to reach it.
+        """
+        cfg = self.config
+        tr = self.tracks
+        ahead = self._crossing_u[tr.corridor] - tr.x[:, 0]  # towards the crossing: sign(ahead)
+        speed = tr.x[:, 1] * np.sign(ahead)  # > 0 approaching
+        front = np.sqrt(3.0) * tr.spread  # half a uniform body of that spread
+        to_line = np.abs(ahead) - self.site.stop_line_m - front
+        on_road = np.abs(tr.x[:, 3]) <= 2.0 * self._half_lane[tr.corridor]
+        cand = (
+            self.book.confirmed & tr.moved & ~tr.stopped & ~tr.line_event_raised & on_road
+            & (speed > 0.5) & (to_line > -front)
+        )  # fmt: skip
+        cant = cand & (speed**2 > 2.0 * cfg.stop_decel_mps2 * np.maximum(to_line, 1e-6))
+        road_user = self.book.confirmed & ~(tr.stopped & ~tr.moved)
+        for i in np.flatnonzero(cant):  # one who follows a road user stops behind it
+            ahead_i = (tr.x[:, 0] - tr.x[i, 0]) * np.sign(ahead[i])
+            lane = np.abs(tr.x[:, 3] - tr.x[i, 3]) < self._half_lane[tr.corridor[i]]
+            cant[i] = not np.any(
+                road_user & (tr.corridor == tr.corridor[i]) & lane & (ahead_i > 0)
+                & (np.sign(ahead) == np.sign(ahead[i]))
+            )  # fmt: skip
+        rows = np.flatnonzero(cant)
+        self._raise(
+            "will_not_stop_before_stop_line", rows, time_s,
+            np.maximum(to_line[rows], 0.0) / speed[rows],
+        )  # fmt: skip
+        tr.line_event_raised |= cant
+
+    def _raise(
+        self, event: str, rows: np.ndarray, time_s: float, lead_s: FloatArray | None = None
+    ) -> None:
+        """Record ``event`` for the tracks in ``rows`` (with its lead time [s] if predicted)."""
+        if rows.size == 0:
+            return
+        pos = self._planar(rows)["position"]
+        for k, i in enumerate(rows):
             self.events.append(
                 {
                     "time_s": time_s,
-                    "event": "stopped_between_barriers",
+                    "event": event,
                     "track_id": int(self.book.ids[i]),
-                    "east_m": float(pos[0]),
-                    "north_m": float(pos[1]),
+                    "east_m": float(pos[k, 0]),
+                    "north_m": float(pos[k, 1]),
+                    "lead_s": float(lead_s[k]) if lead_s is not None else np.nan,
                 }
             )
-        tr.event_raised |= hazard
 
     def _delete(self, time_s: float) -> None:
         tr = self.tracks
@@ -571,13 +635,15 @@ def track_scene(
     detections: pd.DataFrame,
     config: SceneTrackerConfig | None = None,
     on_scan: Callable[[int, int], None] | None = None,
+    warnings: FloatArray | None = None,
 ) -> tuple[pd.DataFrame, pd.DataFrame, ScanLog]:
     """Track a detection table scan by scan (:func:`iter_scans`).
 
-    ``on_scan(done, total)`` is called after each scan (progress). Returns the track rows of
-    every scan, the hazard events and the detection log.
+    ``on_scan(done, total)`` is called after each scan (progress); ``warnings`` (K, 2): when
+    the crossing's lights flash or its barriers are down [s] (none: no stop-line prediction).
+    Returns the track rows of every scan, the hazard events and the detection log.
     """
-    tracker = SceneTracker(site, config)
+    tracker = SceneTracker(site, config, warnings)
     scans = list(iter_scans(detections, {r.name: r.latency_s for r in site.radars}))
     out = []
     for i, (radar, t, z) in enumerate(scans):
