@@ -199,9 +199,10 @@ def test_learnt_clutter_reserves_its_own_detections():
 def test_will_not_stop_before_the_stop_line_rule():
     """Hand-made tracks on corridor 0 approaching the crossing (u increasing), lights flashing.
 
-    At 20 m/s, 30 m before the stop line (front 2.6 m ahead of the centre) a driver needs
-    20^2 / (2 * 27.4) = 7.3 m/s^2 > 4: the event, lead 27.4 / 20 s. At 10 m/s it needs
-    1.8 m/s^2: none. A car following the first one stops behind it: none.
+    At 20 m/s (sigma 1: at least 18.4 m/s at 95 %), 30 m before the stop line (front 2.6 m
+    ahead of the centre) a driver needs 18.4^2 / (2 * 27.4) = 6.2 m/s^2 > 4: the event, lead
+    27.4 / 20 s. At 10 m/s it needs 1.8 m/s^2: none. A car following the first one stops
+    behind it: none. Not detected for longer than ``stop_seen_s``: none.
     """
     from adaptrack.crossing.scene_tracker import _Tracks
 
@@ -211,7 +212,7 @@ def test_will_not_stop_before_the_stop_line_rule():
     half_lane = 0.5 * SITE.roads[cor.first].lane_width_m
     u = np.array([line_u - 30.0, line_u - 80.0, line_u - 45.0])
     x = np.stack([u, [20.0, 10.0, 20.0], np.zeros(3), np.full(3, -half_lane)], -1)
-    tracker.book.add(3, 0.0)
+    tracker.book.add(3, 10.0)  # detected at 10 s
     tracker.book.confirmed[:] = True
     tracker.tracks = _Tracks.opened(np.zeros(3, int), x, np.tile(np.eye(4), (3, 1, 1)), 10.0, 1.5)
     tracker.tracks.moved[:] = True
@@ -222,6 +223,10 @@ def test_will_not_stop_before_the_stop_line_rule():
     assert ev[0]["lead_s"] == pytest.approx((30.0 - front) / 20.0)
     tracker._stop_line_events(10.05)
     assert len(tracker.events) == 1  # once per track
+    tracker.tracks.line_event_raised[:] = False
+    tracker.events.clear()
+    tracker._stop_line_events(10.5)  # last detected 0.5 s ago
+    assert tracker.events == []
     quiet = SceneTracker(SITE)  # no warning: no prediction
     quiet.book.add(1, 0.0)
     quiet.book.confirmed[:] = True

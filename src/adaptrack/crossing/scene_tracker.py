@@ -464,9 +464,10 @@ class SceneTracker:
     def _stop_line_events(self, time_s: float) -> None:
         """Raise "will not stop before the stop line" for tracks that cannot stop there.
 
-        A moving confirmed road user on the carriageway, first in its lane (one who follows
-        another stops behind it), whose front needs more than ``stop_decel_mps2`` to stop at
-        the line; its lead is the time to reach it.
+        A moving confirmed road user on the carriageway, detected within ``stop_seen_s``,
+        first in its lane (one who follows another stops behind it), whose front needs more
+        than ``stop_decel_mps2`` to stop at the line even at the low end of its speed's 90 %
+        interval; its lead is the time to reach the line.
         """
         cfg = self.config
         tr = self.tracks
@@ -479,7 +480,11 @@ class SceneTracker:
             self.book.confirmed & tr.moved & ~tr.stopped & ~tr.line_event_raised & on_road
             & (speed > 0.5) & (to_line > -front)
         )  # fmt: skip
-        cant = cand & (speed**2 > 2.0 * cfg.stop_decel_mps2 * np.maximum(to_line, 1e-6))
+        seen = time_s - self.book.last_hit_s <= cfg.stop_seen_s
+        slow_bound = speed - 1.645 * np.sqrt(tr.p[:, 1, 1])  # the speed is at least this (95 %)
+        cant = (
+            cand & seen & (slow_bound > np.sqrt(2.0 * cfg.stop_decel_mps2 * np.maximum(to_line, 0)))
+        )
         road_user = self.book.confirmed & ~(tr.stopped & ~tr.moved)
         for i in np.flatnonzero(cant):  # one who follows a road user stops behind it
             ahead_i = (tr.x[:, 0] - tr.x[i, 0]) * np.sign(ahead[i])
