@@ -28,7 +28,13 @@ from .crossing.compliance import (
     evaluate_site,
 )
 from .crossing.families import FAMILIES
-from .crossing.measurements_io import detections_frame, read_detections, read_scene_detections
+from .crossing.measurements_io import (
+    WARNING_COLUMNS,
+    detections_frame,
+    read_detections,
+    read_scene_detections,
+    read_warnings,
+)
 from .crossing.radar_sim import simulate_site_case
 from .crossing.report import build_report, render_html, sample_tracks
 from .crossing.scene import scene_spec, simulate_scene
@@ -288,6 +294,9 @@ def simulate(
     duration: float | None = typer.Option(
         None, "--duration", min=1.0, help="Scene length [s] (default: the site's)."
     ),
+    warnings: Path | None = typer.Option(
+        None, "--warnings", help="Scene: also write when the lights flash or barriers are down."
+    ),
 ) -> None:
     """Simulate radar detections of traffic at a site.
 
@@ -307,6 +316,8 @@ def simulate(
             cols = ["object_id", "vehicle_class", "time_s", "east_m", "north_m", "speed_mps",
                     "in_zone"]  # fmt: skip
             write_table_atomic(rec.truth.table[cols], truth)
+        if warnings is not None:
+            write_table_atomic(pd.DataFrame(spec.warnings(), columns=WARNING_COLUMNS), warnings)
         Console().print(
             f"wrote {out} ({len(rec.detections)} detections of {len(rec.truth.users)} road "
             f"users over {spec.duration_s:g} s)"
@@ -378,6 +389,12 @@ def track(
     events: Path | None = typer.Option(
         None, "--events", help="Hazard events of raw detections (default: next to --out)."
     ),
+    warnings: Path | None = typer.Option(
+        None,
+        "--warnings",
+        help="Raw detections: the crossing's warning intervals (start_s, end_s), for the "
+        "'will not stop before the stop line' prediction.",
+    ),
 ) -> None:
     """Track radar detections at a site; write the estimates.
 
@@ -386,12 +403,15 @@ def track(
     without it); the reflection-point scatter follows the ``vehicle_class`` column (a car
     when absent). Without ``object_id`` (raw detections): the many-object scene tracker;
     tracks go to ``--out`` (status tentative tracks excluded) and hazard events to
-    ``--events``.
+    ``--events`` (with ``--warnings``, also the predicted "will not stop before the stop
+    line").
     """
     st = _load_site(site)
     if "object_id" not in read_table(measurements).columns:
-        _track_scene_file(measurements, st, out, events)
+        _track_scene_file(measurements, st, out, events, warnings)
         return
+    if warnings is not None:
+        _fail("--warnings applies to raw detections (without object_id)")
     try:
         objects = read_detections(measurements, st)
         estimator = (
@@ -429,9 +449,12 @@ def track(
     Console().print(f"wrote {out} ({len(objects)} objects)")
 
 
-def _track_scene_file(measurements: Path, st: Site, out: Path, events: Path | None) -> None:
+def _track_scene_file(
+    measurements: Path, st: Site, out: Path, events: Path | None, warnings: Path | None
+) -> None:
     try:
         det = read_scene_detections(measurements, st)
+        intervals = read_warnings(warnings) if warnings is not None else None
     except ValueError as exc:
         _fail(str(exc))
     with Progress(transient=True) as progress:
@@ -441,6 +464,7 @@ def _track_scene_file(measurements: Path, st: Site, out: Path, events: Path | No
                 st,
                 det,
                 on_scan=lambda done, total: progress.update(task, completed=done, total=total),
+                warnings=intervals,
             )
         except ValueError as exc:
             _fail(f"{measurements}: {exc}")

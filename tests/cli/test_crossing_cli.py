@@ -172,3 +172,30 @@ def test_demo_bad_site_file_is_one_line(tmp_path, edit, message):
     assert proc.returncode == 1 and proc.stderr.startswith("error: ")
     assert re.search(message, proc.stderr) and proc.stderr.count("\n") == 1, proc.stderr
     assert not (tmp_path / "out").exists()
+
+
+def test_scene_simulate_then_track_with_the_controllers_warnings(tmp_path):
+    """Raw detections of a mixed-traffic scene through the CLI, with the warning intervals."""
+    det, truth, warn = tmp_path / "det.csv", tmp_path / "truth.csv", tmp_path / "warn.csv"
+    proc = run(
+        "simulate", "lx_default", "--scene", "--duration", "320", "--seed", "2",
+        "--out", str(det), "--truth", str(truth), "--warnings", str(warn),
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    intervals = pd.read_csv(warn)
+    assert list(intervals.columns) == ["start_s", "end_s"]
+    np.testing.assert_allclose(intervals.to_numpy(), [[292.0, 420.0]])  # 8 s of lights
+    out = tmp_path / "tracks.csv"
+    track = ("track", str(det), "--site", "lx_default", "--out", str(out), "--warnings")
+    proc = run(*track, str(warn))
+    assert proc.returncode == 0, proc.stderr
+    events = pd.read_csv(tmp_path / "tracks.events.csv")
+    assert list(events.columns) == ["time_s", "event", "track_id", "east_m", "north_m", "lead_s"]
+    assert pd.read_csv(out)["track_id"].nunique() > 5
+    # a warnings file that is not one: a one-line error naming the row
+    bad = tmp_path / "bad.csv"
+    bad.write_text("start_s,end_s\n10,5\n")
+    proc = run(*track, str(bad))
+    assert proc.returncode != 0
+    assert "row 1: start_s must be before end_s" in proc.stderr
+    assert "Traceback" not in proc.stderr

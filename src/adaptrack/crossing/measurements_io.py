@@ -130,6 +130,25 @@ def read_scene_detections(path: str | Path, site: Site) -> pd.DataFrame:
     return out.sort_values("time_s", kind="stable", ignore_index=True)
 
 
+WARNING_COLUMNS = ["start_s", "end_s"]
+
+
+def read_warnings(path: str | Path) -> FloatArray:
+    """Read the crossing's warning intervals (K, 2) [s]: lights flashing or barriers down.
+
+    Columns ``start_s``, ``end_s`` (finite, start before end); errors name file, row and column.
+    """
+    p = Path(path)
+    frame = read_table(p)
+    require_columns(frame, WARNING_COLUMNS, p)
+    start, end = (numeric_column(frame, c, p) for c in WARNING_COLUMNS)
+    bad = ~(start < end)
+    if bad.any():
+        row = int(np.argmax(bad))
+        raise DataFormatError(f"{p}: row {row + 1}: start_s must be before end_s")
+    return np.stack([start, end], -1)
+
+
 def read_detections(path: str | Path, site: Site) -> list[ObjectDetections]:
     """Read and validate a detection table; errors name file, row and column."""
     p = Path(path)
