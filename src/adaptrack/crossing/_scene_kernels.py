@@ -28,6 +28,7 @@ from ._ekf_kernels import (
 from ._radar_kernel import curve_at, in_view
 
 N_STATE = 4
+BIAS_MIN_SPEED_MPS = 6.0  # azimuth alignment on vehicles, not on cyclists at the lane's edge
 
 
 @numba.njit(cache=True, inline="always")
@@ -256,12 +257,14 @@ def update_tracks(  # type: ignore[no-untyped-def]
     """Update each owning track with its detections in ``order`` (sequential EKF updates).
 
     Azimuth alignment: before its update, a detection of a moving track (``moved``, not
-    stopped, ``direction`` known) is compared with the centre of the lane it drives in
-    (``lane_half_width`` per corridor to the right of travel): its raw azimuth (``z`` plus the
-    ``bias`` already taken off) less the lane centre's, weighted by the squared ground range,
-    goes into ``bias_stats`` = [sum of weights, sum of weighted angles, count] with forgetting
-    factor ``bias_forget`` per detection, unless the detection lies further than ``bias_gate`` [m]
-    across from the lane centre corrected by the current bias (another lane, a footway).
+    stopped, ``direction`` known, faster than ``BIAS_MIN_SPEED_MPS``) is
+    compared with the centre of the lane it drives in
+    (``lane_half_width`` per corridor to the right of travel): its offset across the lane
+    ``lat`` is ``g b`` for an azimuth bias ``b``, with ``g`` the offset's derivative with
+    respect to the azimuth. Least squares over the detections (the ``bias`` already taken off
+    added back) accumulate in ``bias_stats`` = [sum g^2, sum g lat, count] with forgetting
+    factor ``bias_forget`` per detection; a detection further than ``bias_gate`` [m] across
+    from the lane centre (another lane, a footway) is left out.
 
     A detection whose radial speed exceeds ``moving_radial`` along the vehicle's ``direction``
     ends the stop of a vehicle that had moved (speed and acceleration freed with variance
@@ -283,13 +286,16 @@ def update_tracks(  # type: ignore[no-untyped-def]
         gx = radar[0] + rho * math.sin(z[j, 1])
         gy = radar[1] + rho * math.cos(z[j, 1])
         along = (gx - px) * tx + (gy - py) * ty
-        if moved[i] and not stopped[i] and direction[i] != 0.0:
+        fast = abs(x[i, 1]) >= BIAS_MIN_SPEED_MPS
+        if moved[i] and not stopped[i] and direction[i] != 0.0 and fast:
+            # across the lane only (the body's extent along it says nothing on the bias)
             lane = -direction[i] * lane_half_width[corridor[i]]
-            lx, ly = cx - lane * ty - radar[0], cy + lane * tx - radar[1]
-            err = (z[j, 1] + bias - math.atan2(lx, ly) + math.pi) % (2.0 * math.pi) - math.pi
-            if abs((err - bias) * rho) <= bias_gate:
-                bias_stats[0] = bias_forget * bias_stats[0] + rho * rho
-                bias_stats[1] = bias_forget * bias_stats[1] + rho * rho * err
+            nx, ny = -ty, tx
+            lat = (gx - (cx + lane * nx)) * nx + (gy - (cy + lane * ny)) * ny
+            g = rho * (math.cos(z[j, 1]) * nx - math.sin(z[j, 1]) * ny)  # d lat / d azimuth
+            if abs(lat) <= bias_gate:
+                bias_stats[0] = bias_forget * bias_stats[0] + g * g
+                bias_stats[1] = bias_forget * bias_stats[1] + g * (lat + bias * g)
                 bias_stats[2] = bias_forget * bias_stats[2] + 1.0
         off = abs((z[j, 1] - radar[3] + math.pi) % (2.0 * math.pi) - math.pi)
         sr = curve_at(noise_tab, noise_cnt, 0, z[j, 0])
