@@ -44,7 +44,7 @@ each radar can be estimated from the offsets across the lane of the detections o
 faster than 6 m/s against the centre of the lane they drive in (vehicles keep to their lane on
 average; ``estimate_azimuth_bias``, ``bias_*`` settings) and taken off the radar's next scans
 (``azimuth_bias_rad``). It is opt-in: in a 10-minute scene with queues the near-field radar at
-the crossing settles at -0.17 deg where there is none (the roadside radars within 0.02 deg).
+the crossing settles at -0.17 deg where there is none (the roadside radars within 0.03 deg).
 
 No detection is dropped silently: every one is recorded as used by a track, opening a track,
 or rejected with a reason (``ScanLog``).
