@@ -42,6 +42,12 @@ def _polar_into(px, py, vx, vy, radar, zp, jp, jv):  # type: ignore[no-untyped-d
 
 
 @numba.njit(cache=True, inline="always")
+def off_boresight(az, radar):  # type: ignore[no-untyped-def]
+    """Angle of azimuth ``az`` off the radar's boresight ``radar[3]``, in ``[0, pi]`` [rad]."""
+    return abs((az - radar[3] + math.pi) % (2.0 * math.pi) - math.pi)
+
+
+@numba.njit(cache=True, inline="always")
 def _noise_into(radar, noise_tab, noise_cnt, zp, jp, ux, uy, scatter_std, rm):  # type: ignore[no-untyped-def]
     """Fill the measurement noise at the predicted geometry ``zp`` (with body scatter).
 
@@ -53,7 +59,7 @@ def _noise_into(radar, noise_tab, noise_cnt, zp, jp, ux, uy, scatter_std, rm):  
     b1 = jp[1, 0] * ux + jp[1, 1] * uy
     b2 = jp[2, 0] * ux + jp[2, 1] * uy
     s2 = scatter_std * scatter_std
-    off = abs((zp[1] - radar[3] + math.pi) % (2.0 * math.pi) - math.pi)
+    off = off_boresight(zp[1], radar)
     rm[0, 0] = curve_at(noise_tab, noise_cnt, 0, zp[0]) ** 2
     rm[1, 1] = curve_at(noise_tab, noise_cnt, 1, off) ** 2
     rm[2, 2] = curve_at(noise_tab, noise_cnt, 2, zp[0]) ** 2
@@ -62,6 +68,17 @@ def _noise_into(radar, noise_tab, noise_cnt, zp, jp, ux, uy, scatter_std, rm):  
     for a in range(3):
         for c in range(3):
             rm[a, c] += s2 * bb[a] * bb[c]
+
+
+@numba.njit(cache=True, inline="always")
+def alias_known(var, radar):  # type: ignore[no-untyped-def]
+    """Whether a radial-speed innovation variance ``var`` tells a folding radar's alias.
+
+    True without folding (``radar[6]`` 0); else while the sigma is below
+    ``radar[6] / UNFOLD_SIGMAS``.
+    """
+    fold = radar[6]
+    return fold <= 0.0 or var * UNFOLD_SIGMAS * UNFOLD_SIGMAS < fold * fold
 
 
 @numba.njit(cache=True, inline="always")
@@ -74,15 +91,14 @@ def doppler_usable(h, p, rm, radar):  # type: ignore[no-untyped-def]
     radial-speed row of ``h`` and the noise's cross terms with it are zeroed: an update with a
     zero radial-speed residual then uses range and azimuth alone.
     """
-    fold = radar[6]
-    if fold <= 0.0:
+    if radar[6] <= 0.0:
         return True
     n = h.shape[1]
     var = rm[2, 2]
     for a in range(n):
         for b in range(n):
             var += h[2, a] * p[a, b] * h[2, b]
-    if var * UNFOLD_SIGMAS * UNFOLD_SIGMAS < fold * fold:
+    if alias_known(var, radar):
         return True
     for a in range(n):
         h[2, a] = 0.0
@@ -237,7 +253,7 @@ def gate_update_into(  # type: ignore[no-untyped-def]
         x[a] = xp[a]
         for b in range(n):
             p[a, b] = pp[a, b]
-    off = abs((zp[1] - radar[3] + math.pi) % (2.0 * math.pi) - math.pi)
+    off = off_boresight(zp[1], radar)
     if not in_view(zp[0], off, fields, radar[4]):
         return 0.0, miss_run
     if kind == ROAD:
@@ -254,9 +270,7 @@ def gate_update_into(  # type: ignore[no-untyped-def]
     p_gate = _normal_cdf((gate - mu) / sd) - _normal_cdf((-gate - mu) / sd)
     p_det = curve_at(pd_tab, pd_cnt, 0, zp[0])
     p_miss = p_gate + (1.0 - p_det) * (1.0 - p_gate)
-    fold = radar[6]
-    ambiguous = fold > 0.0 and (var + rm[2, 2]) * UNFOLD_SIGMAS * UNFOLD_SIGMAS >= fold * fold
-    if along < GATE_MIN_COS or ambiguous:  # the miss says little on the speed
+    if along < GATE_MIN_COS or not alias_known(var + rm[2, 2], radar):  # says little on speed
         return math.log(p_miss) if p_miss > 0.0 else -math.inf, miss_run
     miss_run = max(miss_run * (1.0 - p_det), MISS_RUN_FLOOR)
     if gate > 0.0 and p_gate > miss_run * (1.0 - p_gate):
@@ -436,7 +450,7 @@ def pcrlb_kernel(  # type: ignore[no-untyped-def]
                         ROAD, xp, k, radar, noise_tab, noise_cnt, road, half_width, scatter_std,
                         zp, h, rm, jp, jv,
                     )  # fmt: skip
-                    off = abs((zp[1] - radar[3] + math.pi) % (2.0 * math.pi) - math.pi)
+                    off = off_boresight(zp[1], radar)
                     informs = abs(h[2, 1]) >= GATE_MIN_COS
                     if in_view(zp[0], off, fields, radar[4]) and abs(zp[2]) < radar[5] and informs:
                         update_into(

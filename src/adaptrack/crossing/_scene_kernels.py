@@ -16,7 +16,7 @@ import math
 import numba
 import numpy as np
 
-from ..filters._kernels import cholesky_into, update_into
+from ..filters._kernels import cholesky_into, predict_into, update_into
 from ._ekf_kernels import (
     ROAD,
     _centreline,
@@ -24,6 +24,7 @@ from ._ekf_kernels import (
     gate_update_into,
     innovation_into,
     measure,
+    off_boresight,
 )
 from ._radar_kernel import curve_at, in_view
 
@@ -62,6 +63,9 @@ def predict_tracks(  # type: ignore[no-untyped-def]
     phi = np.zeros((N_STATE, N_STATE))
     q = np.zeros((N_STATE, N_STATE))
     tmp = np.zeros((N_STATE, N_STATE))
+    no_input = np.zeros(N_STATE)
+    x0 = np.zeros(N_STATE)
+    p0 = np.zeros((N_STATE, N_STATE))
     for i in range(x.shape[0]):
         dt = max(time_s - t[i], 0.0)
         t[i] = max(t[i], time_s)
@@ -83,27 +87,23 @@ def predict_tracks(  # type: ignore[no-untyped-def]
             q[1, 2] = q[2, 1] = accel_psd * dt**2 / 2.0
             q[2, 2] = accel_psd * dt
             q[3, 3] = lateral_psd * dt
-        xi = x[i].copy()
-        for a in range(N_STATE):
-            acc = 0.0
-            for b in range(N_STATE):
-                acc += phi[a, b] * xi[b]
-            x[i, a] = acc
-        for a in range(N_STATE):
-            for b in range(N_STATE):
-                acc = 0.0
-                for c in range(N_STATE):
-                    acc += phi[a, c] * p[i, c, b]
-                tmp[a, b] = acc
-        for a in range(N_STATE):
-            for b in range(a, N_STATE):
-                acc = 0.0
-                for c in range(N_STATE):
-                    acc += tmp[a, c] * phi[b, c]
-                p[i, a, b] = acc + q[a, b]
-                p[i, b, a] = p[i, a, b]
+        x0[:] = x[i]
+        p0[:, :] = p[i]
+        predict_into(x0, p0, phi, q, no_input, x[i], p[i], tmp)
         if direction[i] != 0 and x[i, 1] * direction[i] < 0.0:
             x[i, 1] = x[i, 2] = 0.0
+
+
+@numba.njit(cache=True, inline="always")
+def _lane_frame(roads, bounds, c, u, d):  # type: ignore[no-untyped-def]
+    """Corridor ``c`` at ``u``: centreline point, unit tangent, curvature, point at offset ``d``.
+
+    Returns ``(cx, cy, tx, ty, kappa, px, py)``; ``(-ty, tx)`` is the offsets' direction.
+    """
+    road = roads[:, bounds[c, 0] : bounds[c, 1]]
+    cx, cy, th, kappa = _centreline(road, u)
+    tx, ty = math.sin(th), math.cos(th)
+    return cx, cy, tx, ty, kappa, cx - d * ty, cy + d * tx
 
 
 @numba.njit(cache=True, inline="always")
@@ -124,7 +124,6 @@ def _model(  # type: ignore[no-untyped-def]
     for a in range(3):
         for c in range(3):
             rm[a, c] += s2 * bb[a] * bb[c]
-    return road
 
 
 @numba.njit(cache=True)
@@ -151,8 +150,7 @@ def gate_scan(  # type: ignore[no-untyped-def]
             i, x, spread, corridor, roads, bounds, radar, noise_tab, noise_cnt, across_std,
             zp, h, rm, jp, jv,
         )  # fmt: skip
-        off = abs((zp[1] - radar[3] + math.pi) % (2.0 * math.pi) - math.pi)
-        seen[i] = in_view(zp[0], off, fields, radar[4])
+        seen[i] = in_view(zp[0], off_boresight(zp[1], radar), fields, radar[4])
         if not seen[i] or n_d == 0:
             d2[i, :] = np.inf
             continue
@@ -251,20 +249,20 @@ def unambiguous_assignment(d2, gate):  # type: ignore[no-untyped-def]
 def update_tracks(  # type: ignore[no-untyped-def]
     order, owner, z, x, p, spread, stopped, moved, direction, slow_since, corridor, roads,
     bounds, radar, noise_tab, noise_cnt, across_std, moving_radial, start_speed_var,
-    learning_rate, spread_lo, spread_hi, lane_half_width, bias, bias_stats, bias_forget,
+    learning_rate, spread_lo, spread_hi, align, lane_half_width, bias, bias_stats, bias_forget,
     bias_gate,
 ):  # fmt: skip
     """Update each owning track with its detections in ``order`` (sequential EKF updates).
 
-    Azimuth alignment: before its update, a detection of a moving track (``moved``, not
-    stopped, ``direction`` known, faster than ``BIAS_MIN_SPEED_MPS``) is
-    compared with the centre of the lane it drives in
-    (``lane_half_width`` per corridor to the right of travel): its offset across the lane
-    ``lat`` is ``g b`` for an azimuth bias ``b``, with ``g`` the offset's derivative with
-    respect to the azimuth. Least squares over the detections (the ``bias`` already taken off
-    added back) accumulate in ``bias_stats`` = [sum g^2, sum g lat, count] with forgetting
-    factor ``bias_forget`` per detection; a detection further than ``bias_gate`` [m] across
-    from the lane centre (another lane, a footway) is left out.
+    Azimuth alignment (if ``align``): before its update, a detection of a moving track
+    (``moved``, not stopped, ``direction`` known, faster than ``BIAS_MIN_SPEED_MPS``) is
+    compared with the centre of the lane it drives in (``lane_half_width`` per corridor to the
+    right of travel): its offset across the lane ``lat`` is ``g b`` for an azimuth bias ``b``,
+    with ``g`` the offset's derivative with respect to the azimuth. Least squares over the
+    detections (the ``bias`` already taken off added back) accumulate in ``bias_stats`` =
+    [sum g^2, sum g lat, count] with forgetting factor ``bias_forget`` per detection; a
+    detection further than ``bias_gate`` [m] across from the lane centre (another lane, a
+    footway) is left out.
 
     A detection whose radial speed exceeds ``moving_radial`` along the vehicle's ``direction``
     ends the stop of a vehicle that had moved (speed and acceleration freed with variance
@@ -278,16 +276,13 @@ def update_tracks(  # type: ignore[no-untyped-def]
     for j in order:
         i = owner[j]
         # body spread: along-track residual of the detection's ground point
-        road = roads[:, bounds[corridor[i], 0] : bounds[corridor[i], 1]]
-        cx, cy, th, _ = _centreline(road, x[i, 0])
-        tx, ty = math.sin(th), math.cos(th)
-        px, py = cx - x[i, 3] * ty, cy + x[i, 3] * tx
+        cx, cy, tx, ty, _, px, py = _lane_frame(roads, bounds, corridor[i], x[i, 0], x[i, 3])
         rho = math.sqrt(max(z[j, 0] ** 2 - radar[2] ** 2, 0.01))
         gx = radar[0] + rho * math.sin(z[j, 1])
         gy = radar[1] + rho * math.cos(z[j, 1])
         along = (gx - px) * tx + (gy - py) * ty
         fast = abs(x[i, 1]) >= BIAS_MIN_SPEED_MPS
-        if moved[i] and not stopped[i] and direction[i] != 0.0 and fast:
+        if align and moved[i] and not stopped[i] and direction[i] != 0.0 and fast:
             # across the lane only (the body's extent along it says nothing on the bias)
             lane = -direction[i] * lane_half_width[corridor[i]]
             nx, ny = -ty, tx
@@ -297,9 +292,8 @@ def update_tracks(  # type: ignore[no-untyped-def]
                 bias_stats[0] = bias_forget * bias_stats[0] + g * g
                 bias_stats[1] = bias_forget * bias_stats[1] + g * (lat + bias * g)
                 bias_stats[2] = bias_forget * bias_stats[2] + 1.0
-        off = abs((z[j, 1] - radar[3] + math.pi) % (2.0 * math.pi) - math.pi)
         sr = curve_at(noise_tab, noise_cnt, 0, z[j, 0])
-        sa = curve_at(noise_tab, noise_cnt, 1, off)
+        sa = curve_at(noise_tab, noise_cnt, 1, off_boresight(z[j, 1], radar))
         sample = max(along * along - sr * sr - (rho * sa) ** 2 - p[i, 0, 0], 0.0)
         var = (1.0 - learning_rate) * spread[i] ** 2 + learning_rate * sample
         spread[i] = math.sqrt(min(max(var, spread_lo**2), spread_hi**2))
@@ -336,11 +330,8 @@ def occluded_rows(rows, x, spread, corridor, roads, bounds, radar):  # type: ign
     az = np.zeros(n)
     half = np.zeros(n)
     for i in range(n):
-        road = roads[:, bounds[corridor[i], 0] : bounds[corridor[i], 1]]
-        cx, cy, th, _ = _centreline(road, x[i, 0])
-        tx, ty = math.sin(th), math.cos(th)
-        ex = cx - x[i, 3] * ty - radar[0]
-        ey = cy + x[i, 3] * tx - radar[1]
+        _, _, tx, ty, _, px, py = _lane_frame(roads, bounds, corridor[i], x[i, 0], x[i, 3])
+        ex, ey = px - radar[0], py - radar[1]
         rng[i] = math.sqrt(ex * ex + ey * ey)
         az[i] = math.atan2(ex, ey)
         ux, uy = ex / max(rng[i], 1e-9), ey / max(rng[i], 1e-9)
@@ -392,13 +383,11 @@ def planar_rows(  # type: ignore[no-untyped-def]
 ):
     """Planar position, velocity, position sigma (trace) and distance to the crossing."""
     for i in range(x.shape[0]):
-        road = roads[:, bounds[corridor[i], 0] : bounds[corridor[i], 1]]
-        cx, cy, th, kappa = _centreline(road, x[i, 0])
-        tx, ty = math.sin(th), math.cos(th)
-        rx, ry = -ty, tx
         d = x[i, 3]
+        _, _, tx, ty, kappa, px, py = _lane_frame(roads, bounds, corridor[i], x[i, 0], d)
+        pos[i, 0], pos[i, 1] = px, py
+        rx, ry = -ty, tx
         lever = 1.0 + kappa * d
-        pos[i, 0], pos[i, 1] = cx + d * rx, cy + d * ry
         vel[i, 0], vel[i, 1] = x[i, 1] * lever * tx, x[i, 1] * lever * ty
         # position covariance J P J^T with J = [lever t, right] on (u, d)
         a0, a1 = lever * tx, lever * ty

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from .._typing import FloatArray
 from ..analysis.gospa import gospa, identity_counts
 from .scene import STEP_S, STOPPED_MPS, SceneTruth
 
@@ -139,6 +140,14 @@ def hazard_stops(truth: SceneTruth, barrier_m: float, *, confirm_s: float = 0.5)
     return pd.DataFrame(rows, columns=["object_id", "stop_time_s", "east_m", "north_m"])
 
 
+def _events_of(events: pd.DataFrame, kind: str) -> tuple[pd.DataFrame, FloatArray, FloatArray]:
+    """Events of one kind in time order, with their times (E,) and positions (E, 2)."""
+    if not len(events):
+        return events, np.zeros(0), np.zeros((0, 2))
+    ev = events[events["event"] == kind].sort_values("time_s")
+    return ev, ev["time_s"].to_numpy(), ev[["east_m", "north_m"]].to_numpy()
+
+
 def event_outcomes(
     truth: SceneTruth,
     events: pd.DataFrame,
@@ -154,10 +163,7 @@ def event_outcomes(
     and the events that match no hazard (false events).
     """
     stops = hazard_stops(truth, barrier_m)
-    ev = events[events["event"] == "stopped_between_barriers"] if len(events) else events
-    ev = ev.sort_values("time_s") if len(ev) else ev
-    t = ev["time_s"].to_numpy() if len(ev) else np.zeros(0)
-    xy = ev[["east_m", "north_m"]].to_numpy() if len(ev) else np.zeros((0, 2))
+    ev, t, xy = _events_of(events, "stopped_between_barriers")
     used = np.zeros(t.size, dtype=bool)
     delays = []
     for st in stops.itertuples():
@@ -167,8 +173,7 @@ def event_outcomes(
         if k >= 0:
             used[k] = True
         delays.append(t[k] - st.stop_time_s if k >= 0 else np.nan)
-    false = ev[~used] if len(ev) else ev
-    return stops.assign(delay_s=np.array(delays, dtype=float)), false
+    return stops.assign(delay_s=np.array(delays, dtype=float)), ev[~used]
 
 
 def stop_line_outcomes(
@@ -183,10 +188,7 @@ def stop_line_outcomes(
     NaN: missed) and the events that match no run (false).
     """
     runs = truth.stop_line_runs
-    ev = events[events["event"] == "will_not_stop_before_stop_line"] if len(events) else events
-    ev = ev.sort_values("time_s") if len(ev) else ev
-    t = ev["time_s"].to_numpy() if len(ev) else np.zeros(0)
-    xy = ev[["east_m", "north_m"]].to_numpy() if len(ev) else np.zeros((0, 2))
+    ev, t, xy = _events_of(events, "will_not_stop_before_stop_line")
     used = np.zeros(t.size, dtype=bool)
     tab = truth.table
     lead = []
@@ -203,8 +205,7 @@ def stop_line_outcomes(
         if k >= 0:
             used[k] = True
         lead.append(run.cross_time_s - t[k] if k >= 0 else np.nan)
-    false = ev[~used] if len(ev) else ev
-    return runs.assign(lead_s=np.array(lead, dtype=float)), false
+    return runs.assign(lead_s=np.array(lead, dtype=float)), ev[~used]
 
 
 __all__ = ["SceneScore", "event_outcomes", "hazard_stops", "score_scene", "stop_line_outcomes"]

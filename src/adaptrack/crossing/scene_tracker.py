@@ -170,6 +170,11 @@ class _Tracks:
             np.zeros(0, int), np.zeros((0, N_STATE)), np.zeros((0, N_STATE, N_STATE)), 0.0, 0.0
         )
 
+    @property
+    def static(self) -> np.ndarray:
+        """Stopped objects that never moved (clutter: a post, a rail), bool per track."""
+        return self.stopped & ~self.moved
+
     def append(self, other: _Tracks) -> None:
         for name in self.__dataclass_fields__:
             setattr(self, name, np.concatenate([getattr(self, name), getattr(other, name)]))
@@ -211,8 +216,7 @@ class SceneTracker:
         self.site = site
         self.config = config or SceneTrackerConfig()
         # the controller's warning intervals (K, 2) [s]: lights flashing or barriers down
-        self.warnings = np.asarray(warnings if warnings is not None else np.zeros((0, 2)))
-        self.warnings = self.warnings.reshape(-1, 2).astype(float)
+        self.warnings = np.asarray([] if warnings is None else warnings, float).reshape(-1, 2)
         self.corridors = site_corridors(site.roads, site.zone_m + site.run_in_m)
         self.book = TrackBook(self.config.rules)
         self.tracks = _Tracks.empty()
@@ -335,10 +339,11 @@ class SceneTracker:
                     tr.direction, tr.slow_since, tr.corridor, self._roads, self._bounds,
                     radar_row, noise_tab, noise_cnt, cfg.body_across_std_m,
                     cfg.moving_radial_mps, cfg.start_speed_max_mps**2,
-                    cfg.spread_learning_rate, lo, hi, self._half_lane, bias, stats,
+                    cfg.spread_learning_rate, lo, hi, cfg.estimate_azimuth_bias,
+                    self._half_lane, bias, stats,
                     1.0 - 1.0 / cfg.bias_memory, cfg.bias_gate_m,
                 )  # fmt: skip
-                if cfg.estimate_azimuth_bias and stats[2] >= cfg.bias_min_samples:
+                if stats[2] >= cfg.bias_min_samples:
                     self.azimuth_bias_rad[radar_name] = float(stats[1] / stats[0])
                 used[order] = True
                 hit[owner[order]] = True
@@ -375,7 +380,7 @@ class SceneTracker:
         a rail) is its reflection; a road user passing over it would otherwise take it and
         leave a track behind on the clutter when it drives on.
         """
-        static = self.tracks.stopped & ~self.tracks.moved
+        static = self.tracks.static
         static &= self.tracks.time_s - self.book.born_s >= self.config.clutter_age_s
         if not static.any() or static.all():
             return
@@ -403,7 +408,7 @@ class SceneTracker:
         dd = np.abs(tr.x[a, 3] - tr.x[b, 3])
         dv = np.abs(tr.x[a, 1] - tr.x[b, 1])
         sv = np.sqrt(tr.p[a, 1, 1] + tr.p[b, 1, 1])
-        static = tr.stopped & ~tr.moved
+        static = tr.static
         same = (
             (static[a] == static[b])
             & (du < tr.spread[a] + tr.spread[b] + 0.5)
@@ -447,7 +452,7 @@ class SceneTracker:
             tr.p[enter, :, 1:3] = 0.0
         # hazard: a road user stopped between the barriers
         to_cross = np.abs(self._crossing_u[tr.corridor] - tr.x[:, 0])
-        on_road = np.abs(tr.x[:, 3]) <= 2.0 * self._half_lane[tr.corridor]  # both lanes
+        on_road = self._on_carriageway()
         hazard = (
             tr.stopped & tr.moved & ~tr.event_raised & (to_cross <= self.site.barrier_m) & on_road
         )
@@ -455,6 +460,11 @@ class SceneTracker:
         tr.event_raised |= hazard
         if self._warning(time_s):
             self._stop_line_events(time_s)
+
+    def _on_carriageway(self) -> np.ndarray:
+        """Which tracks are on the road (either lane), not beside it (bool per track)."""
+        tr = self.tracks
+        return np.abs(tr.x[:, 3]) <= 2.0 * self._half_lane[tr.corridor]
 
     def _warning(self, time_s: float) -> bool:
         """Whether the crossing's lights flash or its barriers are down at ``time_s``."""
@@ -475,7 +485,7 @@ class SceneTracker:
         speed = tr.x[:, 1] * np.sign(ahead)  # > 0 approaching
         front = np.sqrt(3.0) * tr.spread  # half a uniform body of that spread
         to_line = np.abs(ahead) - self.site.stop_line_m - front
-        on_road = np.abs(tr.x[:, 3]) <= 2.0 * self._half_lane[tr.corridor]
+        on_road = self._on_carriageway()
         cand = (
             self.book.confirmed & tr.moved & ~tr.stopped & ~tr.line_event_raised & on_road
             & (speed > 0.5) & (to_line > -front)
@@ -485,7 +495,7 @@ class SceneTracker:
         cant = (
             cand & seen & (slow_bound > np.sqrt(2.0 * cfg.stop_decel_mps2 * np.maximum(to_line, 0)))
         )
-        road_user = self.book.confirmed & ~(tr.stopped & ~tr.moved)
+        road_user = self.book.confirmed & ~tr.static
         for i in np.flatnonzero(cant):  # one who follows a road user stops behind it
             ahead_i = (tr.x[:, 0] - tr.x[i, 0]) * np.sign(ahead[i])
             lane = np.abs(tr.x[:, 3] - tr.x[i, 3]) < self._half_lane[tr.corridor[i]]
