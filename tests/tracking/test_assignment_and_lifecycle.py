@@ -115,3 +115,19 @@ def test_confirmation_waits_until_the_track_is_ready():
     assert book.record(rows, hits, 0.1, np.array([True, False])).tolist() == [0]
     assert book.record(rows, hits, 0.2, np.array([True, False])).tolist() == []
     assert book.record(rows, hits, 0.3, np.array([True, True])).tolist() == [1]
+
+
+def test_an_unconfirmed_track_dies_of_age_and_a_lost_one_of_its_sigma():
+    book = TrackBook(LifecycleRules(max_tentative_s=2.0, max_position_std_m=8.0))
+    book.add(2, 0.0)
+    rows = np.arange(2)
+    none = np.zeros(2, bool)
+    for t in np.arange(1, 20) / 10:  # both seen every scan; only the second is ever ready
+        book.record(rows, np.array([True, True]), t, np.array([False, True]))
+    assert book.confirmed.tolist() == [False, True]
+    assert book.expired(1.95, none, none).tolist() == []
+    assert book.expired(2.05, none, none).tolist() == [0]  # not confirmed within 2 s
+    sigma = np.array([1.0, 9.0])
+    assert book.expired(1.95, none, none, sigma).tolist() == [1]  # lost: 9 m > 8 m
+    assert book.expired(1.95, np.array([False, True]), none, sigma).tolist() == []  # stopped
+    assert book.expired(1.95, none, none, np.array([1.0, 7.9])).tolist() == []

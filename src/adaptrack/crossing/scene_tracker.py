@@ -531,7 +531,8 @@ class SceneTracker:
 
     def _delete(self, time_s: float) -> None:
         tr = self.tracks
-        gone = self.book.expired(time_s, tr.stopped, tr.occluded)
+        position_std = np.sqrt(tr.p[:, 0, 0] + tr.p[:, 3, 3])  # along and across the corridor
+        gone = self.book.expired(time_s, tr.stopped, tr.occluded, position_std)
         # tracks that left every corridor
         out = (tr.x[:, 0] < 0) | (tr.x[:, 0] > self._length_m[tr.corridor])
         self._drop(np.union1d(gone, np.flatnonzero(out)))

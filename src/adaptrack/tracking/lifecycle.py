@@ -29,17 +29,22 @@ class LifecycleRules:
     """Rules of the track life cycle.
 
     Confirm after ``confirm_hits`` hits in the last ``confirm_window`` scans; drop a tentative
-    track after ``tentative_misses`` misses in a row; delete a confirmed track not seen for
+    track after ``tentative_misses`` misses in a row or when it is not confirmed within
+    ``max_tentative_s`` of its birth (misses that tell nothing, e.g. behind another object,
+    must not keep a false alarm's track alive); delete a confirmed track not seen for
     ``max_coast_s`` (``max_coast_stopped_s`` while stopped, ``max_coast_hidden_s`` while
-    possibly hidden behind another object) [s].
+    possibly hidden behind another object) [s], or whose position sigma exceeds
+    ``max_position_std_m`` while it is not stopped (it no longer says where the object is).
     """
 
     confirm_hits: int = 3
     confirm_window: int = 4
     tentative_misses: int = 2
+    max_tentative_s: float = 3.0
     max_coast_s: float = 1.5
     max_coast_stopped_s: float = 600.0
     max_coast_hidden_s: float = 10.0
+    max_position_std_m: float = 10.0
 
     def __post_init__(self) -> None:
         if not 1 <= self.confirm_hits <= self.confirm_window <= 62:
@@ -91,19 +96,30 @@ class TrackBook:
         self.confirmed[now] = True
         return now
 
-    def expired(self, time_s: float, stopped: np.ndarray, hidden: np.ndarray) -> np.ndarray:
+    def expired(
+        self,
+        time_s: float,
+        stopped: np.ndarray,
+        hidden: np.ndarray,
+        position_std_m: FloatArray | None = None,
+    ) -> np.ndarray:
         """Return the rows to delete at ``time_s``.
 
-        Failed tentative tracks, and confirmed ones coasting too long (``stopped`` and
-        ``hidden`` rows by their own limits).
+        Failed tentative tracks, confirmed ones coasting too long (``stopped`` and ``hidden``
+        rows by their own limits) and moving ones whose ``position_std_m`` [m] (per row; none:
+        not checked) is beyond the limit.
         """
         r = self.rules
         limit = np.where(
             stopped, r.max_coast_stopped_s, np.where(hidden, r.max_coast_hidden_s, r.max_coast_s)
         )
-        dead_tentative = ~self.confirmed & (self.misses >= r.tentative_misses)
-        dead_confirmed = self.confirmed & (time_s - self.last_hit_s > limit)
-        return np.flatnonzero(dead_tentative | dead_confirmed)
+        dead_tentative = ~self.confirmed & (
+            (self.misses >= r.tentative_misses) | (time_s - self.born_s > r.max_tentative_s)
+        )
+        dead = dead_tentative | (self.confirmed & (time_s - self.last_hit_s > limit))
+        if position_std_m is not None:
+            dead |= ~stopped & (np.asarray(position_std_m) > r.max_position_std_m)
+        return np.flatnonzero(dead)
 
     def remove(self, rows: np.ndarray) -> None:
         """Forget the tracks in ``rows``."""
