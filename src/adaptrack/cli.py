@@ -35,6 +35,7 @@ from .crossing.measurements_io import (
     read_scene_detections,
     read_warnings,
 )
+from .crossing.mixed_traffic import MixedTraffic, mixed_traffic_study
 from .crossing.radar_sim import simulate_site_case
 from .crossing.report import build_report, render_html, sample_tracks
 from .crossing.scene import scene_spec, simulate_scene
@@ -106,11 +107,19 @@ def demo(
     families: str = FAMILY_KEYS,
     workers: int | None = WORKERS,
     scheduler: str | None = SCHEDULER,
+    scene_seconds: float = typer.Option(
+        600.0,
+        "--scene-seconds",
+        min=0.0,
+        help="Length of the report's mixed-traffic scene [s] (0: no such section).",
+    ),
 ) -> None:
     """Level-crossing demo: adapt the estimator to a site, then prove compliance on new runs.
 
     Every candidate family is tuned on training runs and scored on validation runs; the best
     is deployed and checked, with the references, on test runs that neither step has seen.
+    Then the site's mixed traffic (many objects, raw detections, a vehicle stalled on the
+    crossing) is tracked by the scene tracker and scored against its truth.
     """
     st = _load_site(site)
     criterion = _criterion(criterion)
@@ -148,6 +157,7 @@ def demo(
             test, st, {winner.label: trackers[winner.label]}, pool=pool, progress=step
         )
     test = dataclasses.replace(test, seed=seed)
+    mixed, mixed_note = _mixed_traffic(st, seed, scene_seconds, console)
     console.print(_candidates_table(tuning))
     console.print(f"deployed: {tuning.reason}")
     console.print(_verdict_table(test, winner.label))
@@ -163,7 +173,10 @@ def demo(
         "selection": tuning.to_json(),
         "validation": validation.to_json(),
         "test": test.to_json(),
+        "mixed_traffic": mixed.to_json() if mixed is not None else {"skipped": mixed_note},
     }
+    if mixed is not None:
+        console.print(_mixed_traffic_table(mixed))
     _write_json(out / "summary.json", summary)
     _write_text(out / "tuned.toml", tuning.to_toml())
     report_data = build_report(
@@ -173,12 +186,51 @@ def demo(
         deployed=winner.label,
         tuning=tuning,
         validation=validation,
+        mixed_traffic=mixed,
+        mixed_traffic_note=mixed_note,
     )
     _write_text(out / "report.html", render_html(report_data))
     console.print(
         f"wrote {out / 'summary.json'}, {out / 'tuned.toml'} and {out / 'report.html'} "
         f"(test Monte Carlo {test.elapsed_s:.1f} s)"
     )
+
+
+def _mixed_traffic(
+    st: Site, seed: int, duration_s: float, console: Console
+) -> tuple[MixedTraffic | None, str]:
+    """Return the demo's scored mixed-traffic scene, or None and why there is none."""
+    if duration_s <= 0:
+        return None, "not requested (--scene-seconds 0)"
+    scene_seed = int(np.random.SeedSequence([seed, 17]).generate_state(1)[0])
+    with Progress(console=console, transient=True) as progress:
+        task = progress.add_task("mixed traffic", total=None)
+
+        def on_scan(done: int, total: int) -> None:
+            if done % 500 == 0 or done == total:
+                progress.update(task, completed=done, total=total)
+
+        try:
+            return mixed_traffic_study(st, scene_seed, duration_s, on_scan=on_scan), ""
+        except ValueError as exc:  # a site without a scene (no flow between two roads)
+            return None, str(exc)
+
+
+def _mixed_traffic_table(m: MixedTraffic) -> Table:
+    table = Table(
+        title=f"mixed traffic, {m.duration_s:g} s: GOSPA {m.gospa_mean:.2f} m, "
+        f"{m.id_switches} id switches, hazard delays "
+        f"{[round(h['delay_s'], 2) for h in m.hazards]} s, "
+        f"{len(m.false_stop_times_s)} false 'stopped' events"
+    )
+    for col in ("class", "vehicles", "position RMS [m]", "speed RMS [km/h]", "verdict"):
+        table.add_column(col)
+    for c in m.classes:
+        table.add_row(
+            str(c["class"]), str(c["vehicles"]), f"{c['position_rms_m']:.3f}",
+            f"{c['speed_rms_kmh']:.3f}", str(c["verdict"]),
+        )  # fmt: skip
+    return table
 
 
 def _load_site(site: str) -> Site:
@@ -267,6 +319,9 @@ def report(
         tuning = SiteTuning.from_json(data["selection"])
         validation = ComplianceResult.from_json(data["validation"])
         seed = int(data["seed"])
+        scene = data.get("mixed_traffic", {"skipped": "the summary has no mixed-traffic scene"})
+        mixed = None if "skipped" in scene else MixedTraffic.from_json(scene)
+        mixed_note = str(scene.get("skipped", ""))
     except (OSError, ValueError, KeyError, TypeError) as exc:
         _fail(f"{summary}: not a demo summary ({exc})")
     report_data = build_report(
@@ -276,6 +331,8 @@ def report(
         deployed=str(data["deployed"]),
         tuning=tuning,
         validation=validation,
+        mixed_traffic=mixed,
+        mixed_traffic_note=mixed_note,
     )
     _write_text(out, render_html(report_data))
     Console().print(f"wrote {out}")

@@ -1,10 +1,7 @@
 """The HTML compliance report: plain data, self-containment, rendering in headless Chromium."""
 
 import copy
-import os
 import re
-import shutil
-import subprocess
 
 import pytest
 
@@ -12,6 +9,7 @@ from adaptrack.crossing.compliance import evaluate_site
 from adaptrack.crossing.report import build_report, render_html, sample_tracks
 from adaptrack.crossing.selection import select_estimator
 from adaptrack.crossing.site import site_from_mapping
+from tests.browser import render_in_chromium
 
 # a small site written as a user would: one arm, a near and a far field, two cases
 SMALL = {
@@ -116,40 +114,13 @@ def test_user_strings_are_escaped(small_report):
 
 
 def test_report_renders_in_headless_chromium(small_report, tmp_path):
-    chromium = shutil.which("chromium") or shutil.which("chromium-browser")
-    if chromium is None:
-        if os.environ.get("CI") == "true":
-            pytest.fail("chromium must be installed in CI (.ci/run installs Debian chromium)")
-        pytest.skip("chromium is not installed on this machine; CI installs it")
     page = tmp_path / "report.html"
     page.write_text(small_report[1])
-    shot = tmp_path / "shot.png"
-    flags = [
-        "--headless",
-        "--no-sandbox",
-        "--disable-gpu",
-        "--disable-quic",
-        "--no-first-run",
-        "--disable-background-networking",
-        "--disable-component-update",
-        "--disable-sync",
-        f"--user-data-dir={tmp_path / 'profile'}",
-        "--enable-logging=stderr",
-        "--v=0",
-    ]
-    proc = subprocess.run(
-        [chromium, *flags, f"--screenshot={shot}", "--window-size=1100,2600", page.as_uri()],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
-    assert shot.exists() and shot.stat().st_size > 20_000, proc.stderr[-2000:]
-    assert "CONSOLE" not in proc.stderr and "Uncaught" not in proc.stderr
-    dom = subprocess.run(
-        [chromium, *flags, "--dump-dom", page.as_uri()], capture_output=True, text=True, timeout=120
-    ).stdout
-    assert "Pass/fail per estimator, class and case" in dom and "<svg" in dom
-    assert "Design-time selection" in dom
+    shown = render_in_chromium(page, tmp_path)
+    assert shown.screenshot_bytes > 20_000, shown.log[-2000:]
+    assert "CONSOLE" not in shown.log and "Uncaught" not in shown.log
+    assert "Pass/fail per estimator, class and case" in shown.dom and "<svg" in shown.dom
+    assert "Design-time selection" in shown.dom
 
 
 def test_profile_figure_shows_the_cv_member(small_report):

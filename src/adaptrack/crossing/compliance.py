@@ -340,9 +340,23 @@ def _blocks(
     return list(zip(sizes, seeds, strict=True))
 
 
-def _level(confidence: float) -> float:
+def bound_level(confidence: float) -> float:
     """Nominal level that gives the stated one-sided ``confidence`` (calibrated at 95 %)."""
     return 1.0 - (1.0 - confidence) * (1.0 - BOUND_LEVEL) / (1.0 - CONFIDENCE)
+
+
+def verdict_of(rms: FloatArray, lower: FloatArray, upper: FloatArray, limits: FloatArray) -> str:
+    """Return "fail" if a lower bound is beyond its limit, "pass" if every upper bound is within.
+
+    Quantities with a NaN RMS (not scored) are left out; the first (position) must be scored
+    to pass. Otherwise "undecided".
+    """
+    scored = np.asarray(np.isfinite(rms), dtype=bool)
+    if np.any(lower[scored] > limits[scored]):
+        return "fail"
+    if np.all(upper[scored] <= limits[scored]) and scored[0]:
+        return "pass"
+    return "undecided"
 
 
 def rows_of_pair(
@@ -355,14 +369,8 @@ def rows_of_pair(
     for name in blocks[0][0]:
         parts = [b[0][name] for b in blocks]
         sums = sum(parts[1:], parts[0])
-        rms, lower, upper = rms_with_bounds(sums.squares, sums.counts, _level(confidence))
-        scored = np.asarray(np.isfinite(rms), dtype=bool)
-        if np.any(lower[scored] > LIMITS[scored]):
-            verdict = "fail"
-        elif np.all(upper[scored] <= LIMITS[scored]) and scored[0]:
-            verdict = "pass"
-        else:
-            verdict = "undecided"
+        rms, lower, upper = rms_with_bounds(sums.squares, sums.counts, bound_level(confidence))
+        verdict = verdict_of(rms, lower, upper, LIMITS)
         zone = float(sums.zone.sum())
         rows.append(
             ComplianceRow(
@@ -579,6 +587,7 @@ __all__ = [
     "ComplianceResult",
     "ComplianceRow",
     "RunSums",
+    "bound_level",
     "confirm_undecided",
     "default_trackers",
     "evaluate_pair",
@@ -589,5 +598,6 @@ __all__ = [
     "run_sums",
     "runs_of",
     "scored_epochs",
+    "verdict_of",
     "zone_epochs",
 ]

@@ -3,7 +3,9 @@
 Sections: the verdict of the deployed estimator on the test runs (RMS with one-sided
 confidence bounds), the design-time selection (every candidate on the validation runs, its
 ratio to the road-aligned PCRLB, and why the winner won), the site map with fields of view and
-blind zones, sample tracks, the M1 profile J(lambda), and the pass/fail table.
+blind zones, sample tracks, the M1 profile J(lambda), the mixed-traffic scene
+(:mod:`adaptrack.crossing.mixed_traffic`: many objects from raw detections, GOSPA, events,
+per-class accuracy through association) and the pass/fail table.
 
 The HTML has inline CSS and inline SVG figures (matplotlib, fixed hash salt, no dates), no
 scripts and no network resources; every user-supplied string is escaped.
@@ -12,18 +14,15 @@ scripts and no network resources; every user-supplied string is escaped.
 from __future__ import annotations
 
 import html
-import io
 import math
 from dataclasses import dataclass, field
 from typing import Any
 
-import matplotlib
-
-matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
 from .. import __version__
+from ._figures import draw_site, site_layers, svg_of
 from .compliance import (
     CONFIRMATION_FACTOR,
     POSITION_LIMIT_M,
@@ -32,6 +31,7 @@ from .compliance import (
     WARM_UP_S,
     ComplianceResult,
 )
+from .mixed_traffic import MixedTraffic, mixed_traffic_html
 from .radar_sim import simulate_site_case
 from .selection import CRITERION_TEXT, SiteTuning
 from .site import Site, blind_zones
@@ -78,6 +78,8 @@ class ReportData:
     selection: dict[str, Any] = field(default_factory=dict)
     candidates: list[dict[str, Any]] = field(default_factory=list)
     profile: dict[str, list[float]] = field(default_factory=dict)
+    mixed_traffic: MixedTraffic | None = None
+    mixed_traffic_note: str = ""  # why there is no mixed-traffic section
 
 
 def _sample_pairs(site: Site) -> list[tuple[Any, Any]]:
@@ -155,25 +157,16 @@ def build_report(
     deployed: str = "",
     tuning: SiteTuning | None = None,
     validation: ComplianceResult | None = None,
+    mixed_traffic: MixedTraffic | None = None,
+    mixed_traffic_note: str = "",
 ) -> ReportData:
     """Collect the report's content as plain data.
 
     ``test``: the compliance Monte Carlo (``deployed`` names its deployed estimator);
-    ``tuning`` and ``validation``: the design-time selection and its validation runs.
+    ``tuning`` and ``validation``: the design-time selection and its validation runs;
+    ``mixed_traffic``: the scored scene (or ``mixed_traffic_note``: why there is none).
     """
-    roads = {
-        name: road.lane_point(np.linspace(0, road.length_m, 200)).tolist()
-        for name, road in site.roads.items()
-    }
-    radars = [
-        {
-            "name": r.name,
-            "xy": list(r.position_m),
-            "boresight_rad": r.boresight_rad,
-            "fields": [[f.max_range_m, f.half_angle_rad] for f in r.fields],
-        }
-        for r in site.radars
-    ]
+    roads, radars = site_layers(site)
     blind = {
         f"{name}: {a:.1f}-{b:.1f} m": site.roads[name].lane_point(np.linspace(a, b, 20)).tolist()
         for name, parts in blind_zones(site).items()
@@ -231,35 +224,15 @@ def build_report(
         selection,
         candidates,
         dict(tuning.m1_profile) if tuning is not None else {},
+        mixed_traffic,
+        mixed_traffic_note,
     )
-
-
-def _svg(fig: Any) -> str:
-    buf = io.StringIO()
-    with plt.rc_context({"svg.hashsalt": "adaptrack", "svg.fonttype": "none"}):
-        fig.savefig(buf, format="svg", metadata={"Date": None, "Creator": None})
-    plt.close(fig)
-    text = buf.getvalue()
-    text = text[text.index("<svg") :]
-    if "<metadata>" in text:  # RDF metadata: not needed, and it names external vocabularies
-        text = text[: text.index("<metadata>")] + text[text.index("</metadata>") + 11 :]
-    return text
 
 
 def _map_figure(data: ReportData) -> str:
     fig, ax = plt.subplots(figsize=(6, 6))
-    for name, pts in data.roads.items():
-        p = np.asarray(pts)
-        ax.plot(p[:, 0], p[:, 1], color="0.6", lw=3, label=f"lane, road {name}")
     reach = max(float(np.hypot(*np.asarray(p).T).max()) for p in data.roads.values())
-    for r in data.radars:
-        x, y = r["xy"]
-        ax.plot(x, y, "k^", ms=9)
-        for max_range, half in r["fields"]:  # each field of view, drawn up to the roads' reach
-            length = min(max_range, reach)
-            for sgn in (-1, 1):
-                a = r["boresight_rad"] + sgn * half
-                ax.plot([x, x + length * math.sin(a)], [y, y + length * math.cos(a)], "k:", lw=0.8)
+    draw_site(ax, data.roads, data.radars, reach)  # each field of view up to the roads' reach
     for j, pts in enumerate(data.blind.values()):
         p = np.asarray(pts)
         label = "blind zone (its radar does not see it)" if j == 0 else None
@@ -277,7 +250,7 @@ def _map_figure(data: ReportData) -> str:
     ax.set_aspect("equal", "datalim")
     ax.legend(fontsize=6, loc="best")
     ax.set_title("site map: roads, radars' fields of view, blind zones, sample tracks")
-    return _svg(fig)
+    return svg_of(fig)
 
 
 def _error_figure(data: ReportData) -> str:
@@ -297,7 +270,7 @@ def _error_figure(data: ReportData) -> str:
         axes[1, j].set_xlabel("time [s]")
         axes[0, j].legend(fontsize=6)
     fig.tight_layout()
-    return _svg(fig)
+    return svg_of(fig)
 
 
 def _rms_figure(data: ReportData, name: str) -> str:
@@ -324,7 +297,7 @@ def _rms_figure(data: ReportData, name: str) -> str:
         f"{name}: RMS per class and case with the {100 * data.confidence:.0f} % upper bound"
     )
     fig.tight_layout()
-    return _svg(fig)
+    return svg_of(fig)
 
 
 def _profile_figure(data: ReportData) -> str:
@@ -342,7 +315,7 @@ def _profile_figure(data: ReportData) -> str:
     ax.set_ylabel("J (training criterion)")
     ax.set_title("design-time adaptation: J(lambda) of M1")
     fig.tight_layout()
-    return _svg(fig)
+    return svg_of(fig)
 
 
 def _num(v: float, fmt: str) -> str:
@@ -477,6 +450,13 @@ def render_html(data: ReportData) -> str:
             "<h2>Design-time adaptation of M1</h2><figure id='profile'>"
             + _profile_figure(data)
             + "</figure>"
+        )
+    if data.mixed_traffic is not None:
+        parts += mixed_traffic_html(data.mixed_traffic, data.roads, data.radars, data.zone_m)
+    elif data.mixed_traffic_note:
+        parts.append(
+            "<h2 id='mixed'>Mixed traffic</h2><p>No mixed-traffic section: "
+            f"{e(data.mixed_traffic_note)}</p>"
         )
     conf = f"{100 * data.confidence:.0f} %"
     parts.append(

@@ -17,7 +17,9 @@ import numpy as np
 import pandas as pd
 
 from .._typing import FloatArray
+from ..analysis.confidence import rms_with_bounds
 from ..analysis.gospa import gospa, identity_counts
+from .compliance import CONFIDENCE, POSITION_LIMIT_M, SPEED_LIMIT_KMH, bound_level, verdict_of
 from .scene import STEP_S, STOPPED_MPS, SceneTruth
 
 
@@ -31,15 +33,26 @@ class SceneScore:
     gospa_false: float
     id_switches: int
     fragmentations: int
-    classes: pd.DataFrame  # class, position_rms_m, speed_rms_kmh, coverage, epochs, vehicles
+    classes: pd.DataFrame  # class, position_rms_m, position_upper_m, speed_rms_kmh, ..., verdict
     gospa_series: pd.DataFrame  # time_s, gospa, n_truth, n_tracks
     n_epochs: int
 
 
 def score_scene(
-    truth: SceneTruth, tracks: pd.DataFrame, zone_m: float, *, c: float = 5.0, every_s: float = 0.5
+    truth: SceneTruth,
+    tracks: pd.DataFrame,
+    zone_m: float,
+    *,
+    c: float = 5.0,
+    every_s: float = 0.5,
+    confidence: float = CONFIDENCE,
 ) -> SceneScore:
-    """Score ``tracks`` (rows of :func:`~adaptrack.crossing.scene_tracker.track_scene`)."""
+    """Score ``tracks`` (rows of :func:`~adaptrack.crossing.scene_tracker.track_scene`).
+
+    Per class, the RMS bounds at ``confidence`` take the vehicle as the sampling unit (its
+    epochs are one track's, correlated) and give the verdict as in
+    :mod:`adaptrack.crossing.compliance` (0.7 m, 2 km/h).
+    """
     tab = truth.table
     k_truth = np.rint(tab["time_s"].to_numpy() / STEP_S).astype(np.int64)
     stride = max(1, round(every_s / STEP_S))
@@ -93,15 +106,27 @@ def score_scene(
         tab[(k_truth % stride == 0) & tab["in_zone"].to_numpy()].groupby("vehicle_class").size()
     )
     rows = []
+    limits = np.array([POSITION_LIMIT_M, SPEED_LIMIT_KMH])
     for cls, g in pl.groupby("vehicle_class"):
+        per_vehicle = (
+            g.assign(p2=g["pos_err"] ** 2, s2=(3.6 * g["speed_err"]) ** 2, n=1)
+            .groupby("object_id")[["p2", "s2", "n"]]
+            .sum()
+        )
+        squares = per_vehicle[["p2", "s2"]].to_numpy()
+        counts = np.repeat(per_vehicle[["n"]].to_numpy(), 2, axis=1)
+        rms, lower, upper = rms_with_bounds(squares, counts, bound_level(confidence))
         rows.append(
             {
                 "class": cls,
-                "position_rms_m": float(np.sqrt(np.mean(g["pos_err"] ** 2))),
-                "speed_rms_kmh": float(np.sqrt(np.mean(g["speed_err"] ** 2)) * 3.6),
+                "position_rms_m": float(rms[0]),
+                "position_upper_m": float(upper[0]),
+                "speed_rms_kmh": float(rms[1]),
+                "speed_upper_kmh": float(upper[1]),
+                "verdict": verdict_of(rms, lower, upper, limits),
                 "coverage": len(g) / int(zone_epochs.get(cls, len(g))),
                 "epochs": len(g),
-                "vehicles": g["object_id"].nunique(),
+                "vehicles": len(per_vehicle),
             }
         )
     ident = identity_counts(assignments)

@@ -1,0 +1,67 @@
+"""Figure helpers of the HTML reports: deterministic inline SVG and the site's map layers."""
+
+from __future__ import annotations
+
+import io
+import math
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+
+from .site import Site
+
+
+def svg_of(fig: Any) -> str:
+    """Return ``fig`` as inline SVG (fixed hash salt, no dates, no metadata); close it."""
+    buf = io.StringIO()
+    with plt.rc_context({"svg.hashsalt": "adaptrack", "svg.fonttype": "none"}):
+        fig.savefig(buf, format="svg", metadata={"Date": None, "Creator": None})
+    plt.close(fig)
+    text = buf.getvalue()
+    text = text[text.index("<svg") :]
+    if "<metadata>" in text:  # RDF metadata: not needed, and it names external vocabularies
+        text = text[: text.index("<metadata>")] + text[text.index("</metadata>") + 11 :]
+    return text
+
+
+def site_layers(site: Site) -> tuple[dict[str, list[list[float]]], list[dict[str, Any]]]:
+    """Return the site's lane polylines (200 points per road) and radars as plain data [m, rad]."""
+    roads = {
+        name: road.lane_point(np.linspace(0, road.length_m, 200)).tolist()
+        for name, road in site.roads.items()
+    }
+    radars = [
+        {
+            "name": r.name,
+            "xy": list(r.position_m),
+            "boresight_rad": r.boresight_rad,
+            "fields": [[f.max_range_m, f.half_angle_rad] for f in r.fields],
+        }
+        for r in site.radars
+    ]
+    return roads, radars
+
+
+def draw_site(
+    ax: Any, roads: dict[str, list[list[float]]], radars: list[dict[str, Any]], reach_m: float
+) -> None:
+    """Draw the lanes (grey), the radars (triangles) and their fields of view up to ``reach_m``.
+
+    ``roads``: lane polylines [m]; ``radars``: ``name``, ``xy`` [m], ``boresight_rad`` and
+    ``fields`` ([max range m, half angle rad] each).
+    """
+    for name, pts in roads.items():
+        p = np.asarray(pts)
+        ax.plot(p[:, 0], p[:, 1], color="0.6", lw=3, label=f"lane, road {name}")
+    for r in radars:
+        x, y = r["xy"]
+        ax.plot(x, y, "k^", ms=9)
+        for max_range, half in r["fields"]:
+            length = min(max_range, reach_m)
+            for sgn in (-1, 1):
+                a = r["boresight_rad"] + sgn * half
+                ax.plot([x, x + length * math.sin(a)], [y, y + length * math.cos(a)], "k:", lw=0.8)
