@@ -21,6 +21,7 @@ def test_demo_writes_summary(tmp_path):
     proc = run(
         "demo", "--runs", "2", "--seed", "3", "--out", str(tmp_path), "--workers", "1",
         "--training-runs", "1", "--validation-runs", "2", "--families", "cv,ca,m1,m2",
+        "--scene-seconds", "40",
     )  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     assert "road EKF (M2)" in proc.stdout and "(deployed)" in proc.stdout
@@ -37,10 +38,14 @@ def test_demo_writes_summary(tmp_path):
     assert {"candidates", "deployed", "m1_profile"} <= set(summary["selection"])
     html = (tmp_path / "report.html").read_text()
     assert "Pass/fail per estimator, class and case" in html
+    mixed = summary["mixed_traffic"]  # the scene tracker on 40 s of the site's traffic
+    assert mixed["duration_s"] == 40.0 and mixed["classes"] and "mixed traffic, 40 s" in proc.stdout
+    assert "id='mixed-classes'" in html
     # the report command re-renders from the summary
     proc = run("report", str(tmp_path / "summary.json"), "--out", str(tmp_path / "again.html"))
     assert proc.returncode == 0, proc.stderr
-    assert "Verdict on the test runs" in (tmp_path / "again.html").read_text()
+    again = (tmp_path / "again.html").read_text()
+    assert "Verdict on the test runs" in again and "id='mixed-classes'" in again
     proc = run("report", str(tmp_path / "report.html"), "--out", str(tmp_path / "x.html"))
     assert proc.returncode == 1 and "not a demo summary" in proc.stderr
 

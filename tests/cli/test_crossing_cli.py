@@ -119,6 +119,7 @@ def demo_on_a_site_file(tmp_path_factory):
     proc = run(
         "demo", "--site", str(EXAMPLE_SITE), "--runs", "3", "--training-runs", "1",
         "--validation-runs", "2", "--workers", "1", "--seed", "5", "--out", str(out),
+        "--scene-seconds", "30",
     )  # fmt: skip
     assert proc.returncode == 0, proc.stderr[-3000:]
     return out, proc.stdout
@@ -136,6 +137,9 @@ def test_demo_on_a_site_file_reports_the_family_and_the_validation_table(demo_on
     assert 'family = "' in tuned and "[candidates.imm.parameters]" in tuned
     html = (out / "report.html").read_text()
     assert "rural_crossing" in html and "id='candidates'" in html and "north_east: 0.0-" in html
+    # a site it was not developed on has its own mixed traffic in the report
+    assert summary["mixed_traffic"]["stall_road"] in ("north_east", "south_west")
+    assert "id='mixed-classes'" in html
     # the summary carries the site: the report re-renders for a site given as a file
     again = out / "again.html"
     proc = run("report", str(out / "summary.json"), "--out", str(again))

@@ -234,3 +234,30 @@ def test_will_not_stop_before_the_stop_line_rule():
     quiet.tracks.moved[:] = True
     quiet._modes(10.0)
     assert quiet.events == []
+
+
+def test_a_sites_own_classes_drive_in_its_scene():
+    """A site's custom class (rural_crossing's tractor, its 16.5 m truck) joins its traffic."""
+    from pathlib import Path
+
+    from adaptrack.crossing.scene import detections_per_scan, road_users
+
+    site = load_site(Path(__file__).parents[2] / "examples" / "sites" / "rural_crossing.toml")
+    users = road_users(site)
+    assert users["tractor"] is site.classes["tractor"] and {"pedestrian", "cyclist"} <= set(users)
+    spec = scene_spec(site, duration_s=120.0, closure_s=0.0, stalls=(),
+                      mix={"tractor": 0.5, "truck": 0.5})  # fmt: skip
+    rec = simulate_scene(site, spec, seed=2)
+    u = rec.truth.users
+    assert set(u["vehicle_class"]) == {"tractor", "truck"}
+    assert (u.loc[u["vehicle_class"] == "tractor", "length_m"] == 6.5).all()
+    assert (u.loc[u["vehicle_class"] == "truck", "length_m"] == 16.5).all()
+    tab = rec.truth.table
+    # its top speed along the lane centre; a body up to 3 m off it on the R = 80 m curve's
+    # outside moves up to 3/80 faster
+    assert tab.loc[tab["vehicle_class"] == "tractor", "speed_mps"].max() <= 40 / 3.6 * (1 + 3 / 80)
+    # detections per scan by body length: the built-in classes keep their counts
+    np.testing.assert_array_equal(
+        detections_per_scan(np.array([2.2, 5.0, 6.5, 7.1, 12.0, 16.5])),
+        [[1, 1], [1, 2], [1, 2], [2, 4], [2, 4], [2, 4]],
+    )

@@ -22,8 +22,10 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
+from .._typing import FloatArray
 from ._figures import draw_site, svg_of
 from .compliance import CONFIDENCE, POSITION_LIMIT_M, SPEED_LIMIT_KMH
+from .radar_sim import radial_geometry
 from .scene import Stall, scene_spec, simulate_scene
 from .scene_metrics import event_outcomes, score_scene, stop_line_outcomes
 from .scene_tracker import track_scene
@@ -55,7 +57,7 @@ class MixedTraffic:
     classes: list[dict[str, Any]]  # per class: RMS, upper bounds, verdict, coverage, ...
     gospa_series: dict[str, list[float]]  # time_s, gospa, localisation, missed, false
     closures: list[list[float]]  # barriers down [s]
-    hazards: list[dict[str, float]]  # object_id, stop_time_s, delay_s (NaN: missed)
+    hazards: list[dict[str, Any]]  # object_id, stop_time_s, delay_s (NaN: missed), seen
     false_stop_times_s: list[float]
     stop_line_runs: list[dict[str, float]]  # object_id, cross_time_s, lead_s (NaN: missed)
     false_line_times_s: list[float]
@@ -105,6 +107,15 @@ def _paths(table: pd.DataFrame, key: str, zone_m: float, distance: str) -> list[
     ]
 
 
+def _in_some_view(site: Site, xy: FloatArray) -> list[bool]:
+    """Whether each ground point (N, 2) [m] lies in a field of view of one of the radars."""
+    seen = np.zeros(len(xy), dtype=bool)
+    for radar in site.radars:
+        rng_m, az, _ = radial_geometry(xy, np.zeros_like(xy), radar)
+        seen |= radar.in_view(rng_m, az)
+    return seen.tolist()
+
+
 def mixed_traffic_study(
     site: Site,
     seed: int,
@@ -151,7 +162,9 @@ def mixed_traffic_study(
             for k in ("time_s", "gospa", "localisation", "missed", "false")
         },
         rec.truth.closures.tolist(),
-        hazards[["object_id", "stop_time_s", "delay_s"]].to_dict("records"),
+        hazards.assign(seen=_in_some_view(site, hazards[["east_m", "north_m"]].to_numpy()))[
+            ["object_id", "stop_time_s", "delay_s", "seen"]
+        ].to_dict("records"),
         false_stops["time_s"].astype(float).tolist(),
         runs[["object_id", "cross_time_s", "lead_s"]].to_dict("records"),
         false_line["time_s"].astype(float).tolist(),
@@ -256,7 +269,7 @@ def _events_figure(m: MixedTraffic) -> str:
 
 
 def _cell(value: float) -> str:
-    """A table figure: blank when not computed, "> 100" when a bound says nothing."""
+    """Format a table figure: blank when not computed, "> 100" when a bound says nothing."""
     if not np.isfinite(value):
         return ""
     return "&gt; 100" if value > 100 else f"{value:.3f}"
@@ -294,10 +307,12 @@ def mixed_traffic_html(
     found = [d for d in delays if np.isfinite(d)]
     leads = [r["lead_s"] for r in m.stop_line_runs if np.isfinite(r["lead_s"])]
     hours = m.duration_s / 3600.0
+    blind = sum(1 for h in m.hazards if not h["seen"])
     hazard_text = (
         f"{len(delays)} true hazards (a road user at a standstill between the barriers), "
         f"{len(found)} raised an event"
         + (f", delays {', '.join(f'{d:.2f}' for d in found)} s" if found else "")
+        + (f" ({blind} stood where no radar's field of view reaches)" if blind else "")
         + f"; {len(m.false_stop_times_s)} false 'stopped' events "
         f"({len(m.false_stop_times_s) / hours:.1f} per hour). {len(m.stop_line_runs)} road "
         f"users ran the stop line during a warning, {len(leads)} predicted"

@@ -36,10 +36,9 @@ from .corridor import Corridor, site_corridors
 from .radar_sim import radial_geometry
 from .sensor import RadarSpec
 from .site import Site
-from .traffic import KMH, VEHICLES, VehicleClass
+from .traffic import KMH, VehicleClass
 
-ROAD_USERS = {
-    **VEHICLES,
+WALKERS_AND_RIDERS = {  # road users of every scene besides the site's vehicle classes
     "pedestrian": VehicleClass("pedestrian", 0.5, 0.5, 1.0, 2.0, 3.0, 8.0, 0.1),
     "cyclist": VehicleClass("cyclist", 1.8, 0.6, 1.0, 2.5, 4.0, 40.0, 0.3),
 }
@@ -50,10 +49,33 @@ DESIRED_SPEED_KMH = {  # mean and standard deviation of the desired speed per cl
     "bus": (50.0, 8.0),
     "pedestrian": (5.0, 1.0),
     "cyclist": (18.0, 4.0),
-}
-DETECTIONS_PER_SCAN = {"truck": (2, 4), "bus": (2, 4), "car": (1, 2)}  # others: 1
-NON_BLOCKING = frozenset({"motorcycle", "cyclist", "pedestrian"})
-LARGE = frozenset({"truck", "bus"})  # cast a radar shadow
+}  # another class: 0.8 of its top speed up to 60 km/h, sigma 20 % of that
+NON_BLOCKING = frozenset({"motorcycle", "cyclist", "pedestrian"})  # filter past a queue
+LONG_M = 7.0  # a body this long gives 2-4 detections per scan (4 m: 1-2; shorter: 1)
+LARGE_WIDTH_M = 2.4  # a body this wide (truck, bus, tractor) casts a radar shadow
+
+
+def road_users(site: Site) -> dict[str, VehicleClass]:
+    """Classes of a site's scene: its vehicle classes, pedestrians and cyclists."""
+    return {**site.classes, **WALKERS_AND_RIDERS}
+
+
+def desired_speed_kmh(user: VehicleClass) -> tuple[float, float]:
+    """Mean and standard deviation of a class's desired speed [km/h]."""
+    if user.name in DESIRED_SPEED_KMH:
+        return DESIRED_SPEED_KMH[user.name]
+    mean = min(60.0, 0.8 * user.max_speed_kmh)
+    return mean, 0.2 * mean
+
+
+def detections_per_scan(length_m: FloatArray) -> np.ndarray:
+    """Fewest and most detections of a body per scan (N, 2), by its length [m]."""
+    length_m = np.asarray(length_m, dtype=float)
+    lo = np.where(length_m >= LONG_M, 2, 1)
+    hi = np.where(length_m >= LONG_M, 4, np.where(length_m >= 4.0, 2, 1))
+    return np.stack([lo, hi], -1)
+
+
 OCCLUDED_P = 0.85  # probability that a detection in a radar shadow is lost
 STATIC_P_D = 0.9
 WARNING_S = 8.0  # lights flash this long before the barriers close
@@ -164,9 +186,10 @@ def _check_spec(spec: SceneSpec, site: Site) -> None:
         for road in (f.entry, f.exit):
             if road not in site.roads:
                 raise ValueError(f"scene flow {f.entry}->{f.exit}: unknown road {road!r}")
+    users = road_users(site)
     for name in spec.mix:
-        if name not in ROAD_USERS:
-            raise ValueError(f"scene mix: unknown class {name!r}; known: {', '.join(ROAD_USERS)}")
+        if name not in users:
+            raise ValueError(f"scene mix: unknown class {name!r}; known: {', '.join(users)}")
     total = sum(spec.mix.values())
     if abs(total - 1.0) > 1e-6:
         raise ValueError(f"scene mix: shares must sum to 1; they sum to {total:g}")
@@ -248,8 +271,8 @@ def simulate_traffic(site: Site, spec: SceneSpec, rng: np.random.Generator) -> S
         )
         if cand.size:
             classes[cand[0]] = stall.vehicle_class
-    users = [ROAD_USERS[c] for c in classes]
-    mean_sd = np.array([DESIRED_SPEED_KMH[c] for c in classes]).reshape(-1, 2)
+    users = [road_users(site)[c] for c in classes]
+    mean_sd = np.array([desired_speed_kmh(u) for u in users]).reshape(-1, 2)
     v0 = np.clip(rng.normal(mean_sd[:, 0], mean_sd[:, 1]), 3.0, None) * KMH
     v0 = np.minimum(v0, np.array([u.max_speed_kmh for u in users]) * KMH)
     length_m = np.array([u.length_m for u in users])
@@ -496,13 +519,13 @@ def detect(
                 + np.abs(los[:, 0] * fwd[:, 0] + los[:, 1] * fwd[:, 1]) * width
             )
             half = np.arctan2(0.5 * across, rng_c)
-            large = np.isin(cls, list(LARGE))
+            large = width >= LARGE_WIDTH_M
             occ = _occluded(
                 starts.astype(np.int64), rng_c[order], az_c[order], half[order], large[order],
                 rng.uniform(size=obj.size), OCCLUDED_P,
             )  # fmt: skip
             occluded[order] = occ
-        lo_hi = np.array([DETECTIONS_PER_SCAN.get(c, (1, 1)) for c in cls]).reshape(-1, 2)
+        lo_hi = detections_per_scan(length)
         count = rng.integers(lo_hi[:, 0], lo_hi[:, 1] + 1)
         count = np.where(near & ~occluded, count, 0)
         rep = np.repeat(np.arange(obj.size), count)
@@ -588,13 +611,16 @@ def simulate_scene(site: Site, spec: SceneSpec, seed: int) -> SceneRecording:
 
 
 __all__ = [
-    "ROAD_USERS",
+    "WALKERS_AND_RIDERS",
     "Flow",
     "SceneRecording",
     "SceneSpec",
     "SceneTruth",
     "Stall",
+    "desired_speed_kmh",
     "detect",
+    "detections_per_scan",
+    "road_users",
     "scene_spec",
     "simulate_scene",
     "simulate_traffic",
