@@ -29,7 +29,8 @@ minutes, seen or not), and leaves the mode when a detection's radial speed shows
 its direction of travel (a stopped track's gate allows a start-up speed in that direction). A
 track that has never moved faster than ``moved_speed_mps`` (with a speed sigma below
 ``moving_speed_std_mps``: not the first guess of a folding radar's track) and further than
-``moved_distance_m`` from where it opened is a *static* object (a barrier
+``moved_distance_m`` from where it was confirmed (not where it opened: a first detection
+mixed with a ghost or another body's reflection is metres off) is a *static* object (a barrier
 arm, a pole, rails: zero Doppler since the start); a stopped vehicle had moved. Hazard event:
 a moved track stopped on the carriageway (both lanes) within ``barrier_m`` of the crossing
 raises "object stopped between the barriers" (a reflection of a barrier post beside the road
@@ -114,7 +115,7 @@ class SceneTrackerConfig:
     start_speed_max_mps: float = 3.0  # a stopped vehicle's gate allows starting up to this
     moved_speed_mps: float = 0.8
     moving_speed_std_mps: float = 1.0  # ... known this well (not a first guess) ...
-    moved_distance_m: float = 3.0  # ... and has moved this far from where it was opened
+    moved_distance_m: float = 3.0  # ... and has moved this far from where it was confirmed
     initial_speed_std_mps: float = 15.0
     confirm_speed_std_mps: float = 3.0  # a track is confirmed once its speed is known this well
     merge_lateral_m: float = 1.2  # two tracks this close across (and along: the spread) ...
@@ -142,7 +143,7 @@ class _Tracks:
     moved: np.ndarray
     event_raised: np.ndarray
     line_event_raised: np.ndarray  # "will not stop before the stop line" raised
-    born_u: FloatArray
+    anchor_u: FloatArray  # where along the corridor it was confirmed (opened, until then)
     spread: FloatArray  # body spread of the reflections along the track [m]
     direction: FloatArray  # +1 / -1: direction of travel along u once known, else 0
     miss_run: FloatArray  # probability of the current run of misses for a moving target
@@ -158,7 +159,7 @@ class _Tracks:
         return cls(
             corridor, x, p, np.full(n, time_s), stopped=no, slow_since=np.full(n, np.nan),
             moved=no.copy(), event_raised=no.copy(), line_event_raised=no.copy(),
-            born_u=x[:, 0].copy(),
+            anchor_u=x[:, 0].copy(),
             spread=np.full(n, spread_m), direction=np.zeros(n), miss_run=np.ones(n),
             occluded=no.copy(),
         )  # fmt: skip
@@ -362,7 +363,8 @@ class SceneTracker:
             )  # fmt: skip
             rows = np.flatnonzero(seen & ~tr.occluded)
             ready = tr.p[rows, 1, 1] < cfg.confirm_speed_std_mps**2
-            self.book.record(rows, hit[rows], time_s, ready)
+            now = self.book.record(rows, hit[rows], time_s, ready)
+            tr.anchor_u[now] = tr.x[now, 0]  # the first position known well enough
         self.log.updated += int(used.sum())
         left = z[~used]
         if left.shape[0]:
@@ -431,7 +433,7 @@ class SceneTracker:
         conf = self.book.confirmed
         speed = np.abs(tr.x[:, 1])
         sd = np.sqrt(tr.p[:, 1, 1])
-        travelled = np.abs(tr.x[:, 0] - tr.born_u)
+        travelled = np.abs(tr.x[:, 0] - tr.anchor_u)
         moving = (
             conf & (speed > cfg.moved_speed_mps) & (sd < 0.5 * speed)
             & (sd < cfg.moving_speed_std_mps)

@@ -42,6 +42,8 @@ def cluster_points(points: FloatArray, radius_m: float) -> np.ndarray:
     if n == 0:
         return np.zeros(0, dtype=int)
     pairs = cKDTree(p).query_pairs(radius_m, output_type="ndarray")
+    if len(pairs) == 0:  # every point alone (the usual case of a scan's left-overs)
+        return np.arange(n)
     graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
     return connected_components(graph, directed=False)[1]
 
