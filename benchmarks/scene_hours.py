@@ -65,7 +65,8 @@ def main() -> None:
         print(
             f"seed {seed}: {args.duration / elapsed:.0f}x real time, GOSPA "
             f"{score.gospa_mean:.2f} (parts: localisation {score.gospa_localisation:.2f}, "
-            f"missed {score.gospa_missed:.2f}, false {score.gospa_false:.2f}), id switches {score.id_switches}, hazard delays "
+            f"missed {score.gospa_missed:.2f}, false {score.gospa_false:.2f}), id switches "
+            f"{score.id_switches}, hazard delays "
             f"{hazards['delay_s'].round(2).tolist()} s, false events {len(false)}; stop-line "
             f"runners {len(runs)}, event leads {runs['lead_s'].round(2).tolist()} s (NaN: "
             f"missed), false 'will not stop' events {len(line_false)}"
