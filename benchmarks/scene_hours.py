@@ -1,8 +1,9 @@
 """Long mixed-traffic evaluation of the scene tracker: accuracy, identities and hazard events.
 
 ``python -m benchmarks.scene_hours --seeds 31 32 33 --duration 1200`` simulates each seed's
-scene on ``lx_default`` (2-minute closures every 10 minutes, a vehicle stalled on road B at 58 %
-of the duration for 90 s), tracks it and prints per seed: time per simulated second, mean GOSPA,
+scene on ``lx_default`` (2-minute closures every 10 minutes, a vehicle stalled on road B at
+58 % of the duration for 90 s: :func:`adaptrack.crossing.mixed_traffic.mixed_traffic_study`),
+tracks it and prints per seed: time per simulated second, mean GOSPA,
 id switches, per-class position / speed RMS through association, the delay of every true
 hazard (a standstill between the barriers) and the false "stopped" events, and the lead of the
 "will not stop before the stop line" event for every user that ran the line (with the
@@ -17,11 +18,11 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import time
 
-from adaptrack.crossing.scene import Stall, scene_spec, simulate_scene
-from adaptrack.crossing.scene_metrics import event_outcomes, score_scene, stop_line_outcomes
-from adaptrack.crossing.scene_tracker import SceneTrackerConfig, track_scene
+import pandas as pd
+
+from adaptrack.crossing.mixed_traffic import mixed_traffic_study
+from adaptrack.crossing.scene_tracker import SceneTrackerConfig
 from adaptrack.crossing.site import load_site
 
 
@@ -46,32 +47,24 @@ def main() -> None:
             for r in site.radars
         )
         site = dataclasses.replace(site, radars=radars)
-    road = sorted(site.roads)[-1]
-    spec = scene_spec(
-        site, duration_s=args.duration, stalls=(Stall(road, 0.58 * args.duration, 0.0, 90.0),)
-    )
     n_false, n_line_false, hours = 0, 0, 0.0
     for seed in args.seeds:
-        rec = simulate_scene(site, spec, seed)
-        start = time.perf_counter()
-        tracks, events, _ = track_scene(site, rec.detections, config, warnings=spec.warnings())
-        elapsed = time.perf_counter() - start
-        score = score_scene(rec.truth, tracks, site.zone_m)
-        hazards, false = event_outcomes(rec.truth, events, site.barrier_m)
-        runs, line_false = stop_line_outcomes(rec.truth, events)
-        n_false += len(false)
-        n_line_false += len(line_false)
+        m = mixed_traffic_study(site, seed, args.duration, config=config)
+        n_false += len(m.false_stop_times_s)
+        n_line_false += len(m.false_line_times_s)
         hours += args.duration / 3600.0
+        delays = [round(h["delay_s"], 2) for h in m.hazards]
+        leads = [round(r["lead_s"], 2) for r in m.stop_line_runs]
         print(
-            f"seed {seed}: {args.duration / elapsed:.0f}x real time, GOSPA "
-            f"{score.gospa_mean:.2f} (parts: localisation {score.gospa_localisation:.2f}, "
-            f"missed {score.gospa_missed:.2f}, false {score.gospa_false:.2f}), id switches "
-            f"{score.id_switches}, hazard delays "
-            f"{hazards['delay_s'].round(2).tolist()} s, false events {len(false)}; stop-line "
-            f"runners {len(runs)}, event leads {runs['lead_s'].round(2).tolist()} s (NaN: "
-            f"missed), false 'will not stop' events {len(line_false)}"
+            f"seed {seed}: {args.duration / m.tracker_s:.0f}x real time, GOSPA "
+            f"{m.gospa_mean:.2f} (parts: localisation {m.gospa_localisation:.2f}, "
+            f"missed {m.gospa_missed:.2f}, false {m.gospa_false:.2f}), id switches "
+            f"{m.id_switches}, hazard delays {delays} s, false events "
+            f"{len(m.false_stop_times_s)}; stop-line runners {len(m.stop_line_runs)}, event "
+            f"leads {leads} s (NaN: missed), false 'will not stop' events "
+            f"{len(m.false_line_times_s)}"
         )
-        print(score.classes.round(2).to_string(index=False))
+        print(pd.DataFrame(m.classes).round(2).to_string(index=False))
     print(f"false 'stopped between the barriers' events: {n_false} in {hours:.2f} h")
     print(f"false 'will not stop before the stop line' events: {n_line_false} in {hours:.2f} h")
 

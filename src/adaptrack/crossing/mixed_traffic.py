@@ -28,7 +28,7 @@ from .compliance import CONFIDENCE, POSITION_LIMIT_M, SPEED_LIMIT_KMH
 from .radar_sim import radial_geometry
 from .scene import Stall, scene_spec, simulate_scene
 from .scene_metrics import event_outcomes, score_scene, stop_line_outcomes
-from .scene_tracker import track_scene
+from .scene_tracker import SceneTrackerConfig, track_scene
 from .site import Site
 
 STALL_AT = 0.58  # the stall starts at this fraction of the study (within a closure on lx_default)
@@ -121,19 +121,21 @@ def mixed_traffic_study(
     seed: int,
     duration_s: float,
     *,
+    config: SceneTrackerConfig | None = None,
     confidence: float = CONFIDENCE,
     on_scan: Callable[[int, int], None] | None = None,
 ) -> MixedTraffic:
-    """Simulate, track and score ``duration_s`` of the site's scene (module docstring).
+    """Simulate, track (with ``config``) and score ``duration_s`` of the site's scene.
 
-    Raises ValueError when the site has no scene (no flow between two roads).
+    See the module docstring. Raises ValueError when the site has no scene (no flow between
+    two roads).
     """
     road = sorted(site.roads)[-1]
     stall = Stall(road, STALL_AT * duration_s, 0.0, STALL_S)
     spec = scene_spec(site, duration_s=duration_s, stalls=(stall,))
     rec = simulate_scene(site, spec, seed)
     start = time.perf_counter()
-    tracks, events, _ = track_scene(site, rec.detections, None, on_scan, spec.warnings())
+    tracks, events, _ = track_scene(site, rec.detections, config, on_scan, spec.warnings())
     elapsed = time.perf_counter() - start
     score = score_scene(rec.truth, tracks, site.zone_m, confidence=confidence)
     hazards, false_stops = event_outcomes(rec.truth, events, site.barrier_m)

@@ -271,7 +271,8 @@ def simulate_traffic(site: Site, spec: SceneSpec, rng: np.random.Generator) -> S
         )
         if cand.size:
             classes[cand[0]] = stall.vehicle_class
-    users = [road_users(site)[c] for c in classes]
+    known = road_users(site)
+    users = [known[c] for c in classes]
     mean_sd = np.array([desired_speed_kmh(u) for u in users]).reshape(-1, 2)
     v0 = np.clip(rng.normal(mean_sd[:, 0], mean_sd[:, 1]), 3.0, None) * KMH
     v0 = np.minimum(v0, np.array([u.max_speed_kmh for u in users]) * KMH)

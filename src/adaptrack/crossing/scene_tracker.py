@@ -461,7 +461,7 @@ class SceneTracker:
         self._raise("stopped_between_barriers", np.flatnonzero(hazard), time_s)
         tr.event_raised |= hazard
         if self._warning(time_s):
-            self._stop_line_events(time_s)
+            self._stop_line_events(time_s, on_road)
 
     def _on_carriageway(self) -> np.ndarray:
         """Which tracks are on the road (either lane), not beside it (bool per track)."""
@@ -473,13 +473,14 @@ class SceneTracker:
         w = self.warnings
         return bool(np.any((w[:, 0] <= time_s) & (time_s < w[:, 1])))
 
-    def _stop_line_events(self, time_s: float) -> None:
+    def _stop_line_events(self, time_s: float, on_road: np.ndarray) -> None:
         """Raise "will not stop before the stop line" for tracks that cannot stop there.
 
         A moving confirmed road user on the carriageway, detected within ``stop_seen_s``,
         first in its lane (one who follows another stops behind it), whose front needs more
         than ``stop_decel_mps2`` to stop at the line even at the low end of its speed's 90 %
-        interval; its lead is the time to reach the line.
+        interval; its lead is the time to reach the line. ``on_road``: tracks on the
+        carriageway (bool per track).
         """
         cfg = self.config
         tr = self.tracks
@@ -487,7 +488,6 @@ class SceneTracker:
         speed = tr.x[:, 1] * np.sign(ahead)  # > 0 approaching
         front = np.sqrt(3.0) * tr.spread  # half a uniform body of that spread
         to_line = np.abs(ahead) - self.site.stop_line_m - front
-        on_road = self._on_carriageway()
         cand = (
             self.book.confirmed & tr.moved & ~tr.stopped & ~tr.line_event_raised & on_road
             & (speed > 0.5) & (to_line > -front)
