@@ -48,6 +48,11 @@ def test_demo_writes_summary(tmp_path):
     assert "Verdict on the test runs" in again and "id='mixed-classes'" in again
     proc = run("report", str(tmp_path / "report.html"), "--out", str(tmp_path / "x.html"))
     assert proc.returncode == 1 and "not a demo summary" in proc.stderr
+    broken = tmp_path / "broken.json"  # a mixed-traffic section with fields missing
+    broken.write_text(json.dumps({**summary, "mixed_traffic": {"seed": 1}}))
+    proc = run("report", str(broken), "--out", str(tmp_path / "y.html"))
+    assert proc.returncode == 1 and "not a demo summary" in proc.stderr
+    assert proc.stderr.count("\n") == 1 and not (tmp_path / "y.html").exists()
 
 
 def test_usage_and_user_errors():

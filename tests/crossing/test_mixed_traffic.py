@@ -81,3 +81,11 @@ def test_a_site_without_a_scene_says_why():
 def test_verdict_of_bounds(rms, lower, upper, expected):
     limits = np.array([0.7, 2.0])
     assert verdict_of(np.array(rms), np.array(lower), np.array(upper), limits) == expected
+
+
+def test_from_json_names_a_missing_or_unknown_field(study):
+    data = study.to_json()
+    with pytest.raises(ValueError, match="missing field 'seed'$"):
+        MixedTraffic.from_json({k: v for k, v in data.items() if k != "seed"})
+    with pytest.raises(ValueError, match=r"unknown field 'colour' \(and 1 more\)"):
+        MixedTraffic.from_json({**data, "colour": 1, "size": 2})

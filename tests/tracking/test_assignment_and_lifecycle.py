@@ -131,3 +131,14 @@ def test_an_unconfirmed_track_dies_of_age_and_a_lost_one_of_its_sigma():
     assert book.expired(1.95, none, none, sigma).tolist() == [1]  # lost: 9 m > 8 m
     assert book.expired(1.95, np.array([False, True]), none, sigma).tolist() == []  # stopped
     assert book.expired(1.95, none, none, np.array([1.0, 7.9])).tolist() == []
+
+
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [("max_tentative_s", 0.0), ("max_coast_s", -1.0), ("max_coast_stopped_s", float("nan")),
+     ("max_coast_hidden_s", 0.0), ("max_position_std_m", -5.0), ("tentative_misses", 0)],
+)  # fmt: skip
+def test_life_cycle_limits_must_be_positive(field, value):
+    with pytest.raises(ValueError, match=f"{field} must be"):
+        LifecycleRules(**{field: value})
+    LifecycleRules(max_position_std_m=float("inf"))  # no limit is allowed

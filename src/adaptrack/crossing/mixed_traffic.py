@@ -15,7 +15,7 @@ from __future__ import annotations
 import html
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 from typing import Any
 
 import matplotlib.pyplot as plt
@@ -71,7 +71,14 @@ class MixedTraffic:
 
     @classmethod
     def from_json(cls, data: dict[str, Any]) -> MixedTraffic:
-        """Inverse of :meth:`to_json`."""
+        """Inverse of :meth:`to_json`; ValueError names a missing or unknown field."""
+        names = [f.name for f in fields(cls)]
+        missing = [n for n in names if n not in data]
+        unknown = [k for k in data if k not in names]
+        if missing or unknown:
+            what, bad = ("missing", missing) if missing else ("unknown", unknown)
+            more = f" (and {len(bad) - 1} more)" if len(bad) > 1 else ""
+            raise ValueError(f"mixed-traffic section: {what} field {bad[0]!r}{more}")
         return cls(**_none_to_nan(data))
 
 

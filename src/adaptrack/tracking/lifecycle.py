@@ -49,6 +49,13 @@ class LifecycleRules:
     def __post_init__(self) -> None:
         if not 1 <= self.confirm_hits <= self.confirm_window <= 62:
             raise ValueError("need 1 <= confirm_hits <= confirm_window <= 62")
+        if self.tentative_misses < 1:
+            raise ValueError(f"tentative_misses must be >= 1; got {self.tentative_misses}")
+        for name in ("max_tentative_s", "max_coast_s", "max_coast_stopped_s",
+                     "max_coast_hidden_s", "max_position_std_m"):  # fmt: skip
+            value = getattr(self, name)
+            if not value > 0:  # NaN fails too; inf means no limit
+                raise ValueError(f"{name} must be > 0 (inf: no limit); got {value}")
 
 
 @dataclass
