@@ -4,7 +4,14 @@ import math
 
 import numpy as np
 
-from adaptrack.crossing._scene_kernels import occluded_rows, owners, unambiguous_assignment
+from adaptrack.crossing._scene_kernels import (
+    BODY_HALF_SPREADS,
+    VISIBLE_SAMPLES,
+    _visible_part,
+    occluded_rows,
+    owners,
+    unambiguous_assignment,
+)
 from adaptrack.tracking import gnn_assign
 
 GATE = 16.27
@@ -30,9 +37,20 @@ def test_unambiguous_assignment_is_the_gnn_optimum_when_no_detection_is_shared()
 
 def test_owners_give_every_gated_detection_to_its_nearest_track_in_distance_order():
     d2 = np.array([[1.0, 4.0, np.inf, 20.0], [np.inf, 3.0, 2.0, 30.0]])
-    owner, order = owners(d2, GATE, np.array([0, 1]), np.array([0, 2]))
+    owner, order = owners(d2, np.zeros(2), GATE, np.array([0, 1]), np.array([0, 2]))
     assert owner.tolist() == [0, 1, 1, -1]  # detection 1 joins track 1 (3 < 4); 3 is outside
     assert order.tolist() == [0, 2, 1]  # by increasing distance to the owner
+
+
+def test_owners_give_an_extra_detection_to_the_likeliest_track_not_the_nearest_in_d2():
+    # an extra reflection 2 m from a tight track (sigma 1 m) and 4.5 m from a wide one
+    # (sigma 3 m: a car whose gate has grown over a truck's rear): d2 4 vs 2.25 favours the
+    # wide track, the Gaussian densities exp(-d2 / 2) / sigma (0.135 vs 0.108) the tight one
+    sig, off = np.array([1.0, 3.0]), np.array([2.0, 4.5])
+    d2 = np.array([[0.0, (off[0] / sig[0]) ** 2], [np.inf, (off[1] / sig[1]) ** 2]])
+    owner, _ = owners(d2, 2.0 * np.log(sig), GATE, np.array([0]), np.array([0]))
+    density = np.exp(-0.5 * (off / sig) ** 2) / sig
+    assert owner[1] == int(np.argmax(density)) == 0
 
 
 def _road(length=100.0):
@@ -54,3 +72,22 @@ def test_a_nearer_body_on_the_line_of_sight_hides_what_is_behind_it():
     # the aside track is atan(5 / 40) = 7.1 deg off the line of sight
     assert math.degrees(math.atan2(5.0, 40.0)) > math.degrees(math.atan2(1.0, 20.0))
     assert out.tolist() == [False, True, False]
+
+
+def test_a_body_reaching_past_the_radars_range_is_seen_over_its_near_part():
+    roads = _road()
+    bounds = np.array([[0, roads.shape[1]]])
+    radar = np.array([0.0, 0.0, 6.0, 0.0, 1.0, 0.1])  # at the road's start, looking north
+    fields = np.array([[40.0, math.pi / 2]])  # 40 m slant range
+    x = np.zeros((2, 4))
+    x[:, 0] = [40.0, 20.0]  # a 16 m body centred at 40 m ground range, one at 20 m
+    spread = np.array([4.0, 4.0]) / BODY_HALF_SPREADS
+    corridor = np.zeros(2, np.int64)
+    offset, part_spread, slope = _visible_part(0, x, spread, corridor, roads, bounds, radar, fields)
+    # independently: in view up to the ground range sqrt(40^2 - 6^2) = 39.55 m
+    far = math.sqrt(40.0**2 - 6.0**2)
+    step = 8.0 / (VISIBLE_SAMPLES - 1)
+    assert abs(offset - (0.5 * (36.0 + far) - 40.0)) <= step / 2  # the near part's centre
+    assert abs(part_spread / spread[0] - (far - 36.0) / 8.0) <= 1.0 / VISIBLE_SAMPLES + 1e-9
+    assert slope == -0.5  # the far end of what is seen stays at the range limit
+    assert _visible_part(1, x, spread, corridor, roads, bounds, radar, fields) == (0.0, 2.0, 0.0)

@@ -133,10 +133,26 @@ def test_an_unconfirmed_track_dies_of_age_and_a_lost_one_of_its_sigma():
     assert book.expired(1.95, none, none, np.array([1.0, 7.9])).tolist() == []
 
 
+def test_a_stopped_track_missed_in_a_row_has_left_when_standstills_are_detectable():
+    book = TrackBook(LifecycleRules(confirm_hits=1, confirm_window=1, max_stopped_misses=3))
+    book.add(2, 0.0)
+    rows = np.arange(2)
+    book.record(rows, np.array([True, True]), 0.1)
+    stopped, none = np.array([True, True]), np.zeros(2, bool)
+    for t in (0.2, 0.3):  # the first missed twice, the second seen
+        book.record(rows, np.array([False, True]), t)
+    assert book.expired(0.3, stopped, none).tolist() == []
+    book.record(rows, np.array([False, True]), 0.4)  # third miss in a row: it has left
+    assert book.expired(0.4, stopped, none).tolist() == [0]
+    assert book.expired(0.4, none, none).tolist() == []  # moving: the coasting time decides
+    assert book.expired(0.4, stopped, none, stopped_detectable=False).tolist() == []
+
+
 @pytest.mark.parametrize(
     ("field", "value"),
     [("max_tentative_s", 0.0), ("max_coast_s", -1.0), ("max_coast_stopped_s", float("nan")),
-     ("max_coast_hidden_s", 0.0), ("max_position_std_m", -5.0), ("tentative_misses", 0)],
+     ("max_coast_hidden_s", 0.0), ("max_position_std_m", -5.0), ("tentative_misses", 0),
+     ("max_stopped_misses", 0)],
 )  # fmt: skip
 def test_life_cycle_limits_must_be_positive(field, value):
     with pytest.raises(ValueError, match=f"{field} must be"):

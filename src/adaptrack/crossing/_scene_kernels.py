@@ -30,6 +30,8 @@ from ._radar_kernel import curve_at, in_view
 
 N_STATE = 4
 BIAS_MIN_SPEED_MPS = 6.0  # azimuth alignment on vehicles, not on cyclists at the lane's edge
+BODY_HALF_SPREADS = 2.0  # a body reaches this many spreads either side of its centre
+VISIBLE_SAMPLES = 17  # points over a body tested against a field of view
 
 
 @numba.njit(cache=True, inline="always")
@@ -107,14 +109,57 @@ def _lane_frame(roads, bounds, c, u, d):  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True, inline="always")
-def _model(  # type: ignore[no-untyped-def]
-    i, x, spread, corridor, roads, bounds, radar, noise_tab, noise_cnt, across_std,
-    zp, h, rm, jp, jv,
-):  # fmt: skip
-    """Predicted detection, Jacobian and noise of track ``i`` (body spread along and across)."""
+def _visible_part(i, x, spread, corridor, roads, bounds, radar, fields):  # type: ignore[no-untyped-def]
+    """Locate the part of track ``i``'s body inside the radar's field of view.
+
+    The body spans ``BODY_HALF_SPREADS`` spreads either side of its centre along the lane;
+    ``VISIBLE_SAMPLES`` points over it are tested against the field of view (``fields``, the
+    radar's minimum range ``radar[4]``). Returns ``(offset, spread, slope)``: the visible
+    part's centre along the lane from the body's centre [m], its spread [m] (the body's, in
+    proportion to the part's length) and ``d offset / d u`` (-1/2 when one end is cut: the
+    cut stays put while the body moves; -1 when both are). A body wholly in view, or wholly
+    out of it, gives ``(0, spread, 0)``.
+    """
+    half = BODY_HALF_SPREADS * spread[i]
     road = roads[:, bounds[corridor[i], 0] : bounds[corridor[i], 1]]
-    measure(ROAD, x[i], 3, radar, noise_tab, noise_cnt, road, 0.0, spread[i], zp, h, rm, jp, jv)
-    th = _centreline(road, x[i, 0])[2]
+    n_in, total = 0, 0.0
+    first_in = last_in = False
+    for k in range(VISIBLE_SAMPLES):
+        a = half * (2.0 * k / (VISIBLE_SAMPLES - 1) - 1.0)
+        cx, cy, th, _ = _centreline(road, x[i, 0] + a)
+        ex = cx - x[i, 3] * math.cos(th) - radar[0]
+        ey = cy + x[i, 3] * math.sin(th) - radar[1]
+        rng = math.sqrt(ex * ex + ey * ey + radar[2] * radar[2])
+        if in_view(rng, off_boresight(math.atan2(ex, ey), radar), fields, radar[4]):
+            n_in += 1
+            total += a
+            first_in |= k == 0
+            last_in |= k == VISIBLE_SAMPLES - 1
+    if n_in == 0 or n_in == VISIBLE_SAMPLES:
+        return 0.0, spread[i], 0.0
+    slope = -0.5 if first_in != last_in else (-1.0 if not first_in else 0.0)
+    return total / n_in, spread[i] * n_in / VISIBLE_SAMPLES, slope
+
+
+@numba.njit(cache=True, inline="always")
+def _model(  # type: ignore[no-untyped-def]
+    i, x, spread, corridor, roads, bounds, radar, noise_tab, noise_cnt, fields, across_std,
+    xv, zp, h, rm, jp, jv,
+):  # fmt: skip
+    """Predicted detection, Jacobian and noise of track ``i`` (body spread along and across).
+
+    A body partly outside the field of view is detected over its visible part only
+    (:func:`_visible_part`): the detection is predicted at that part's centre, with its
+    spread. ``xv`` (4,): scratch.
+    """
+    road = roads[:, bounds[corridor[i], 0] : bounds[corridor[i], 1]]
+    offset, part_spread, slope = _visible_part(i, x, spread, corridor, roads, bounds, radar, fields)
+    xv[:] = x[i]
+    xv[0] += offset
+    measure(ROAD, xv, 3, radar, noise_tab, noise_cnt, road, 0.0, part_spread, zp, h, rm, jp, jv)
+    for a in range(3):
+        h[a, 0] *= 1.0 + slope
+    th = _centreline(road, xv[0])[2]
     rx, ry = -math.cos(th), math.sin(th)
     b0 = jp[0, 0] * rx + jp[0, 1] * ry
     b1 = jp[1, 0] * rx + jp[1, 1] * ry
@@ -129,10 +174,12 @@ def _model(  # type: ignore[no-untyped-def]
 @numba.njit(cache=True)
 def gate_scan(  # type: ignore[no-untyped-def]
     x, p, spread, starting, direction, corridor, roads, bounds, radar, noise_tab, noise_cnt,
-    fields, across_std, start_speed_max, z, d2,
+    fields, across_std, start_speed_max, z, d2, logdet,
 ):  # fmt: skip
     """Fill ``d2`` (T, D) with each detection's squared Mahalanobis distance to each track.
 
+    ``logdet`` (T,) receives the log-determinant of each track's innovation covariance
+    (``inf`` where ``d2`` is).
     A stopped vehicle may be starting (``starting`` rows): its held zero speed is replaced by
     the speed in ``[0, start_speed_max]`` along its ``direction`` that best explains the
     detection's radial speed (a road user passing by in the other direction does not fit).
@@ -142,15 +189,17 @@ def gate_scan(  # type: ignore[no-untyped-def]
     n_t, n_d = x.shape[0], z.shape[0]
     seen = np.zeros(n_t, dtype=np.bool_)
     zp, h, rm, jp, jv = _model_scratch()
+    xv = np.zeros(N_STATE)
     s = np.zeros((3, 3))
     lo = np.zeros((3, 3))
     w = np.zeros(3)
     for i in range(n_t):
         _model(
-            i, x, spread, corridor, roads, bounds, radar, noise_tab, noise_cnt, across_std,
-            zp, h, rm, jp, jv,
+            i, x, spread, corridor, roads, bounds, radar, noise_tab, noise_cnt, fields,
+            across_std, xv, zp, h, rm, jp, jv,
         )  # fmt: skip
         seen[i] = in_view(zp[0], off_boresight(zp[1], radar), fields, radar[4])
+        logdet[i] = np.inf
         if not seen[i] or n_d == 0:
             d2[i, :] = np.inf
             continue
@@ -165,6 +214,7 @@ def gate_scan(  # type: ignore[no-untyped-def]
         if not cholesky_into(s, lo):
             d2[i, :] = np.inf
             continue
+        logdet[i] = 2.0 * (math.log(lo[0, 0]) + math.log(lo[1, 1]) + math.log(lo[2, 2]))
         for j in range(n_d):
             innovation_into(z[j], zp, radar, doppler, w)
             if starting[i] and h[2, 1] != 0.0:
@@ -183,12 +233,15 @@ def gate_scan(  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True)
-def owners(d2, gate, primary_track, primary_det):  # type: ignore[no-untyped-def]
+def owners(d2, logdet, gate, primary_track, primary_det):  # type: ignore[no-untyped-def]
     """Owner track of every detection (-1: none) and the update order.
 
     ``primary_track``/``primary_det`` is the one-to-one assignment; every further gated
-    detection joins the track it is closest to (a body's other reflections). The order
-    processes each track's detections by increasing distance.
+    detection joins the track most likely to have made it (a body's other reflections):
+    least ``d2 + logdet``, the negative log-likelihood up to a constant, not least ``d2``
+    alone, which favours the wider track (in a queue, a car whose gate has grown over a
+    truck's rear would take the truck's detections). The order processes each track's
+    detections by increasing distance.
     """
     n_t, n_d = d2.shape
     owner = np.full(n_d, -1, dtype=np.int64)
@@ -199,8 +252,8 @@ def owners(d2, gate, primary_track, primary_det):  # type: ignore[no-untyped-def
             continue
         best, arg = np.inf, -1
         for i in range(n_t):
-            if d2[i, j] <= gate and d2[i, j] < best:
-                best, arg = d2[i, j], i
+            if d2[i, j] <= gate and d2[i, j] + logdet[i] < best:
+                best, arg = d2[i, j] + logdet[i], i
         owner[j] = arg
     dist = np.full(n_d, np.inf)
     for j in range(n_d):
@@ -248,7 +301,7 @@ def unambiguous_assignment(d2, gate):  # type: ignore[no-untyped-def]
 @numba.njit(cache=True)
 def update_tracks(  # type: ignore[no-untyped-def]
     order, owner, z, x, p, spread, stopped, moved, direction, slow_since, corridor, roads,
-    bounds, radar, noise_tab, noise_cnt, across_std, moving_radial, start_speed_var,
+    bounds, radar, noise_tab, noise_cnt, fields, across_std, moving_radial, start_speed_var,
     learning_rate, spread_lo, spread_hi, align, lane_half_width, bias, bias_stats, bias_forget,
     bias_gate,
 ):  # fmt: skip
@@ -268,9 +321,10 @@ def update_tracks(  # type: ignore[no-untyped-def]
     ends the stop of a vehicle that had moved (speed and acceleration freed with variance
     ``start_speed_var``; static objects stay); the body spread follows a moving average (rate
     ``learning_rate``) of the squared along-track residual less the sensor's and the track's
-    share, within ``[spread_lo, spread_hi]``.
+    share, within ``[spread_lo, spread_hi]``, learnt while the whole body is in view.
     """
     zp, h, rm, jp, jv = _model_scratch()
+    xv = np.zeros(N_STATE)
     nu = np.zeros(3)
     hp, s, lo, kt, w, ikh, tmp, xn, pn = _update_scratch(3)
     for j in order:
@@ -294,12 +348,14 @@ def update_tracks(  # type: ignore[no-untyped-def]
                 bias_stats[2] = bias_forget * bias_stats[2] + 1.0
         sr = curve_at(noise_tab, noise_cnt, 0, z[j, 0])
         sa = curve_at(noise_tab, noise_cnt, 1, off_boresight(z[j, 1], radar))
-        sample = max(along * along - sr * sr - (rho * sa) ** 2 - p[i, 0, 0], 0.0)
-        var = (1.0 - learning_rate) * spread[i] ** 2 + learning_rate * sample
-        spread[i] = math.sqrt(min(max(var, spread_lo**2), spread_hi**2))
+        whole = _visible_part(i, x, spread, corridor, roads, bounds, radar, fields)[0] == 0.0
+        if whole:
+            sample = max(along * along - sr * sr - (rho * sa) ** 2 - p[i, 0, 0], 0.0)
+            var = (1.0 - learning_rate) * spread[i] ** 2 + learning_rate * sample
+            spread[i] = math.sqrt(min(max(var, spread_lo**2), spread_hi**2))
         _model(
-            i, x, spread, corridor, roads, bounds, radar, noise_tab, noise_cnt, across_std,
-            zp, h, rm, jp, jv,
+            i, x, spread, corridor, roads, bounds, radar, noise_tab, noise_cnt, fields,
+            across_std, xv, zp, h, rm, jp, jv,
         )  # fmt: skip
         innovation_into(z[j], zp, radar, doppler_usable(h, p[i], rm, radar), nu)
         if (

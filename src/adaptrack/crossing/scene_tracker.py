@@ -13,12 +13,13 @@ the scan time; gate the detections of the tracks in that radar's view (chi-squar
 three-dimensional innovation); assign one detection per track by global nearest neighbour
 (:func:`adaptrack.tracking.gnn_assign`; a static object that has stood longer than
 ``clutter_age_s`` keeps the detections in its own tight gate: learnt clutter such as a rail);
-give every further gated detection to the track it
-is closest to (the body's other reflections); update; apply what a miss tells (the Doppler
+give every further gated detection to the track most likely to have made it (the body's
+other reflections; least ``d2 + ln det S``); update (a body reaching out of the radar's field
+of view is measured at the centre of its part in view); apply what a miss tells (the Doppler
 gate hides slow vehicles; a miss behind a nearer track tells nothing); record hits and misses
 (M-of-N confirmation once the speed sigma is below ``confirm_speed_std_mps``, deletion by
-coasting time: :mod:`adaptrack.tracking.lifecycle`); open
-tentative tracks from the detections left over, clustered within ``cluster_radius_m``. The
+coasting time or, for a stopped track, by misses in a row: :mod:`adaptrack.tracking.lifecycle`);
+open tentative tracks from the detections left over, clustered within ``cluster_radius_m``. The
 per-track arithmetic runs compiled (:mod:`._scene_kernels`).
 
 Stopped mode: a confirmed track slower than ``stop_speed_mps`` for ``stop_confirm_s`` (and,
@@ -322,10 +323,11 @@ class SceneTracker:
             radar_row, noise_tab, noise_cnt, fields, pd_tab, pd_cnt = self._radar_tables[radar_name]
             stats = self._bias_stats[radar_name]
             d2 = np.empty((n_t, z.shape[0]))
+            logdet = np.empty(n_t)
             seen = gate_scan(
                 tr.x, tr.p, tr.spread, tr.stopped & tr.moved, tr.direction, tr.corridor,
                 self._roads, self._bounds, radar_row, noise_tab, noise_cnt, fields,
-                cfg.body_across_std_m, cfg.start_speed_max_mps, z, d2,
+                cfg.body_across_std_m, cfg.start_speed_max_mps, z, d2, logdet,
             )  # fmt: skip
             hit = np.zeros(n_t, dtype=bool)
             if z.shape[0]:
@@ -333,12 +335,12 @@ class SceneTracker:
                 simple, ti, di = unambiguous_assignment(d2, self._gate)
                 if not simple:
                     ti, di = gnn_assign(np.where(d2 <= self._gate, d2, np.inf), self._gate)
-                owner, order = owners(d2, self._gate, ti, di)
+                owner, order = owners(d2, logdet, self._gate, ti, di)
                 lo, hi = cfg.spread_limits_m
                 update_tracks(
                     order, owner, z, tr.x, tr.p, tr.spread, tr.stopped, tr.moved,
                     tr.direction, tr.slow_since, tr.corridor, self._roads, self._bounds,
-                    radar_row, noise_tab, noise_cnt, cfg.body_across_std_m,
+                    radar_row, noise_tab, noise_cnt, fields, cfg.body_across_std_m,
                     cfg.moving_radial_mps, cfg.start_speed_max_mps**2,
                     cfg.spread_learning_rate, lo, hi, cfg.estimate_azimuth_bias,
                     self._half_lane, bias, stats,
@@ -534,7 +536,9 @@ class SceneTracker:
     def _delete(self, time_s: float) -> None:
         tr = self.tracks
         position_std = np.sqrt(tr.p[:, 0, 0] + tr.p[:, 3, 3])  # along and across the corridor
-        gone = self.book.expired(time_s, tr.stopped, tr.occluded, position_std)
+        gone = self.book.expired(
+            time_s, tr.stopped, tr.occluded, position_std, self.config.stationary_detections
+        )
         # tracks that left every corridor
         out = (tr.x[:, 0] < 0) | (tr.x[:, 0] > self._length_m[tr.corridor])
         self._drop(np.union1d(gone, np.flatnonzero(out)))

@@ -35,6 +35,9 @@ class LifecycleRules:
     ``max_coast_s`` (``max_coast_stopped_s`` while stopped, ``max_coast_hidden_s`` while
     possibly hidden behind another object) [s], or whose position sigma exceeds
     ``max_position_std_m`` while it is not stopped (it no longer says where the object is).
+    Where the sensors detect objects at a standstill, a stopped track is also deleted after
+    ``max_stopped_misses`` misses in a row that tell (in view, nothing hiding it): the object
+    has left (a queued car that drove off), however long a stopped track may coast unseen.
     """
 
     confirm_hits: int = 3
@@ -45,12 +48,14 @@ class LifecycleRules:
     max_coast_stopped_s: float = 600.0
     max_coast_hidden_s: float = 10.0
     max_position_std_m: float = 10.0
+    max_stopped_misses: int = 100
 
     def __post_init__(self) -> None:
         if not 1 <= self.confirm_hits <= self.confirm_window <= 62:
             raise ValueError("need 1 <= confirm_hits <= confirm_window <= 62")
-        if self.tentative_misses < 1:
-            raise ValueError(f"tentative_misses must be >= 1; got {self.tentative_misses}")
+        for name in ("tentative_misses", "max_stopped_misses"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} must be >= 1; got {getattr(self, name)}")
         for name in ("max_tentative_s", "max_coast_s", "max_coast_stopped_s",
                      "max_coast_hidden_s", "max_position_std_m"):  # fmt: skip
             value = getattr(self, name)
@@ -109,12 +114,14 @@ class TrackBook:
         stopped: np.ndarray,
         hidden: np.ndarray,
         position_std_m: FloatArray | None = None,
+        stopped_detectable: bool = True,
     ) -> np.ndarray:
         """Return the rows to delete at ``time_s``.
 
         Failed tentative tracks, confirmed ones coasting too long (``stopped`` and ``hidden``
-        rows by their own limits) and moving ones whose ``position_std_m`` [m] (per row; none:
-        not checked) is beyond the limit.
+        rows by their own limits), moving ones whose ``position_std_m`` [m] (per row; none:
+        not checked) is beyond the limit and, if ``stopped_detectable`` (the sensors detect
+        objects at a standstill), stopped ones missed too often in a row.
         """
         r = self.rules
         limit = np.where(
@@ -126,6 +133,8 @@ class TrackBook:
         dead = dead_tentative | (self.confirmed & (time_s - self.last_hit_s > limit))
         if position_std_m is not None:
             dead |= ~stopped & (np.asarray(position_std_m) > r.max_position_std_m)
+        if stopped_detectable:
+            dead |= self.confirmed & stopped & (self.misses >= r.max_stopped_misses)
         return np.flatnonzero(dead)
 
     def remove(self, rows: np.ndarray) -> None:
