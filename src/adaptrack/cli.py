@@ -53,6 +53,7 @@ from .io.navigation import read_navigation_measurements
 from .io.tables import DataFormatError, read_flight_csv, read_table, write_table_atomic
 from .models.continuous import ConstantAcceleration, Singer
 from .parallel import TaskPool, task_pool
+from .service import commands as service_commands
 from .simulation.scenario import load_scenario
 
 WORKERS = typer.Option(
@@ -66,9 +67,14 @@ SCHEDULER = typer.Option(
 )
 
 app = typer.Typer(
-    help="adaptrack: adaptive motion estimation.", no_args_is_help=True, add_completion=False
+    help="adaptrack: adaptive motion estimation.",
+    no_args_is_help=True,
+    add_completion=False,
+    rich_markup_mode=None,
 )
 _err = Console(stderr=True)
+app.command("serve")(service_commands.serve)
+app.command("replay")(service_commands.replay)
 
 
 @app.callback()

@@ -56,12 +56,15 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
 from scipy.spatial import cKDTree
 
+from .._toml import load_toml
 from .._typing import FloatArray
 from ..tracking import (
     LifecycleRules,
@@ -88,6 +91,7 @@ from .tracking import _initial_point
 
 N_STATE = 4  # u, du/dt, d2u/dt2, d
 STATIC = len(TrackStatus)  # status code of a stopped object that never moved
+STATUS_NAMES = (*(s.name.lower() for s in TrackStatus), "static")  # by status code
 ROW_COLUMNS = (
     "track_id", "time_s", "east_m", "north_m", "speed_mps", "east_speed_mps", "north_speed_mps",
     "from_crossing_m", "status", "moved", "position_std_m", "speed_std_mps",
@@ -129,6 +133,41 @@ class SceneTrackerConfig:
     bias_min_samples: float = 300.0  # ... before it is applied
     bias_gate_m: float = 2.0  # detections further across from the lane centre are left out
     rules: LifecycleRules = field(default_factory=LifecycleRules)
+
+
+def load_scene_config(path: str | Path) -> SceneTrackerConfig:
+    """Scene-tracker settings of a TOML file's ``[scene_tracker]`` table (defaults without it).
+
+    Keys are :class:`SceneTrackerConfig` fields; ``[scene_tracker.rules]`` holds
+    :class:`~adaptrack.tracking.LifecycleRules` fields. A ``tuned.toml`` of ``adaptrack
+    tune`` may carry the table next to its road-estimator selection. Errors name the file and
+    the key.
+    """
+    table = load_toml(Path(path)).get("scene_tracker", {})
+    rules = table.pop("rules", {}) if isinstance(table, dict) else None
+    if not isinstance(table, dict) or not isinstance(rules, dict):
+        raise ValueError(f"{path}: [scene_tracker] and [scene_tracker.rules] must be tables")
+    for given, cls in ((table, SceneTrackerConfig), (rules, LifecycleRules)):
+        known = {f.name for f in fields(cls)} - {"rules"}
+        unknown = sorted(set(given) - known)
+        if unknown:
+            raise ValueError(f"{path}: unknown {cls.__name__} setting(s) {unknown}; known: "
+                             f"{sorted(known)}")  # fmt: skip
+        defaults = cls()
+        for key, value in given.items():
+            want = type(getattr(defaults, key))
+            number = isinstance(value, int | float) and not isinstance(value, bool)
+            ok = isinstance(value, bool) if want is bool else (
+                number if want in (int, float) else isinstance(value, list)
+            )  # fmt: skip
+            if not ok:
+                raise ValueError(f"{path}: {cls.__name__} setting {key!r}: expected a "
+                                 f"{want.__name__}; got {value!r}")  # fmt: skip
+    settings: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in table.items()}
+    try:
+        return SceneTrackerConfig(**settings, rules=LifecycleRules(**rules))
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{path}: [scene_tracker]: {exc}") from None
 
 
 @dataclass
@@ -283,6 +322,10 @@ class SceneTracker:
         return n_new
 
     # -- one scan ---------------------------------------------------------------------------
+    def previous_scan_s(self, radar_name: str) -> float:
+        """Timestamp of the radar's last scan processed [s] (-inf before its first)."""
+        return self._last_time.get(radar_name, -np.inf)
+
     def step(self, radar_name: str, time_s: float, z: FloatArray) -> None:
         """Process the detections ``z`` (n, 3) of one radar scan stamped ``time_s``.
 
@@ -612,7 +655,7 @@ class SceneTracker:
 
 def _frame(columns: list[dict[str, np.ndarray]]) -> pd.DataFrame:
     """One table of track rows from the columns of several scans (status named)."""
-    names = np.array([s.name.lower() for s in TrackStatus] + ["static"])
+    names = np.array(STATUS_NAMES)
     keys = list(columns[0]) if columns else list(ROW_COLUMNS)
     table: dict[str, np.ndarray] = {
         k: np.concatenate([c[k] for c in columns]) if columns else np.zeros(0) for k in keys
@@ -678,9 +721,11 @@ def track_scene(
 
 __all__ = [
     "EVENT_COLUMNS",
+    "STATUS_NAMES",
     "ScanLog",
     "SceneTracker",
     "SceneTrackerConfig",
     "iter_scans",
+    "load_scene_config",
     "track_scene",
 ]

@@ -1,0 +1,173 @@
+"""The service's core without sockets: lines in, output records out, every detection counted.
+
+:class:`LiveTracker` parses input lines (:mod:`.messages`), merges the radars' scans
+(:mod:`.reorder`), runs the scene tracker on each released scan and returns the records to
+write: the confirmed tracks after the scan (the columns of offline ``adaptrack track``, so a
+replayed file gives the same numbers), new hazard events, and a rejection record for every
+detection that was not used. Its counters keep ``received = used + rejected + pending``.
+:meth:`LiveTracker.save` / :func:`load_state` snapshot and resume the whole state (atomic
+write: a crash leaves the previous snapshot).
+"""
+
+from __future__ import annotations
+
+import os
+import pickle
+import time
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+
+from .._typing import FloatArray
+from ..crossing.scene_tracker import STATUS_NAMES, SceneTracker, SceneTrackerConfig
+from ..crossing.site import Site
+from .messages import Rejected, is_header, parse_line
+from .reorder import ReorderBuffer, Scan
+
+STATE_VERSION = 1
+LATENCY_SAMPLES = 1 << 16  # processing times kept for the percentiles (newest)
+
+Record = dict[str, object]
+
+
+class LiveTracker:
+    """Incremental scene tracking of a line stream (module docstring).
+
+    ``window_s``: reorder window [s]; ``warnings`` (K, 2): the crossing's warning intervals
+    [s] (stop-line prediction), as in :func:`adaptrack.crossing.scene_tracker.track_scene`.
+    """
+
+    def __init__(
+        self,
+        site: Site,
+        config: SceneTrackerConfig | None = None,
+        window_s: float = 0.2,
+        warnings: FloatArray | None = None,
+    ) -> None:
+        self.site = site
+        self.tracker = SceneTracker(site, config, warnings)
+        self.buffer = ReorderBuffer(window_s, {r.name: r.latency_s for r in site.radars})
+        self.radars = frozenset(r.name for r in site.radars)
+        self.received = 0
+        self.used = 0
+        self.rejected: Counter[str] = Counter()
+        self.scans = 0
+        self._events_out = 0
+        self._latency = np.full(LATENCY_SAMPLES, np.nan)  # processing time per scan [s]
+
+    # -- input --------------------------------------------------------------------------
+    def feed(self, line: str, source: str = "") -> list[Record]:
+        """Take one input line; return the records it makes (scans the window released)."""
+        if is_header(line):
+            return []
+        self.received += 1
+        try:
+            det = parse_line(line, self.radars)
+        except Rejected as exc:
+            return [self._reject(exc.reason, exc.detail, source, line)]
+        late = self.buffer.push(det)
+        if late is not None:
+            return [self._reject("late", late, source, line)]
+        return self._process(self.buffer.ready())
+
+    def flush(self) -> list[Record]:
+        """Process every buffered scan (end of input, or the input fell silent)."""
+        return self._process(self.buffer.flush())
+
+    # -- scans ----------------------------------------------------------------------------
+    def _process(self, scans: list[Scan]) -> list[Record]:
+        out: list[Record] = []
+        for scan in scans:
+            start = time.perf_counter()
+            out.extend(self._scan(scan))
+            self._latency[self.scans % LATENCY_SAMPLES] = time.perf_counter() - start
+            self.scans += 1
+        return out
+
+    def _scan(self, scan: Scan) -> list[Record]:
+        tr = self.tracker
+        z = scan.z
+        out = [
+            self._reject(
+                "outside_view",
+                f"radar {scan.radar!r} at {scan.time_s} s: beyond its field of view",
+                scan.radar,
+                row,
+            )
+            for row in z[~self.site.radar(scan.radar).in_view(z[:, 0], z[:, 1])]
+        ]
+        before = tr.log.total - tr.log.rejected_outside_view
+        tr.step(scan.radar, scan.time_s, z)
+        self.used += tr.log.total - tr.log.rejected_outside_view - before
+        out.extend(track_records(tr.columns(tr.last_scan_s)))
+        for event in tr.events[self._events_out :]:
+            out.append({"type": "event", **event})
+        self._events_out = len(tr.events)
+        return out
+
+    def _reject(self, reason: str, detail: str, source: str, line: object) -> Record:
+        self.rejected[reason] += 1
+        text = line if isinstance(line, str) else [float(v) for v in np.asarray(line)]
+        return {"type": "rejection", "reason": reason, "detail": detail, "source": source,
+                "input": text.strip() if isinstance(text, str) else text}  # fmt: skip
+
+    # -- counters -------------------------------------------------------------------------
+    def stats(self) -> Record:
+        """Return the counters: ``received = used + rejected + pending`` (detections)."""
+        lat = self._latency[np.isfinite(self._latency)]
+        p50, p99 = (1e3 * np.percentile(lat, [50, 99])) if lat.size else (np.nan, np.nan)
+        return {
+            "type": "stats",
+            "received": self.received,
+            "used": self.used,
+            "rejected": sum(self.rejected.values()),
+            "pending": self.buffer.pending,
+            "rejected_by_reason": dict(sorted(self.rejected.items())),
+            "scans": self.scans,
+            "live_tracks": int(self.tracker.book.confirmed.sum()),
+            "scan_ms_p50": float(p50),
+            "scan_ms_p99": float(p99),
+        }
+
+    # -- state ----------------------------------------------------------------------------
+    def save(self, path: Path) -> None:
+        """Snapshot the whole state to ``path`` atomically (temporary file, then rename)."""
+        tmp = path.with_name(path.name + ".tmp")
+        with open(tmp, "wb") as f:
+            pickle.dump({"version": STATE_VERSION, "site": self.site.name, "live": self}, f)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+
+
+def track_records(columns: dict[str, np.ndarray]) -> list[Record]:
+    """Track records of :meth:`SceneTracker.columns` (plain Python values, status named)."""
+    values = {k: v.tolist() for k, v in columns.items()}
+    values["status"] = [STATUS_NAMES[s] for s in values["status"]]
+    keys = ("type", *values)
+    return [
+        dict(zip(keys, ("track", *row), strict=True)) for row in zip(*values.values(), strict=True)
+    ]
+
+
+def load_state(path: Path, site: Site) -> LiveTracker:
+    """Resume a :class:`LiveTracker` from a snapshot of :meth:`LiveTracker.save`.
+
+    The snapshot is a pickle: load only files this service wrote. Raises ``ValueError`` if
+    it is not one, or is of another site.
+    """
+    try:
+        with open(path, "rb") as f:
+            state = pickle.load(f)
+    except (pickle.UnpicklingError, EOFError, AttributeError, ImportError) as exc:
+        raise ValueError(f"{path}: not a state snapshot of 'adaptrack serve' ({exc})") from None
+    if not isinstance(state, dict) or state.get("version") != STATE_VERSION:
+        raise ValueError(f"{path}: not a state snapshot of this version of 'adaptrack serve'")
+    if state["site"] != site.name:
+        raise ValueError(f"{path}: snapshot of site {state['site']!r}, not {site.name!r}")
+    live: LiveTracker = state["live"]
+    return live
+
+
+__all__ = ["LiveTracker", "load_state", "track_records"]

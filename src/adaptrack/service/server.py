@@ -1,0 +1,361 @@
+"""The running service: listeners, the tracking loop, output sinks, state snapshots, signals.
+
+Threads: one per input (UDP socket, TCP server, stdin) putting received lines on one queue
+(unbounded: input is never dropped); the main thread takes them in arrival order through
+:class:`~.engine.LiveTracker` and writes the records to the output file (or stdout) and to
+every TCP subscriber (each behind a bounded buffer: a subscriber that does not read loses
+*output*, counted, and never stalls the tracker); the live page (:mod:`.web`) runs in its own
+thread. SIGTERM or SIGINT: the listeners stop, what they received is processed, the reorder
+window is flushed, a final snapshot and a ``stats`` record are written, exit status 0.
+
+Every bound address is announced on stderr (``listening udp://127.0.0.1:PORT``), so port 0
+(any free port) can be used.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import queue
+import signal
+import socket
+import socketserver
+import sys
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO, Any
+from urllib.parse import urlsplit
+
+from .engine import LiveTracker, Record
+from .messages import record_line
+
+UDP_BUFFER_BYTES = 16 << 20  # requested receive buffer (the kernel may cap it)
+SUBSCRIBER_BUFFER_BYTES = 4 << 20  # a subscriber's unsent output beyond this is dropped
+
+
+@dataclass(frozen=True)
+class Endpoint:
+    """Where to listen or publish: ``udp://HOST:PORT``, ``tcp://HOST:PORT`` or ``stdin``."""
+
+    scheme: str
+    host: str = ""
+    port: int = 0
+
+    @classmethod
+    def parse(cls, text: str, schemes: tuple[str, ...] = ("udp", "tcp", "stdin")) -> Endpoint:
+        """Parse an endpoint; raise ``ValueError`` naming what was expected."""
+        if text in ("stdin", "-") and "stdin" in schemes:
+            return cls("stdin")
+        parts = urlsplit(text)
+        try:
+            port = parts.port
+        except ValueError:
+            port = None
+        if parts.scheme not in schemes or not parts.hostname or port is None:
+            raise ValueError(
+                f"endpoint {text!r}: expected one of "
+                + ", ".join(("stdin" if s == "stdin" else f"{s}://HOST:PORT") for s in schemes)
+            )
+        return cls(parts.scheme, parts.hostname, port)
+
+
+def announce(message: str) -> None:
+    """Print a line on stderr (listening addresses, snapshots)."""
+    print(message, file=sys.stderr, flush=True)
+
+
+class Subscriber:
+    """Output waiting for one TCP subscriber: bounded (bytes), overflow dropped and counted."""
+
+    def __init__(self, limit_bytes: int) -> None:
+        self.limit_bytes = limit_bytes
+        self.chunks: deque[str] = deque()
+        self.size = 0
+        self.dropped_lines = 0
+        self.cond = threading.Condition()
+        self.closed = False
+
+    def offer(self, text: str) -> None:
+        """Queue ``text`` (whole lines) unless the buffer is full (then count its lines)."""
+        with self.cond:
+            if self.size + len(text) > self.limit_bytes:
+                self.dropped_lines += text.count("\n")
+                return
+            self.chunks.append(text)
+            self.size += len(text)
+            self.cond.notify()
+
+    def take(self, timeout_s: float) -> str:
+        """Everything queued (waits up to ``timeout_s`` for something)."""
+        with self.cond:
+            if not self.chunks and not self.closed:
+                self.cond.wait(timeout_s)
+            text = "".join(self.chunks)
+            self.chunks.clear()
+            self.size = 0
+            return text
+
+
+class _Threaded(socketserver.ThreadingTCPServer):
+    daemon_threads = True
+    allow_reuse_address = True
+    service: Service
+
+
+class _InputHandler(socketserver.StreamRequestHandler):
+    """One TCP input connection: each line is one detection."""
+
+    def handle(self) -> None:
+        svc = self.server.service  # type: ignore[attr-defined]
+        source = "tcp {}:{}".format(*self.client_address[:2])
+        for raw in self.rfile:
+            svc.inbox.put((raw.decode("utf-8", "replace"), source))
+            if svc.stopping.is_set():
+                break
+
+
+class _PublishHandler(socketserver.BaseRequestHandler):
+    """One TCP subscriber: receives the output records as JSON lines."""
+
+    def handle(self) -> None:
+        svc: Service = self.server.service  # type: ignore[attr-defined]
+        sub = svc.subscribe()
+        try:
+            while not (svc.done.is_set() and not sub.chunks):
+                text = sub.take(0.2)
+                if text:
+                    self.request.sendall(text.encode())
+        except OSError:
+            pass
+        finally:
+            svc.unsubscribe(sub)
+
+
+@dataclass
+class Service:
+    """The live service around a :class:`LiveTracker` (module docstring).
+
+    ``out``: the output stream; ``state``: snapshot file (written every ``state_every_s``
+    [s] and at exit); ``stats_every_s``: a ``stats`` record this often [s].
+    """
+
+    live: LiveTracker
+    out: IO[str]
+    state: Path | None = None
+    state_every_s: float = 2.0
+    stats_every_s: float = 10.0
+    subscriber_limit_bytes: int = SUBSCRIBER_BUFFER_BYTES
+    inbox: queue.SimpleQueue[tuple[str, str] | None] = field(default_factory=queue.SimpleQueue)
+    stopping: threading.Event = field(default_factory=threading.Event)
+    done: threading.Event = field(default_factory=threading.Event)
+    subscribers: list[Subscriber] = field(default_factory=list)
+    dropped_output_lines: int = 0
+    on_scan: Callable[[Service], None] | None = None  # after each processed batch (live page)
+    _threads: list[threading.Thread] = field(default_factory=list)
+    _servers: list[socketserver.TCPServer] = field(default_factory=list)
+    _udp: list[socket.socket] = field(default_factory=list)
+    _lock: threading.Lock = field(default_factory=threading.Lock)
+    _open_inputs: int = 0
+    arrivals: deque[tuple[float, int]] = field(default_factory=lambda: deque(maxlen=64))
+    kernel_dropped: int | None = None  # UDP datagrams the kernel dropped (at exit)
+
+    # -- inputs ---------------------------------------------------------------------------
+    def listen(self, ep: Endpoint) -> None:
+        """Start receiving detections from ``ep``."""
+        if ep.scheme == "udp":
+            sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            with contextlib.suppress(OSError):
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, UDP_BUFFER_BYTES)
+            sock.bind((ep.host, ep.port))
+            sock.settimeout(0.1)
+            self._udp.append(sock)
+            self._start(self._receive_udp, sock)
+            announce("listening udp://{}:{}".format(*sock.getsockname()[:2]))
+        elif ep.scheme == "tcp":
+            srv = self._tcp_server(ep, _InputHandler)
+            announce("listening tcp://{}:{}".format(*srv.server_address[:2]))
+        else:
+            self._open_inputs += 1
+            self._start(self._receive_stdin, join=False)  # a blocked read cannot be stopped
+
+    def publish(self, ep: Endpoint) -> None:
+        """Serve the output records to every TCP client connecting to ``ep``."""
+        srv = self._tcp_server(ep, _PublishHandler, join=False)
+        announce("publishing tcp://{}:{}".format(*srv.server_address[:2]))
+
+    def _tcp_server(self, ep: Endpoint, handler: type, join: bool = True) -> _Threaded:
+        srv = _Threaded((ep.host, ep.port), handler)
+        srv.service = self
+        self._servers.append(srv)
+        self._start(srv.serve_forever, 0.1, join=join)
+        return srv
+
+    def _start(self, target: Callable[..., Any], *args: Any, join: bool = True) -> None:
+        """Run ``target(*args)`` in a daemon thread (joined at exit if ``join``: an input)."""
+        thread = threading.Thread(target=target, args=args, daemon=True)
+        thread.start()
+        if join:
+            self._threads.append(thread)
+
+    def _receive_udp(self, sock: socket.socket) -> None:
+        name = "udp {}:{}".format(*sock.getsockname()[:2])
+        while True:
+            try:
+                data, addr = sock.recvfrom(65535)
+            except TimeoutError:
+                if self.stopping.is_set():
+                    break
+                continue
+            except OSError:
+                break
+            text = data.decode("utf-8", "replace")
+            source = f"{name} from {addr[0]}:{addr[1]}"
+            for line in text.splitlines() or [""]:
+                self.inbox.put((line, source))
+        # stopping: take what the kernel still holds, then close
+        sock.setblocking(False)
+        with contextlib.suppress(OSError):
+            while True:
+                data, addr = sock.recvfrom(65535)
+                for line in data.decode("utf-8", "replace").splitlines() or [""]:
+                    self.inbox.put((line, f"{name} from {addr[0]}:{addr[1]}"))
+        self.kernel_dropped = udp_drops(sock)
+        sock.close()
+
+    def _receive_stdin(self) -> None:
+        for line in sys.stdin:
+            self.inbox.put((line, "stdin"))
+            if self.stopping.is_set():
+                return
+        self.inbox.put(None)  # end of stdin
+
+    # -- subscribers ----------------------------------------------------------------------
+    def subscribe(self) -> Subscriber:
+        """Register a new output subscriber."""
+        sub = Subscriber(self.subscriber_limit_bytes)
+        with self._lock:
+            self.subscribers.append(sub)
+        return sub
+
+    def unsubscribe(self, sub: Subscriber) -> None:
+        """Forget a subscriber (its dropped output stays counted)."""
+        with self._lock:
+            if sub in self.subscribers:
+                self.subscribers.remove(sub)
+                self.dropped_output_lines += sub.dropped_lines
+
+    # -- the loop -------------------------------------------------------------------------
+    def run(self) -> None:
+        """Process input until SIGTERM / SIGINT (or the end of stdin if it is the only input)."""
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            signal.signal(sig, lambda *_: self.stopping.set())
+        only_stdin = self._open_inputs > 0 and not (self._udp or self._servers_in())
+        next_state = next_stats = time.monotonic()
+        last_input = time.monotonic()
+        while True:
+            try:
+                item = self.inbox.get(timeout=0.05)
+                idle = False
+            except queue.Empty:
+                item, idle = None, True
+            now = time.monotonic()
+            if item is not None:
+                last_input = now
+                self._emit(self.live.feed(*item))
+                self.arrivals.append((now, self.live.received))
+            elif not idle and only_stdin:
+                break  # the end of stdin, the only input
+            elif self.live.buffer.pending and now - last_input >= self.live.buffer.window_s:
+                self._emit(self.live.flush())  # the input fell silent: release the window
+            if self.stopping.is_set() and item is None:
+                break
+            if self.state is not None and now >= next_state:
+                self.live.save(self.state)
+                next_state = now + self.state_every_s
+            if now >= next_stats:
+                self._emit([self.stats()])
+                next_stats = now + self.stats_every_s
+        self._finish()
+
+    def _servers_in(self) -> bool:
+        return any(isinstance(s, _Threaded) and s.RequestHandlerClass is _InputHandler
+                   for s in self._servers)  # fmt: skip
+
+    def _finish(self) -> None:
+        self.stopping.set()
+        for srv in self._servers:
+            if srv.RequestHandlerClass is _InputHandler:
+                srv.shutdown()
+        for thread in self._threads:
+            thread.join(timeout=0.5)
+        while True:  # what the inputs received before they stopped
+            try:
+                item = self.inbox.get_nowait()
+            except queue.Empty:
+                break
+            if item is not None:
+                self._emit(self.live.feed(*item))
+        self._emit(self.live.flush())
+        if self.state is not None:
+            self.live.save(self.state)
+        self._emit([self.stats()])
+        self.out.flush()
+        self.done.set()
+        for srv in self._servers:
+            srv.shutdown()
+            srv.server_close()
+
+    def _emit(self, records: list[Record]) -> None:
+        if not records:
+            return
+        text = "".join(record_line(r) for r in records)
+        self.out.write(text)
+        with self._lock:
+            for sub in self.subscribers:
+                sub.offer(text)
+        if self.on_scan is not None:
+            self.on_scan(self)
+
+    def stats(self) -> Record:
+        """Return the tracker's counters plus output drops, subscribers and kernel drops."""
+        with self._lock:
+            dropped = self.dropped_output_lines + sum(s.dropped_lines for s in self.subscribers)
+            n_sub = len(self.subscribers)
+        kernel = self.kernel_dropped
+        if kernel is None and self._udp:
+            kernel = sum(udp_drops(s) or 0 for s in self._udp if s.fileno() >= 0)
+        return {
+            **self.live.stats(),
+            "output_dropped_lines": dropped,
+            "subscribers": n_sub,
+            "udp_kernel_dropped": kernel,
+            "input_rate_per_s": self.input_rate(),
+        }
+
+    def input_rate(self) -> float:
+        """Return the detections received per second over the recent arrivals."""
+        if len(self.arrivals) < 2:
+            return 0.0
+        (t0, n0), (t1, n1) = self.arrivals[0], self.arrivals[-1]
+        return (n1 - n0) / (t1 - t0) if t1 > t0 else 0.0
+
+
+def udp_drops(sock: socket.socket) -> int | None:
+    """Datagrams the kernel dropped on ``sock`` (receive buffer full): Linux only, else None."""
+    try:
+        inode = os.fstat(sock.fileno()).st_ino
+        with open("/proc/net/udp") as f:
+            for line in f.readlines()[1:]:
+                cols = line.split()
+                if int(cols[9]) == inode:
+                    return int(cols[-1])
+    except (OSError, ValueError, IndexError):
+        return None
+    return None
+
+
+__all__ = ["Endpoint", "Service", "Subscriber", "announce", "udp_drops"]
