@@ -39,7 +39,7 @@ from .crossing.mixed_traffic import MixedTraffic, mixed_traffic_study
 from .crossing.radar_sim import simulate_site_case
 from .crossing.report import build_report, render_html, sample_tracks
 from .crossing.scene import scene_spec, simulate_scene
-from .crossing.scene_tracker import track_scene
+from .crossing.scene_tracker import load_scene_config, track_scene
 from .crossing.selection import (
     CRITERIA,
     CRITERION_TEXT,
@@ -464,14 +464,14 @@ def track(
     With an ``object_id`` column (a radar object list): every object with the site's road
     estimator, the deployed one of ``--config`` (the road EKF with constant acceleration
     without it); the reflection-point scatter follows the ``vehicle_class`` column (a car
-    when absent). Without ``object_id`` (raw detections): the many-object scene tracker;
-    tracks go to ``--out`` (status tentative tracks excluded) and hazard events to
+    when absent). Without ``object_id`` (raw detections): the many-object scene tracker
+    (its settings from the ``[scene_tracker]`` table of ``--config``, if any); tracks go to ``--out`` (status tentative tracks excluded) and hazard events to
     ``--events`` (with ``--warnings``, also the predicted "will not stop before the stop
     line").
     """
     st = _load_site(site)
     if "object_id" not in read_table(measurements).columns:
-        _track_scene_file(measurements, st, out, events, warnings)
+        _track_scene_file(measurements, st, out, events, warnings, config)
         return
     if warnings is not None:
         _fail("--warnings applies to raw detections (without object_id)")
@@ -513,11 +513,17 @@ def track(
 
 
 def _track_scene_file(
-    measurements: Path, st: Site, out: Path, events: Path | None, warnings: Path | None
+    measurements: Path,
+    st: Site,
+    out: Path,
+    events: Path | None,
+    warnings: Path | None,
+    config: Path | None,
 ) -> None:
     try:
         det = read_scene_detections(measurements, st)
         intervals = read_warnings(warnings) if warnings is not None else None
+        settings = load_scene_config(config) if config is not None else None
     except ValueError as exc:
         _fail(str(exc))
     with Progress(transient=True) as progress:
@@ -526,6 +532,7 @@ def _track_scene_file(
             tracks, events_frame, log = track_scene(
                 st,
                 det,
+                settings,
                 on_scan=lambda done, total: progress.update(task, completed=done, total=total),
                 warnings=intervals,
             )

@@ -48,6 +48,10 @@ def serve(
     stats_every: float = typer.Option(
         10.0, "--stats-every", min=0.1, help="Period of the stats record [s]."
     ),
+    subscriber_buffer: int = typer.Option(
+        4096, "--subscriber-buffer", min=1, help="Unsent output per subscriber [kB] beyond "
+        "which its output is dropped (counted)."
+    ),
 ) -> None:
     """Track live detections: tracks, events, rejections and stats as JSON lines.
 
@@ -80,7 +84,7 @@ def serve(
         announce(f"resumed from {state}: {live.scans} scans, next track id "
                  f"{live.tracker.book.next_id}")  # fmt: skip
     stream = sys.stdout if out == "-" else open(out, "a" if resume else "w")
-    svc = Service(live, stream, state, state_every, stats_every)
+    svc = Service(live, stream, state, state_every, stats_every, subscriber_buffer << 10)
     pages = None
     try:
         for ep in inputs:

@@ -35,6 +35,7 @@ from .messages import record_line
 
 UDP_BUFFER_BYTES = 16 << 20  # requested receive buffer (the kernel may cap it)
 SUBSCRIBER_BUFFER_BYTES = 4 << 20  # a subscriber's unsent output beyond this is dropped
+FLUSH_PERIOD_S = 0.5  # the output file is flushed this often [s]
 
 
 @dataclass(frozen=True)
@@ -254,7 +255,7 @@ class Service:
         for sig in (signal.SIGTERM, signal.SIGINT):
             signal.signal(sig, lambda *_: self.stopping.set())
         only_stdin = self._open_inputs > 0 and not (self._udp or self._servers_in())
-        next_state = next_stats = time.monotonic()
+        next_state = next_stats = next_flush = time.monotonic()
         last_input = time.monotonic()
         while True:
             try:
@@ -273,7 +274,11 @@ class Service:
                 self._emit(self.live.flush())  # the input fell silent: release the window
             if self.stopping.is_set() and item is None:
                 break
+            if now >= next_flush:
+                self.out.flush()  # readers of the file see the output within a period
+                next_flush = now + FLUSH_PERIOD_S
             if self.state is not None and now >= next_state:
+                self.out.flush()  # the output up to the snapshot is on disk before it
                 self.live.save(self.state)
                 next_state = now + self.state_every_s
             if now >= next_stats:
@@ -300,10 +305,10 @@ class Service:
             if item is not None:
                 self._emit(self.live.feed(*item))
         self._emit(self.live.flush())
-        if self.state is not None:
-            self.live.save(self.state)
         self._emit([self.stats()])
         self.out.flush()
+        if self.state is not None:
+            self.live.save(self.state)
         self.done.set()
         for srv in self._servers:
             srv.shutdown()
