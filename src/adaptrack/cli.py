@@ -465,9 +465,9 @@ def track(
     estimator, the deployed one of ``--config`` (the road EKF with constant acceleration
     without it); the reflection-point scatter follows the ``vehicle_class`` column (a car
     when absent). Without ``object_id`` (raw detections): the many-object scene tracker
-    (its settings from the ``[scene_tracker]`` table of ``--config``, if any); tracks go to ``--out`` (status tentative tracks excluded) and hazard events to
-    ``--events`` (with ``--warnings``, also the predicted "will not stop before the stop
-    line").
+    (its settings from the ``[scene_tracker]`` table of ``--config``, if any); tracks go
+    to ``--out`` (status tentative tracks excluded) and hazard events to ``--events``
+    (with ``--warnings``, also the predicted "will not stop before the stop line").
     """
     st = _load_site(site)
     if "object_id" not in read_table(measurements).columns:

@@ -1,7 +1,6 @@
 """``adaptrack serve`` over real sockets on 127.0.0.1: no data loss, faults, restart."""
 
 import json
-import math
 import socket
 import subprocess
 import sys
@@ -150,4 +149,4 @@ def test_kill_9_and_restart_from_the_state_continues_the_tracks(
     assert first_after["track_id"].max() < last_before["track_id"].max() + 5
     # and indeed every number goes on as if nothing had happened
     pd.testing.assert_frame_equal(tracks_of(records), offline_tracks, check_exact=True)
-    assert not math.isnan(after[-1]["scan_ms_p50"])
+    assert after[-1]["scan_ms_p50"] > 0

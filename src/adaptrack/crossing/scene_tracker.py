@@ -62,7 +62,6 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
-from scipy.spatial import cKDTree
 
 from .._toml import load_toml
 from .._typing import FloatArray
@@ -445,12 +444,10 @@ class SceneTracker:
         n = tr.time_s.size
         if n < 2:
             return
-        pts = np.stack([tr.x[:, 0] + 1e6 * tr.corridor, tr.x[:, 3]], -1)
-        reach = 2.0 * float(tr.spread.max()) + 1.0
-        pairs = cKDTree(pts).query_pairs(reach, output_type="ndarray")
-        if pairs.size == 0:
-            return
-        a, b = pairs[:, 0], pairs[:, 1]
+        a, b = np.triu_indices(n, 1)  # every pair: a few dozen tracks
+        near = tr.corridor[a] == tr.corridor[b]
+        a, b = a[near], b[near]
+        pairs = np.stack([a, b], -1)
         du = np.abs(tr.x[a, 0] - tr.x[b, 0])
         dd = np.abs(tr.x[a, 3] - tr.x[b, 3])
         dv = np.abs(tr.x[a, 1] - tr.x[b, 1])

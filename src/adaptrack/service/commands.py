@@ -49,8 +49,10 @@ def serve(
         10.0, "--stats-every", min=0.1, help="Period of the stats record [s]."
     ),
     subscriber_buffer: int = typer.Option(
-        4096, "--subscriber-buffer", min=1, help="Unsent output per subscriber [kB] beyond "
-        "which its output is dropped (counted)."
+        4096,
+        "--subscriber-buffer",
+        min=1,
+        help="Unsent output per subscriber [kB] beyond which its output is dropped (counted).",
     ),
 ) -> None:
     """Track live detections: tracks, events, rejections and stats as JSON lines.
@@ -97,7 +99,7 @@ def serve(
             view = LiveView(st)
             svc.on_scan = view.update
             pages = PageServer(live_app(st, view), page.host, page.port)
-            announce("live page http://{}:{}/".format(*pages.start()))
+            announce("serving http://{}:{}/ (the live page)".format(*pages.start()))
     except OSError as exc:
         _fail(f"cannot listen: {exc}")
     try:

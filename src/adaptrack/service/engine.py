@@ -11,6 +11,7 @@ write: a crash leaves the previous snapshot).
 
 from __future__ import annotations
 
+import math
 import os
 import pickle
 import time
@@ -22,13 +23,13 @@ import numpy as np
 from .._typing import FloatArray
 from ..crossing.scene_tracker import STATUS_NAMES, SceneTracker, SceneTrackerConfig
 from ..crossing.site import Site
-from .messages import Rejected, is_header, parse_line
+from .messages import Rejected, is_header, parse_line, record_line
 from .reorder import ReorderBuffer, Scan
 
 STATE_VERSION = 1
-LATENCY_SAMPLES = 1 << 16  # processing times kept for the percentiles (newest)
+LATENCY_SAMPLES = 1 << 18  # processing times kept for the percentiles (an hour of scans)
 
-Record = dict[str, object]
+Record = dict[str, object]  # an output record before encoding
 
 
 class LiveTracker:
@@ -57,8 +58,8 @@ class LiveTracker:
         self._latency = np.full(LATENCY_SAMPLES, np.nan)  # processing time per scan [s]
 
     # -- input --------------------------------------------------------------------------
-    def feed(self, line: str, source: str = "") -> list[Record]:
-        """Take one input line; return the records it makes (scans the window released)."""
+    def feed(self, line: str, source: str = "") -> list[str]:
+        """Take one input line; return the JSON lines it makes (scans the window released)."""
         if is_header(line):
             return []
         self.received += 1
@@ -71,13 +72,13 @@ class LiveTracker:
             return [self._reject("late", late, source, line)]
         return self._process(self.buffer.ready())
 
-    def flush(self) -> list[Record]:
+    def flush(self) -> list[str]:
         """Process every buffered scan (end of input, or the input fell silent)."""
         return self._process(self.buffer.flush())
 
     # -- scans ----------------------------------------------------------------------------
-    def _process(self, scans: list[Scan]) -> list[Record]:
-        out: list[Record] = []
+    def _process(self, scans: list[Scan]) -> list[str]:
+        out: list[str] = []
         for scan in scans:
             start = time.perf_counter()
             out.extend(self._scan(scan))
@@ -85,7 +86,7 @@ class LiveTracker:
             self.scans += 1
         return out
 
-    def _scan(self, scan: Scan) -> list[Record]:
+    def _scan(self, scan: Scan) -> list[str]:
         tr = self.tracker
         z = scan.z
         out = [
@@ -100,23 +101,24 @@ class LiveTracker:
         before = tr.log.total - tr.log.rejected_outside_view
         tr.step(scan.radar, scan.time_s, z)
         self.used += tr.log.total - tr.log.rejected_outside_view - before
-        out.extend(track_records(tr.columns(tr.last_scan_s)))
+        out.append(track_lines(tr.columns(tr.last_scan_s)))
         for event in tr.events[self._events_out :]:
-            out.append({"type": "event", **event})
+            out.append(record_line({"type": "event", **event}))
         self._events_out = len(tr.events)
         return out
 
-    def _reject(self, reason: str, detail: str, source: str, line: object) -> Record:
+    def _reject(self, reason: str, detail: str, source: str, line: object) -> str:
         self.rejected[reason] += 1
         text = line if isinstance(line, str) else [float(v) for v in np.asarray(line)]
-        return {"type": "rejection", "reason": reason, "detail": detail, "source": source,
-                "input": text.strip() if isinstance(text, str) else text}  # fmt: skip
+        return record_line({"type": "rejection", "reason": reason, "detail": detail,
+                            "source": source,
+                            "input": text.strip() if isinstance(text, str) else text})  # fmt: skip
 
     # -- counters -------------------------------------------------------------------------
     def stats(self) -> Record:
         """Return the counters: ``received = used + rejected + pending`` (detections)."""
         lat = self._latency[np.isfinite(self._latency)]
-        p50, p99 = (1e3 * np.percentile(lat, [50, 99])) if lat.size else (np.nan, np.nan)
+        p50, p99 = (1e3 * np.percentile(lat, [50, 99])).tolist() if lat.size else (None, None)
         return {
             "type": "stats",
             "received": self.received,
@@ -126,8 +128,8 @@ class LiveTracker:
             "rejected_by_reason": dict(sorted(self.rejected.items())),
             "scans": self.scans,
             "live_tracks": int(self.tracker.book.confirmed.sum()),
-            "scan_ms_p50": float(p50),
-            "scan_ms_p99": float(p99),
+            "scan_ms_p50": p50,  # None before the first scan
+            "scan_ms_p99": p99,
         }
 
     # -- state ----------------------------------------------------------------------------
@@ -141,14 +143,24 @@ class LiveTracker:
         os.replace(tmp, path)
 
 
-def track_records(columns: dict[str, np.ndarray]) -> list[Record]:
-    """Track records of :meth:`SceneTracker.columns` (plain Python values, status named)."""
-    values = {k: v.tolist() for k, v in columns.items()}
-    values["status"] = [STATUS_NAMES[s] for s in values["status"]]
-    keys = ("type", *values)
-    return [
-        dict(zip(keys, ("track", *row), strict=True)) for row in zip(*values.values(), strict=True)
-    ]
+def track_lines(columns: dict[str, np.ndarray]) -> str:
+    """JSON lines of the track records of :meth:`SceneTracker.columns` (status named).
+
+    Formatted column by column (the output's bulk: one line per track and scan); numbers as
+    ``repr`` (what ``json`` writes, exact), a non-finite one as null.
+    """
+    fields = []
+    for key, values in columns.items():
+        if key == "status":
+            texts = [f'"{STATUS_NAMES[v]}"' for v in values.tolist()]
+        elif values.dtype == bool:
+            texts = ["true" if v else "false" for v in values.tolist()]
+        elif np.all(np.isfinite(values)):
+            texts = [repr(v) for v in values.tolist()]
+        else:
+            texts = [repr(v) if math.isfinite(v) else "null" for v in values.tolist()]
+        fields.append([f'"{key}":{t}' for t in texts])
+    return "".join('{"type":"track",' + ",".join(row) + "}\n" for row in zip(*fields, strict=True))
 
 
 def load_state(path: Path, site: Site) -> LiveTracker:
@@ -170,4 +182,4 @@ def load_state(path: Path, site: Site) -> LiveTracker:
     return live
 
 
-__all__ = ["LiveTracker", "load_state", "track_records"]
+__all__ = ["LiveTracker", "load_state", "track_lines"]

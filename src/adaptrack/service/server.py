@@ -1,6 +1,7 @@
 """The running service: listeners, the tracking loop, output sinks, state snapshots, signals.
 
-Threads: one per input (UDP socket, TCP server, stdin) putting received lines on one queue
+Threads: one per input (TCP server, stdin; a UDP socket is drained by a process of its own,
+:mod:`.udp_receiver`, and read from its pipe) putting received lines on one queue
 (unbounded: input is never dropped); the main thread takes them in arrival order through
 :class:`~.engine.LiveTracker` and writes the records to the output file (or stdout) and to
 every TCP subscriber (each behind a bounded buffer: a subscriber that does not read loses
@@ -14,12 +15,10 @@ Every bound address is announced on stderr (``listening udp://127.0.0.1:PORT``),
 
 from __future__ import annotations
 
-import contextlib
-import os
 import queue
 import signal
-import socket
 import socketserver
+import subprocess
 import sys
 import threading
 import time
@@ -30,10 +29,11 @@ from pathlib import Path
 from typing import IO, Any
 from urllib.parse import urlsplit
 
+from . import udp_receiver
 from .engine import LiveTracker, Record
 from .messages import record_line
 
-UDP_BUFFER_BYTES = 16 << 20  # requested receive buffer (the kernel may cap it)
+UDP_DRAIN_TIMEOUT_S = 120.0  # at exit, the UDP receivers' buffered datagrams are taken
 SUBSCRIBER_BUFFER_BYTES = 4 << 20  # a subscriber's unsent output beyond this is dropped
 FLUSH_PERIOD_S = 0.5  # the output file is flushed this often [s]
 
@@ -158,24 +158,30 @@ class Service:
     on_scan: Callable[[Service], None] | None = None  # after each processed batch (live page)
     _threads: list[threading.Thread] = field(default_factory=list)
     _servers: list[socketserver.TCPServer] = field(default_factory=list)
-    _udp: list[socket.socket] = field(default_factory=list)
+    _udp: list[subprocess.Popen[bytes]] = field(default_factory=list)
     _lock: threading.Lock = field(default_factory=threading.Lock)
     _open_inputs: int = 0
     arrivals: deque[tuple[float, int]] = field(default_factory=lambda: deque(maxlen=64))
-    kernel_dropped: int | None = None  # UDP datagrams the kernel dropped (at exit)
+    kernel_dropped: int | None = None  # UDP datagrams the kernel dropped (known at exit)
 
     # -- inputs ---------------------------------------------------------------------------
     def listen(self, ep: Endpoint) -> None:
         """Start receiving detections from ``ep``."""
         if ep.scheme == "udp":
-            sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-            with contextlib.suppress(OSError):
-                sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, UDP_BUFFER_BYTES)
-            sock.bind((ep.host, ep.port))
-            sock.settimeout(0.1)
-            self._udp.append(sock)
-            self._start(self._receive_udp, sock)
-            announce("listening udp://{}:{}".format(*sock.getsockname()[:2]))
+            child = subprocess.Popen(
+                [sys.executable, str(Path(udp_receiver.__file__)), ep.host, str(ep.port)],
+                stdin=subprocess.PIPE,
+                stdout=subprocess.PIPE,
+            )
+            assert child.stdout is not None
+            first = child.stdout.readline()
+            if not first.strip().isdigit():
+                child.wait()
+                raise OSError(f"cannot receive on udp://{ep.host}:{ep.port}")
+            self._udp.append(child)
+            name = f"udp {ep.host}:{int(first)}"
+            self._start(self._receive_udp, child, name)
+            announce(f"listening udp://{ep.host}:{int(first)}")
         elif ep.scheme == "tcp":
             srv = self._tcp_server(ep, _InputHandler)
             announce("listening tcp://{}:{}".format(*srv.server_address[:2]))
@@ -202,30 +208,19 @@ class Service:
         if join:
             self._threads.append(thread)
 
-    def _receive_udp(self, sock: socket.socket) -> None:
-        name = "udp {}:{}".format(*sock.getsockname()[:2])
-        while True:
-            try:
-                data, addr = sock.recvfrom(65535)
-            except TimeoutError:
-                if self.stopping.is_set():
+    def _receive_udp(self, child: subprocess.Popen[bytes], name: str) -> None:
+        """Put the datagrams of a receiving process (:mod:`.udp_receiver`) on the inbox."""
+        assert child.stdout is not None
+        with child.stdout as frames:
+            for header in frames:
+                address, _, size = header.decode().partition(" ")
+                if address == "END":
+                    self.kernel_dropped = (self.kernel_dropped or 0) + max(int(size), 0)
                     break
-                continue
-            except OSError:
-                break
-            text = data.decode("utf-8", "replace")
-            source = f"{name} from {addr[0]}:{addr[1]}"
-            for line in text.splitlines() or [""]:
-                self.inbox.put((line, source))
-        # stopping: take what the kernel still holds, then close
-        sock.setblocking(False)
-        with contextlib.suppress(OSError):
-            while True:
-                data, addr = sock.recvfrom(65535)
-                for line in data.decode("utf-8", "replace").splitlines() or [""]:
-                    self.inbox.put((line, f"{name} from {addr[0]}:{addr[1]}"))
-        self.kernel_dropped = udp_drops(sock)
-        sock.close()
+                text = frames.read(int(size)).decode("utf-8", "replace")
+                for line in text.splitlines() or [""]:
+                    self.inbox.put((line, f"{name} from {address}"))
+        child.wait()
 
     def _receive_stdin(self) -> None:
         for line in sys.stdin:
@@ -282,7 +277,7 @@ class Service:
                 self.live.save(self.state)
                 next_state = now + self.state_every_s
             if now >= next_stats:
-                self._emit([self.stats()])
+                self._emit([record_line(self.stats())])
                 next_stats = now + self.stats_every_s
         self._finish()
 
@@ -295,8 +290,11 @@ class Service:
         for srv in self._servers:
             if srv.RequestHandlerClass is _InputHandler:
                 srv.shutdown()
+        for child in self._udp:
+            assert child.stdin is not None
+            child.stdin.close()  # the receiver drains its socket and ends its frames
         for thread in self._threads:
-            thread.join(timeout=0.5)
+            thread.join(timeout=UDP_DRAIN_TIMEOUT_S if self._udp else 0.5)
         while True:  # what the inputs received before they stopped
             try:
                 item = self.inbox.get_nowait()
@@ -305,7 +303,7 @@ class Service:
             if item is not None:
                 self._emit(self.live.feed(*item))
         self._emit(self.live.flush())
-        self._emit([self.stats()])
+        self._emit([record_line(self.stats())])
         self.out.flush()
         if self.state is not None:
             self.live.save(self.state)
@@ -314,10 +312,10 @@ class Service:
             srv.shutdown()
             srv.server_close()
 
-    def _emit(self, records: list[Record]) -> None:
-        if not records:
+    def _emit(self, lines: list[str]) -> None:
+        if not lines:
             return
-        text = "".join(record_line(r) for r in records)
+        text = "".join(lines)
         self.out.write(text)
         with self._lock:
             for sub in self.subscribers:
@@ -330,14 +328,11 @@ class Service:
         with self._lock:
             dropped = self.dropped_output_lines + sum(s.dropped_lines for s in self.subscribers)
             n_sub = len(self.subscribers)
-        kernel = self.kernel_dropped
-        if kernel is None and self._udp:
-            kernel = sum(udp_drops(s) or 0 for s in self._udp if s.fileno() >= 0)
         return {
             **self.live.stats(),
             "output_dropped_lines": dropped,
             "subscribers": n_sub,
-            "udp_kernel_dropped": kernel,
+            "udp_kernel_dropped": self.kernel_dropped,  # at exit (None: no UDP input)
             "input_rate_per_s": self.input_rate(),
         }
 
@@ -349,18 +344,4 @@ class Service:
         return (n1 - n0) / (t1 - t0) if t1 > t0 else 0.0
 
 
-def udp_drops(sock: socket.socket) -> int | None:
-    """Datagrams the kernel dropped on ``sock`` (receive buffer full): Linux only, else None."""
-    try:
-        inode = os.fstat(sock.fileno()).st_ino
-        with open("/proc/net/udp") as f:
-            for line in f.readlines()[1:]:
-                cols = line.split()
-                if int(cols[9]) == inode:
-                    return int(cols[-1])
-    except (OSError, ValueError, IndexError):
-        return None
-    return None
-
-
-__all__ = ["Endpoint", "Service", "Subscriber", "announce", "udp_drops"]
+__all__ = ["Endpoint", "Service", "Subscriber", "announce"]

@@ -5,7 +5,8 @@ resources), ``/site.json`` the site geometry (roads, barriers, stop lines, radar
 fields of view, local metres), ``/ws`` a WebSocket pushing the current picture five times a
 second. A track's class is the site's class nearest in length to the body length its
 reflections spread over (``sqrt(12)`` times the learnt spread: reflections uniform along the
-body), shown with that length: an estimate, not a classification the radar made.
+body), shown with that length: an estimate, not a classification the radar made. A static
+object (stopped since it was first seen: a post, a rail) is a "fixed object".
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ from starlette.routing import Route, WebSocketRoute
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
 from ..crossing.site import Site
-from .engine import track_records
+from .engine import track_lines
 from .server import Service
 
 PUSH_PERIOD_S = 0.2
@@ -72,11 +73,12 @@ class LiveView:
             return
         self._next = now + PUSH_PERIOD_S
         tr = svc.live.tracker
-        tracks = track_records(tr.columns(tr.last_scan_s))
+        tracks = [json.loads(line) for line in track_lines(tr.columns(tr.last_scan_s)).splitlines()]
         lengths = np.sqrt(12.0) * tr.tracks.spread[tr.book.confirmed]
         for rec, length in zip(tracks, lengths.tolist(), strict=True):
             rec["length_m"] = round(length, 1)
-            rec["class"] = min(self.classes, key=lambda c: abs(c[0] - length))[1]
+            nearest = min(self.classes, key=lambda c: abs(c[0] - length))[1]
+            rec["class"] = "fixed object" if rec["status"] == "static" else nearest
         events = [{k: v for k, v in e.items() if v == v} for e in tr.events[-30:]]
         self.text = json.dumps(
             {
@@ -86,6 +88,7 @@ class LiveView:
                 "stats": svc.stats(),
             },
             default=float,
+            allow_nan=False,  # the page's JSON.parse takes no NaN (None above)
         )
 
 
