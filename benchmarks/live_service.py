@@ -34,17 +34,23 @@ def adaptrack(*args: str) -> None:
         raise SystemExit(f"adaptrack {args[0]} failed: {proc.stderr}")
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     """Run the benchmark (command line above)."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--duration", type=float, default=3600.0, help="scene length [s]")
     ap.add_argument("--seed", type=int, default=61)
-    args = ap.parse_args()
-    work = Path(tempfile.mkdtemp(prefix="live_bench_"))
+    args = ap.parse_args(argv)
+    with tempfile.TemporaryDirectory(prefix="live_bench_") as folder:
+        run(Path(folder), args.duration, args.seed)
+
+
+def run(work: Path, duration: float, seed: int) -> None:
+    """Simulate, track offline, serve and replay in ``work``; print the figures."""
     det, warn, off = work / "det.csv", work / "warn.csv", work / "offline.parquet"
-    adaptrack("simulate", "--scene", "--duration", str(args.duration), "--seed",
-              str(args.seed), "--out", str(det), "--warnings", str(warn))  # fmt: skip
-    n = sum(1 for _ in open(det)) - 1
+    adaptrack("simulate", "--scene", "--duration", str(duration), "--seed",
+              str(seed), "--out", str(det), "--warnings", str(warn))  # fmt: skip
+    with open(det) as f:
+        n = sum(1 for _ in f) - 1
     start = time.perf_counter()
     adaptrack("track", str(det), "--out", str(off), "--warnings", str(warn))
     offline_s = time.perf_counter() - start
@@ -66,8 +72,10 @@ def main() -> None:
     sent_s = time.perf_counter() - start
     serve.send_signal(signal.SIGTERM)
     code = serve.wait()
+    serve.stderr.close()
     live_s = time.perf_counter() - start
-    records = [json.loads(line) for line in open(out)]
+    with open(out) as f:
+        records = [json.loads(line) for line in f]
     stats = records[-1]
     tracks = pd.DataFrame([r for r in records if r["type"] == "track"]).drop(columns="type")
     offline = pd.read_parquet(off)
@@ -76,7 +84,7 @@ def main() -> None:
         equal = "yes, exactly"
     except AssertionError as exc:
         equal = f"NO: {str(exc).splitlines()[0]}"
-    print(f"scene: {args.duration:.0f} s, seed {args.seed}, {n} detections, {stats['scans']} scans")
+    print(f"scene: {duration:.0f} s, seed {seed}, {n} detections, {stats['scans']} scans")
     print(f"serve exit status {code}; detections in {n}, received {stats['received']}, used "
           f"{stats['used']}, rejected {stats['rejected']} {stats['rejected_by_reason']}, "
           f"pending {stats['pending']}, lost in the kernel {stats['udp_kernel_dropped']}; "
@@ -85,8 +93,8 @@ def main() -> None:
     print(f"processing per scan: p50 {stats['scan_ms_p50']:.3f} ms, p99 "
           f"{stats['scan_ms_p99']:.3f} ms (tracker step and records)")  # fmt: skip
     print(f"replay sent in {sent_s:.1f} s; service done in {live_s:.1f} s: sustained "
-          f"{args.duration / live_s:.1f}x real time (offline track: "
-          f"{args.duration / offline_s:.1f}x, including start-up)")  # fmt: skip
+          f"{duration / live_s:.1f}x real time (offline track: "
+          f"{duration / offline_s:.1f}x, including start-up)")  # fmt: skip
 
 
 if __name__ == "__main__":

@@ -22,3 +22,12 @@ def test_benchmarks_quick_run_writes_json(tmp_path, capsys):
     memory = [r for r in out["results"] if r["workload"] == "memory"]
     assert all(r["peak_memory_ratio"] >= 1.0 for r in memory)
     assert "adaptrack x faster" in capsys.readouterr().out
+
+
+def test_live_service_benchmark_runs_on_a_short_scene(capsys):
+    from benchmarks.live_service import main as live_main
+
+    live_main(["--duration", "15", "--seed", "3"])
+    out = capsys.readouterr().out
+    assert "in = used + rejected: True" in out and "lost in the kernel 0" in out
+    assert "equal offline 'adaptrack track': yes, exactly" in out

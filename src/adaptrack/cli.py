@@ -524,7 +524,7 @@ def _track_scene_file(
         det = read_scene_detections(measurements, st)
         intervals = read_warnings(warnings) if warnings is not None else None
         settings = load_scene_config(config) if config is not None else None
-    except ValueError as exc:
+    except (ValueError, OSError) as exc:
         _fail(str(exc))
     with Progress(transient=True) as progress:
         task = progress.add_task("tracking")

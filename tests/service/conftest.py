@@ -37,3 +37,20 @@ def scene_files(tmp_path_factory) -> SceneFiles:
     write_table_atomic(rec.detections, det)
     write_table_atomic(pd.DataFrame(spec.warnings(), columns=WARNING_COLUMNS), warn)
     return SceneFiles(site, det, warn)
+
+
+@pytest.fixture
+def serve():
+    """Start ``adaptrack serve ARGS`` processes; any still running at teardown is killed."""
+    from .live_process import LiveProcess
+
+    started: list[LiveProcess] = []
+
+    def start(*args: str) -> LiveProcess:
+        started.append(LiveProcess(*args))
+        return started[-1]
+
+    yield start
+    for proc in started:
+        if proc.proc.poll() is None:
+            proc.kill()

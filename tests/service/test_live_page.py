@@ -6,7 +6,7 @@ import threading
 
 import pytest
 
-from .live_process import LiveProcess, replay
+from .live_process import replay
 
 
 def chromium_path() -> str:
@@ -19,10 +19,10 @@ def chromium_path() -> str:
     return path
 
 
-def test_a_track_appears_on_the_live_page_and_moves(scene_files, tmp_path):
+def test_a_track_appears_on_the_live_page_and_moves(serve, scene_files, tmp_path):
     sync_api = pytest.importorskip("playwright.sync_api")
     browser_path = chromium_path()
-    svc = LiveProcess("--listen", "udp://127.0.0.1:0", "--http", "127.0.0.1:0",
+    svc = serve("--listen", "udp://127.0.0.1:0", "--http", "127.0.0.1:0",
                       "--out", str(tmp_path / "live.jsonl"))  # fmt: skip
     host, port = svc.wait_for("listening udp")
     page_host, page_port = svc.wait_for("serving http")

@@ -10,7 +10,7 @@ import pytest
 
 from adaptrack.service.engine import load_state
 
-from .live_process import LiveProcess, read_records, replay, send_udp, wait_until
+from .live_process import read_records, replay, send_udp, wait_until
 
 
 @pytest.fixture(scope="module")
@@ -31,10 +31,10 @@ def tracks_of(records):
 
 
 def test_replay_at_max_rate_over_udp_loses_nothing_and_equals_offline(
-    scene_files, offline_tracks, tmp_path
+    serve, scene_files, offline_tracks, tmp_path
 ):
     out = tmp_path / "live.jsonl"
-    svc = LiveProcess("--listen", "udp://127.0.0.1:0", "--out", str(out),
+    svc = serve("--listen", "udp://127.0.0.1:0", "--out", str(out),
                       "--warnings", str(scene_files.warnings))  # fmt: skip
     host, port = svc.wait_for("listening udp")
     replay(scene_files.detections, f"udp://{host}:{port}", "max")
@@ -49,11 +49,11 @@ def test_replay_at_max_rate_over_udp_loses_nothing_and_equals_offline(
     pd.testing.assert_frame_equal(tracks_of(records), offline_tracks, check_exact=True)
 
 
-def test_faults_become_rejections_and_the_service_runs_on(scene_files, tmp_path):
+def test_faults_become_rejections_and_the_service_runs_on(serve, scene_files, tmp_path):
     """Garbage datagrams, an unknown radar, NaN, a clock jumping back, a TCP input, a radar
     that stops sending, a subscriber that never reads."""
     out = tmp_path / "live.jsonl"
-    svc = LiveProcess(
+    svc = serve(
         "--listen", "udp://127.0.0.1:0", "--listen", "tcp://127.0.0.1:0", "--out", str(out),
         "--publish", "tcp://127.0.0.1:0", "--subscriber-buffer", "64",
     )  # fmt: skip
@@ -111,13 +111,13 @@ def test_faults_become_rejections_and_the_service_runs_on(scene_files, tmp_path)
 
 
 def test_kill_9_and_restart_from_the_state_continues_the_tracks(
-    scene_files, offline_tracks, tmp_path
+    serve, scene_files, offline_tracks, tmp_path
 ):
     out, state = tmp_path / "live.jsonl", tmp_path / "state.pkl"
     args = ("--listen", "udp://127.0.0.1:0", "--out", str(out), "--state", str(state),
             "--state-every", "0.2", "--warnings", str(scene_files.warnings))  # fmt: skip
     lines = scene_files.lines
-    first = LiveProcess(*args)
+    first = serve(*args)
     udp = first.wait_for("listening udp")
     cut = int(0.6 * len(lines))
     send_udp(udp, [(line + "\n").encode() for line in lines[:cut]])
@@ -131,7 +131,7 @@ def test_kill_9_and_restart_from_the_state_continues_the_tracks(
     wait_until(snapshot_has_everything, timeout_s=120, what="a snapshot after the input")
     first.kill()
     before = read_records(out)
-    second = LiveProcess(*args)
+    second = serve(*args)
     udp = second.wait_for("listening udp")
     assert any("resumed from" in line for line in second.stderr)
     send_udp(udp, [(line + "\n").encode() for line in lines[cut:]])

@@ -80,7 +80,7 @@ def serve(
             load_state(state, st) if resume and state is not None
             else LiveTracker(st, cfg, window, intervals)
         )  # fmt: skip
-    except ValueError as exc:
+    except (ValueError, OSError) as exc:
         _fail(str(exc))
     if resume:
         announce(f"resumed from {state}: {live.scans} scans, next track id "

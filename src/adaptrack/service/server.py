@@ -114,7 +114,7 @@ class _InputHandler(socketserver.StreamRequestHandler):
         svc = self.server.service  # type: ignore[attr-defined]
         source = "tcp {}:{}".format(*self.client_address[:2])
         for raw in self.rfile:
-            svc.inbox.put((raw.decode("utf-8", "replace"), source))
+            svc.inbox.put(([raw.decode("utf-8", "replace")], source))
             if svc.stopping.is_set():
                 break
 
@@ -150,7 +150,10 @@ class Service:
     state_every_s: float = 2.0
     stats_every_s: float = 10.0
     subscriber_limit_bytes: int = SUBSCRIBER_BUFFER_BYTES
-    inbox: queue.SimpleQueue[tuple[str, str] | None] = field(default_factory=queue.SimpleQueue)
+    # received lines with their source (a datagram's lines together); None: end of stdin
+    inbox: queue.SimpleQueue[tuple[list[str], str] | None] = field(
+        default_factory=queue.SimpleQueue
+    )
     stopping: threading.Event = field(default_factory=threading.Event)
     done: threading.Event = field(default_factory=threading.Event)
     subscribers: list[Subscriber] = field(default_factory=list)
@@ -218,13 +221,12 @@ class Service:
                     self.kernel_dropped = (self.kernel_dropped or 0) + max(int(size), 0)
                     break
                 text = frames.read(int(size)).decode("utf-8", "replace")
-                for line in text.splitlines() or [""]:
-                    self.inbox.put((line, f"{name} from {address}"))
+                self.inbox.put((text.splitlines() or [""], f"{name} from {address}"))
         child.wait()
 
     def _receive_stdin(self) -> None:
         for line in sys.stdin:
-            self.inbox.put((line, "stdin"))
+            self.inbox.put(([line], "stdin"))
             if self.stopping.is_set():
                 return
         self.inbox.put(None)  # end of stdin
@@ -261,7 +263,7 @@ class Service:
             now = time.monotonic()
             if item is not None:
                 last_input = now
-                self._emit(self.live.feed(*item))
+                self._feed(*item)
                 self.arrivals.append((now, self.live.received))
             elif not idle and only_stdin:
                 break  # the end of stdin, the only input
@@ -301,7 +303,7 @@ class Service:
             except queue.Empty:
                 break
             if item is not None:
-                self._emit(self.live.feed(*item))
+                self._feed(*item)
         self._emit(self.live.flush())
         self._emit([record_line(self.stats())])
         self.out.flush()
@@ -311,6 +313,13 @@ class Service:
         for srv in self._servers:
             srv.shutdown()
             srv.server_close()
+
+    def _feed(self, lines: list[str], source: str) -> None:
+        """Give received lines to the tracker; write what they make."""
+        out = []
+        for line in lines:
+            out += self.live.feed(line, source)
+        self._emit(out)
 
     def _emit(self, lines: list[str]) -> None:
         if not lines:
