@@ -18,8 +18,8 @@ class Rendered:
     dom: str
 
 
-def render_in_chromium(page: Path, work: Path, height_px: int = 2600) -> Rendered:
-    """Screenshot ``page`` and dump its DOM in headless Chromium (profile under ``work``).
+def chromium_executable() -> str:
+    """Path of the installed Chromium.
 
     Skips when Chromium is not installed, except in CI (``CI=true``), where it fails.
     """
@@ -28,6 +28,15 @@ def render_in_chromium(page: Path, work: Path, height_px: int = 2600) -> Rendere
         if os.environ.get("CI") == "true":
             pytest.fail("chromium must be installed in CI (.ci/run installs Debian chromium)")
         pytest.skip("chromium is not installed on this machine; CI installs it")
+    return chromium
+
+
+def render_in_chromium(page: Path, work: Path, height_px: int = 2600) -> Rendered:
+    """Screenshot ``page`` and dump its DOM in headless Chromium (profile under ``work``).
+
+    Skips when Chromium is not installed, except in CI (``CI=true``), where it fails.
+    """
+    chromium = chromium_executable()
     shot = work / "shot.png"
     flags = [
         "--headless",

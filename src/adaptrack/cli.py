@@ -9,7 +9,6 @@ import os
 from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
 from pathlib import Path
-from typing import NoReturn
 
 import numpy as np
 import pandas as pd
@@ -18,6 +17,7 @@ from rich.console import Console
 from rich.progress import Progress
 from rich.table import Table
 
+from ._cli_errors import fail as _fail
 from .analysis.evaluation import Evaluation, evaluate_scenario
 from .analysis.flights import FlightRow, evaluate_flight, smooth_kalman, smooth_lsq
 from .coords.geodetic import enu_to_ecef, enu_to_ecef_rotation
@@ -72,7 +72,6 @@ app = typer.Typer(
     add_completion=False,
     rich_markup_mode=None,
 )
-_err = Console(stderr=True)
 app.command("serve")(service_commands.serve)
 app.command("replay")(service_commands.replay)
 
@@ -562,11 +561,6 @@ def _pool(workers: int | None, scheduler: str | None) -> Iterator[TaskPool]:
         _fail(f"cannot start the task pool ({exc})")
     with stack:
         yield pool
-
-
-def _fail(message: str) -> NoReturn:
-    _err.print(f"error: {message}", markup=False, highlight=False)
-    raise typer.Exit(code=1)
 
 
 def _write_text(path: Path, text: str) -> None:

@@ -1,27 +1,16 @@
 """The live page in headless Chromium (Playwright): the map, a track that appears and moves."""
 
-import os
-import shutil
 import threading
 
-import pytest
+from playwright.sync_api import sync_playwright
+
+from tests.browser import chromium_executable
 
 from .live_process import replay
 
 
-def chromium_path() -> str:
-    """Debian's chromium (CI installs it); skip without it, except in CI."""
-    path = shutil.which("chromium") or shutil.which("chromium-browser")
-    if path is None:
-        if os.environ.get("CI") == "true":
-            pytest.fail("chromium must be installed in CI (.ci/run installs Debian chromium)")
-        pytest.skip("chromium is not installed on this machine; CI installs it")
-    return path
-
-
 def test_a_track_appears_on_the_live_page_and_moves(serve, scene_files, tmp_path):
-    sync_api = pytest.importorskip("playwright.sync_api")
-    browser_path = chromium_path()
+    browser_path = chromium_executable()
     svc = serve("--listen", "udp://127.0.0.1:0", "--http", "127.0.0.1:0",
                       "--out", str(tmp_path / "live.jsonl"))  # fmt: skip
     host, port = svc.wait_for("listening udp")
@@ -31,7 +20,7 @@ def test_a_track_appears_on_the_live_page_and_moves(serve, scene_files, tmp_path
     )
     sender.start()  # 40 s of traffic in 20 s
     try:
-        with sync_api.sync_playwright() as p:
+        with sync_playwright() as p:
             browser = p.chromium.launch(executable_path=browser_path, args=["--no-sandbox"])
             page = browser.new_page()
             errors = []

@@ -280,6 +280,7 @@ class SceneTracker:
         self.azimuth_bias_rad = {r.name: 0.0 for r in site.radars}  # estimated, taken off
         self._bias_stats = {r.name: np.zeros(3) for r in site.radars}
         self.last_scan_s = -np.inf  # when the last scan was made (timestamp less latency) [s]
+        self.outside_view = np.zeros(0, bool)  # the last scan's detections outside every field
 
     # -- track opening ----------------------------------------------------------------------
     def _open(self, z: FloatArray, radar: RadarSpec, time_s: float) -> int:
@@ -357,7 +358,8 @@ class SceneTracker:
             cfg.accel_psd, cfg.lateral_psd, cfg.stopped_psd,
         )  # fmt: skip
         view = radar.in_view(z[:, 0], z[:, 1])
-        self.log.rejected_outside_view += int((~view).sum())
+        self.outside_view = ~view
+        self.log.rejected_outside_view += int(self.outside_view.sum())
         z = z[view]
         n_t = tr.time_s.size
         used = np.zeros(z.shape[0], dtype=bool)

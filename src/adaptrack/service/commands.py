@@ -7,17 +7,11 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
-from typing import NoReturn
 
 import typer
-from rich.console import Console
 
-_err = Console(stderr=True)
-
-
-def _fail(message: str) -> NoReturn:
-    _err.print(f"error: {message}", markup=False, highlight=False)
-    raise typer.Exit(code=1)
+from .._cli_errors import err_console as _err
+from .._cli_errors import fail as _fail
 
 
 def serve(
@@ -97,7 +91,7 @@ def serve(
             from .web import LiveView, PageServer, live_app
 
             view = LiveView(st)
-            svc.on_scan = view.update
+            svc.on_output = view.update
             pages = PageServer(live_app(st, view), page.host, page.port)
             announce("serving http://{}:{}/ (the live page)".format(*pages.start()))
     except OSError as exc:

@@ -89,18 +89,11 @@ class LiveTracker:
     def _scan(self, scan: Scan) -> list[str]:
         tr = self.tracker
         z = scan.z
-        out = [
-            self._reject(
-                "outside_view",
-                f"radar {scan.radar!r} at {scan.time_s} s: beyond its field of view",
-                scan.radar,
-                row,
-            )
-            for row in z[~self.site.radar(scan.radar).in_view(z[:, 0], z[:, 1])]
-        ]
         before = tr.log.total - tr.log.rejected_outside_view
         tr.step(scan.radar, scan.time_s, z)
         self.used += tr.log.total - tr.log.rejected_outside_view - before
+        detail = f"radar {scan.radar!r} at {scan.time_s} s: beyond its field of view"
+        out = [self._reject("outside_view", detail, scan.radar, row) for row in z[tr.outside_view]]
         out.append(track_lines(tr.columns(tr.last_scan_s)))
         for event in tr.events[self._events_out :]:
             out.append(record_line({"type": "event", **event}))

@@ -27,7 +27,10 @@ DATAGRAM_BYTES = 1400  # below a typical MTU
 
 
 def detection_lines(path: Path, site: Site) -> Iterator[tuple[float, str]]:
-    """(timestamp [s], line) of every detection of a file, in file order."""
+    """(timestamp [s], line) of every detection of a file.
+
+    A CSV in the service's layout in file order, any other table in time order (stably).
+    """
     if path.suffix.lower() == ".csv":
         with open(path) as f:
             header = f.readline().strip().replace(" ", "")
@@ -36,8 +39,7 @@ def detection_lines(path: Path, site: Site) -> Iterator[tuple[float, str]]:
                     if line.strip():
                         yield float(line.split(",", 2)[1]), line.rstrip("\n") + "\n"
                 return
-    frame = read_scene_detections(path, site)
-    frame = frame.sort_index()
+    frame = read_scene_detections(path, site)  # in time order, stably
     for row in frame.itertuples(index=False):
         record = dict(
             zip(("radar", "time_s", "range_m", "azimuth_rad", "radial_speed_mps"), row, strict=True)

@@ -158,18 +158,19 @@ class Service:
     done: threading.Event = field(default_factory=threading.Event)
     subscribers: list[Subscriber] = field(default_factory=list)
     dropped_output_lines: int = 0
-    on_scan: Callable[[Service], None] | None = None  # after each processed batch (live page)
+    on_output: Callable[[Service], None] | None = None  # after each write (the live page)
     _threads: list[threading.Thread] = field(default_factory=list)
     _servers: list[socketserver.TCPServer] = field(default_factory=list)
     _udp: list[subprocess.Popen[bytes]] = field(default_factory=list)
     _lock: threading.Lock = field(default_factory=threading.Lock)
-    _open_inputs: int = 0
+    _input_kinds: list[str] = field(default_factory=list)  # schemes listened to
     arrivals: deque[tuple[float, int]] = field(default_factory=lambda: deque(maxlen=64))
     kernel_dropped: int | None = None  # UDP datagrams the kernel dropped (known at exit)
 
     # -- inputs ---------------------------------------------------------------------------
     def listen(self, ep: Endpoint) -> None:
         """Start receiving detections from ``ep``."""
+        self._input_kinds.append(ep.scheme)
         if ep.scheme == "udp":
             child = subprocess.Popen(
                 [sys.executable, str(Path(udp_receiver.__file__)), ep.host, str(ep.port)],
@@ -189,7 +190,6 @@ class Service:
             srv = self._tcp_server(ep, _InputHandler)
             announce("listening tcp://{}:{}".format(*srv.server_address[:2]))
         else:
-            self._open_inputs += 1
             self._start(self._receive_stdin, join=False)  # a blocked read cannot be stopped
 
     def publish(self, ep: Endpoint) -> None:
@@ -251,7 +251,7 @@ class Service:
         """Process input until SIGTERM / SIGINT (or the end of stdin if it is the only input)."""
         for sig in (signal.SIGTERM, signal.SIGINT):
             signal.signal(sig, lambda *_: self.stopping.set())
-        only_stdin = self._open_inputs > 0 and not (self._udp or self._servers_in())
+        only_stdin = set(self._input_kinds) == {"stdin"}
         next_state = next_stats = next_flush = time.monotonic()
         last_input = time.monotonic()
         while True:
@@ -282,10 +282,6 @@ class Service:
                 self._emit([record_line(self.stats())])
                 next_stats = now + self.stats_every_s
         self._finish()
-
-    def _servers_in(self) -> bool:
-        return any(isinstance(s, _Threaded) and s.RequestHandlerClass is _InputHandler
-                   for s in self._servers)  # fmt: skip
 
     def _finish(self) -> None:
         self.stopping.set()
@@ -329,8 +325,8 @@ class Service:
         with self._lock:
             for sub in self.subscribers:
                 sub.offer(text)
-        if self.on_scan is not None:
-            self.on_scan(self)
+        if self.on_output is not None:
+            self.on_output(self)
 
     def stats(self) -> Record:
         """Return the tracker's counters plus output drops, subscribers and kernel drops."""
