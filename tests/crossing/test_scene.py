@@ -216,16 +216,16 @@ def test_will_not_stop_before_the_stop_line_rule():
     tracker.book.confirmed[:] = True
     tracker.tracks = _Tracks.opened(np.zeros(3, int), x, np.tile(np.eye(4), (3, 1, 1)), 10.0, 1.5)
     tracker.tracks.moved[:] = True
-    tracker._stop_line_events(10.0, tracker._on_carriageway())
+    tracker._stop_line_events(10.0, np.ones(3, bool))  # all in the lane
     ev = tracker.events
     assert [e["track_id"] for e in ev] == [1]
     front = np.sqrt(3.0) * 1.5
     assert ev[0]["lead_s"] == pytest.approx((30.0 - front) / 20.0)
-    tracker._stop_line_events(10.05, tracker._on_carriageway())
+    tracker._stop_line_events(10.05, np.ones(3, bool))
     assert len(tracker.events) == 1  # once per track
     tracker.tracks.line_event_raised[:] = False
     tracker.events.clear()
-    tracker._stop_line_events(10.5, tracker._on_carriageway())  # last detected 0.5 s ago
+    tracker._stop_line_events(10.5, np.ones(3, bool))  # last detected 0.5 s ago
     assert tracker.events == []
     quiet = SceneTracker(SITE)  # no warning: no prediction
     quiet.book.add(1, 0.0)

@@ -3,16 +3,23 @@
 import math
 
 import numpy as np
+import pytest
 
 from adaptrack.crossing._scene_kernels import (
     BODY_HALF_SPREADS,
     VISIBLE_SAMPLES,
     _visible_part,
+    merged_rows,
+    nearest_sample,
     occluded_rows,
+    open_tracks,
     owners,
     unambiguous_assignment,
 )
-from adaptrack.tracking import gnn_assign
+from adaptrack.crossing.corridor import nearest_corridor
+from adaptrack.crossing.scene_tracker import SceneTracker
+from adaptrack.crossing.site import load_site
+from adaptrack.tracking import cluster_labels, cluster_points, gnn_assign
 
 GATE = 16.27
 
@@ -91,3 +98,82 @@ def test_a_body_reaching_past_the_radars_range_is_seen_over_its_near_part():
     assert abs(part_spread / spread[0] - (far - 36.0) / 8.0) <= 1.0 / VISIBLE_SAMPLES + 1e-9
     assert slope == -0.5  # the far end of what is seen stays at the range limit
     assert _visible_part(1, x, spread, corridor, roads, bounds, radar, fields) == (0.0, 2.0, 0.0)
+
+
+def test_compiled_clusters_equal_the_kd_tree_clusters():
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        n = int(rng.integers(0, 30))
+        pts = rng.uniform(0.0, 20.0, (n, 2))
+        labels, count = cluster_labels(pts[:, 0], pts[:, 1], 3.0)
+        assert labels.tolist() == cluster_points(pts, 3.0).tolist()
+        assert count == len(set(labels.tolist()))
+
+
+def _corridor_tables(site_name):
+    site = load_site(site_name)
+    tracker = SceneTracker(site)
+    return site, tracker.corridors, tracker._roads, tracker._bounds
+
+
+@pytest.mark.parametrize("site_name", ["lx_default", "lx_three_arm"])
+def test_nearest_corridor_sample_equals_the_roads_own_projection(site_name):
+    _, corridors, roads, bounds = _corridor_tables(site_name)
+    rng = np.random.default_rng(4)
+    xy = rng.uniform(-120.0, 120.0, (300, 2))
+    index, u, d = nearest_corridor(corridors, xy)
+    for k in range(xy.shape[0]):
+        c, uk, dk = nearest_sample(roads, bounds, xy[k, 0], xy[k, 1])
+        assert (c, uk) == (index[k], u[k])
+        assert dk == pytest.approx(d[k], abs=1e-9)
+
+
+def test_opened_tracks_start_where_the_detections_are_with_their_radial_speed():
+    site, corridors, roads, bounds = _corridor_tables("lx_three_arm")
+    radar = site.radars[0]
+    # two bodies on different arms: two reflections 1.5 m apart, and a single one
+    cor = corridors[1]
+    u_true = np.array([cor.crossing_u - 30.0, cor.crossing_u - 30.0 + 1.5])
+    pos, tangent, _, _ = cor.path.lane_geometry(u_true, np.array([1.0, 1.0]))
+    far, _, _, _ = corridors[2].path.lane_geometry(np.array([corridors[2].crossing_u + 25.0]))
+    ground = np.concatenate([pos, far])
+    rng_m, az = radar.polar(ground)
+    rel = pos[0] - np.asarray(radar.position_m)
+    cos = rel @ tangent[0] / np.hypot(np.hypot(*rel), radar.height_m)  # line of sight . travel
+    vr = np.array([12.0 * cos, 12.0 * cos, 0.0])  # 12 m/s along u
+    z = np.stack([rng_m, az, vr], -1)
+    radar_row, noise_tab, noise_cnt = radar.kernel_row(), *radar.noise_table()
+    corridor, x, p, labels = open_tracks(
+        z, radar_row, noise_tab, noise_cnt, roads, bounds, 3.0, 15.0**2, 1.5**2
+    )
+    assert labels.tolist() == [0, 0, 1]
+    assert corridor.tolist() == nearest_corridor(corridors, ground[[0, 2]])[0].tolist()
+    centre = pos.mean(axis=0)
+    assert np.hypot(*(cor.path.lane_geometry(x[0, 0], x[0, 3])[0] - centre)) < 0.05
+    # the first reflection's Doppler over the line of sight's share at the body's centre
+    rel_c = centre - np.asarray(radar.position_m)
+    cos_c = rel_c @ tangent[0] / np.hypot(np.hypot(*rel_c), radar.height_m)
+    assert x[0, 1] == pytest.approx(vr[0] / cos_c, rel=1e-4)
+    sv = radar.noise_std(z[0, 0], z[0, 1])[2]
+    assert p[0, 1, 1] == pytest.approx((sv / abs(cos_c)) ** 2 + 1.0, rel=1e-4)
+    assert p[0, 0, 0] == 1.0 + 1.5**2 and p[0, 3, 3] == 1.0
+
+
+def test_the_younger_of_two_tracks_on_one_body_is_dropped_unless_it_is_the_confirmed_one():
+    x = np.zeros((4, 4))
+    x[:, 0] = [10.0, 11.0, 10.5, 60.0]  # three on one body, one far away
+    x[:, 1] = [8.0, 8.3, 8.1, 8.0]
+    p = np.tile(np.eye(4) * 0.01, (4, 1, 1))
+    spread = np.full(4, 1.0)
+    ids = np.array([5, 7, 9, 6])
+    corridor = np.zeros(4, np.int64)
+    static = np.zeros(4, bool)
+
+    def drop(confirmed):
+        return merged_rows(corridor, x, p, spread, static, ids, confirmed, 1.2, 1.0).tolist()
+
+    assert drop(np.array([True, True, False, True])) == [False, True, True, False]
+    # the only confirmed one of the body survives, although it is the youngest
+    assert drop(np.array([False, False, True, True])) == [True, True, False, False]
+    x[1, 1] = 12.0  # a different speed: another road user alongside
+    assert drop(np.array([True, True, True, True])) == [False, False, True, False]

@@ -17,6 +17,7 @@ import numba
 import numpy as np
 
 from ..filters._kernels import cholesky_into, predict_into, update_into
+from ..tracking.assignment import cluster_labels
 from ._ekf_kernels import (
     ROAD,
     _centreline,
@@ -451,3 +452,152 @@ def planar_rows(  # type: ignore[no-untyped-def]
         trace = (a0 * a0 + a1 * a1) * puu + 2.0 * (a0 * rx + a1 * ry) * pud + pdd
         pos_std[i] = math.sqrt(max(trace, 0.0))
         to_cross[i] = abs(crossing_u[corridor[i]] - x[i, 0])
+
+
+@numba.njit(cache=True)
+def nearest_sample(roads, bounds, px, py):  # type: ignore[no-untyped-def]
+    """Corridor whose centreline passes nearest to a point, ``u`` and signed offset ``d``.
+
+    ``u`` is the nearest centreline sample's; ``d`` is to the right of increasing ``u``; the
+    corridor is the one of least ``|d|`` (the first on a tie).
+    """
+    best_c, best_u, best_d = 0, 0.0, np.inf
+    for c in range(bounds.shape[0]):
+        k_best, r_best = bounds[c, 0], np.inf
+        for k in range(bounds[c, 0], bounds[c, 1]):
+            r = (px - roads[1, k]) ** 2 + (py - roads[2, k]) ** 2
+            if r < r_best:
+                k_best, r_best = k, r
+        th = roads[3, k_best]
+        d = (px - roads[1, k_best]) * -math.cos(th) + (py - roads[2, k_best]) * math.sin(th)
+        if abs(d) < abs(best_d):
+            best_c, best_u, best_d = c, roads[0, k_best], d
+    return best_c, best_u, best_d
+
+
+@numba.njit(cache=True)
+def open_tracks(  # type: ignore[no-untyped-def]
+    z, radar, noise_tab, noise_cnt, roads, bounds, radius, initial_speed_var, along_var
+):
+    """First states of the tentative tracks opened by left-over detections ``z`` (n, 3).
+
+    Detections within ``radius`` [m] of each other on the ground are one body
+    (:func:`cluster_labels`); each body's track starts at the corridor point nearest to its
+    detections' mean (:func:`nearest_sample`), with the speed along the corridor that its first
+    detection's radial speed gives where the line of sight is not across the lane (and the
+    radar does not fold), else 0 with variance ``initial_speed_var``; the position along has
+    variance ``1 + along_var``. Returns ``(corridor, x, p, labels)`` (one row per body).
+    """
+    n = z.shape[0]
+    gx, gy = np.zeros(n), np.zeros(n)
+    for j in range(n):
+        rho = math.sqrt(max(z[j, 0] ** 2 - radar[2] ** 2, 0.01))
+        gx[j] = radar[0] + rho * math.sin(z[j, 1])
+        gy[j] = radar[1] + rho * math.cos(z[j, 1])
+    labels, m = cluster_labels(gx, gy, radius)
+    sx, sy, cnt = np.zeros(m), np.zeros(m), np.zeros(m)
+    first = np.full(m, -1, dtype=np.int64)
+    for j in range(n):
+        g = labels[j]
+        sx[g] += gx[j]
+        sy[g] += gy[j]
+        cnt[g] += 1.0
+        if first[g] < 0:
+            first[g] = j
+    corridor = np.zeros(m, dtype=np.int64)
+    x = np.zeros((m, N_STATE))
+    p = np.zeros((m, N_STATE, N_STATE))
+    for g in range(m):
+        c, u, d = nearest_sample(roads, bounds, sx[g] / cnt[g], sy[g] / cnt[g])
+        _, _, tx, ty, _, px, py = _lane_frame(roads, bounds, c, u, d)
+        ex, ey = px - radar[0], py - radar[1]
+        cos = (ex * tx + ey * ty) / math.sqrt(ex * ex + ey * ey + radar[2] * radar[2])
+        j = first[g]
+        corridor[g] = c
+        x[g, 0], x[g, 3] = u, d
+        if abs(cos) > 0.3 and radar[6] == 0.0:
+            x[g, 1] = z[j, 2] / cos
+            p[g, 1, 1] = (curve_at(noise_tab, noise_cnt, 2, z[j, 0]) / abs(cos)) ** 2 + 1.0
+        else:
+            p[g, 1, 1] = initial_speed_var
+        p[g, 0, 0] = 1.0 + along_var
+        p[g, 2, 2] = 9.0
+        p[g, 3, 3] = 1.0
+    return corridor, x, p, labels
+
+
+@numba.njit(cache=True)
+def merged_rows(corridor, x, p, spread, static, ids, confirmed, lateral_m, speed_mps):  # type: ignore[no-untyped-def]
+    """Rows to drop: the younger of two tracks on one body (see ``SceneTracker._merge``).
+
+    Pairs in row order; a confirmed track outlives an unconfirmed one whatever their ages; a
+    track already dropped removes no other.
+    """
+    n = x.shape[0]
+    drop = np.zeros(n, dtype=np.bool_)
+    for a in range(n):
+        for b in range(a + 1, n):
+            if corridor[a] != corridor[b] or static[a] != static[b]:
+                continue
+            sv = math.sqrt(p[a, 1, 1] + p[b, 1, 1])
+            if not (
+                abs(x[a, 0] - x[b, 0]) < spread[a] + spread[b] + 0.5
+                and abs(x[a, 3] - x[b, 3]) < lateral_m
+                and abs(x[a, 1] - x[b, 1]) < speed_mps + 3.0 * sv
+            ):
+                continue
+            older, younger = (a, b) if ids[a] < ids[b] else (b, a)
+            if confirmed[younger] and not confirmed[older]:
+                older, younger = younger, older
+            if not drop[older]:
+                drop[younger] = True
+    return drop
+
+
+@numba.njit(cache=True)
+def mode_changes(  # type: ignore[no-untyped-def]
+    time_s, x, p, corridor, confirmed, last_hit_s, anchor_u, stopped, moved, direction,
+    slow_since, event_raised, crossing_u, half_lane, barrier_m, moved_speed, moving_speed_std,
+    moved_distance, stop_speed, stop_confirm_s, seen_s,
+):  # fmt: skip
+    """Update the moving / stopped modes after a scan in place (``SceneTracker._modes``).
+
+    A confirmed track whose speed is known (sigma below half of it and below
+    ``moving_speed_std``) to exceed ``moved_speed`` gets its ``direction``; it has ``moved``
+    once also ``moved_distance`` from ``anchor_u``. One slower than ``stop_speed`` (sigma below
+    0.5 m/s, detected within ``seen_s``; inf: not required) for ``stop_confirm_s`` is
+    ``stopped`` (speed and acceleration zeroed with their covariance). Returns the hazard
+    rows (a moved track stopped on the carriageway within ``barrier_m`` of the crossing,
+    raised once: ``event_raised`` set) and which tracks are on the carriageway (bool each).
+    """
+    n = x.shape[0]
+    hazard = np.zeros(n, dtype=np.bool_)
+    on_road = np.zeros(n, dtype=np.bool_)
+    for i in range(n):
+        speed = abs(x[i, 1])
+        sd = math.sqrt(p[i, 1, 1])
+        if confirmed[i]:
+            if speed > moved_speed and sd < 0.5 * speed and sd < moving_speed_std:
+                direction[i] = 1.0 if x[i, 1] > 0.0 else -1.0
+                if abs(x[i, 0] - anchor_u[i]) > moved_distance:
+                    moved[i] = True
+        slow = (
+            confirmed[i] and not stopped[i] and speed < stop_speed and sd < 0.5
+            and time_s - last_hit_s[i] <= seen_s
+        )  # fmt: skip
+        if not slow:
+            slow_since[i] = np.nan
+        elif math.isnan(slow_since[i]):
+            slow_since[i] = time_s
+        if slow and time_s - slow_since[i] >= stop_confirm_s:
+            stopped[i] = True
+            x[i, 1] = x[i, 2] = 0.0
+            for a in range(1, 3):
+                for b in range(N_STATE):
+                    p[i, a, b] = p[i, b, a] = 0.0
+        on_road[i] = abs(x[i, 3]) <= 2.0 * half_lane[corridor[i]]
+        to_cross = abs(crossing_u[corridor[i]] - x[i, 0])
+        if stopped[i] and moved[i] and not event_raised[i] and to_cross <= barrier_m:
+            if on_road[i]:
+                hazard[i] = event_raised[i] = True
+    return hazard, on_road

@@ -54,6 +54,7 @@ or rejected with a reason (``ScanLog``).
 
 from __future__ import annotations
 
+import bisect
 import itertools
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, fields
@@ -69,24 +70,25 @@ from ..tracking import (
     LifecycleRules,
     TrackBook,
     TrackStatus,
-    cluster_points,
     gate_threshold,
     gnn_assign,
 )
 from ._scene_kernels import (
     gate_scan,
+    merged_rows,
     miss_updates,
+    mode_changes,
     occluded_rows,
+    open_tracks,
     owners,
     planar_rows,
     predict_tracks,
     unambiguous_assignment,
     update_tracks,
 )
-from .corridor import Corridor, nearest_corridor, site_corridors
-from .sensor import RadarSpec, curve_tables
+from .corridor import Corridor, site_corridors
+from .sensor import curve_tables
 from .site import Site
-from .tracking import _initial_point
 
 N_STATE = 4  # u, du/dt, d2u/dt2, d
 STATIC = len(TrackStatus)  # status code of a stopped object that never moved
@@ -257,6 +259,7 @@ class SceneTracker:
         self.config = config or SceneTrackerConfig()
         # the controller's warning intervals (K, 2) [s]: lights flashing or barriers down
         self.warnings = np.asarray([] if warnings is None else warnings, float).reshape(-1, 2)
+        self._warning_starts, self._warning_ends = _merged_intervals(self.warnings)
         self.corridors = site_corridors(site.roads, site.zone_m + site.run_in_m)
         self.book = TrackBook(self.config.rules)
         self.tracks = _Tracks.empty()
@@ -283,42 +286,18 @@ class SceneTracker:
         self.outside_view = np.zeros(0, bool)  # the last scan's detections outside every field
 
     # -- track opening ----------------------------------------------------------------------
-    def _open(self, z: FloatArray, radar: RadarSpec, time_s: float) -> int:
+    def _open(self, z: FloatArray, radar_name: str, time_s: float) -> int:
         """Open one tentative track per cluster of detections ``z`` (n, 3); return the count."""
-        xy, _, _ = _initial_point(z, radar)
-        labels = cluster_points(xy, self.config.cluster_radius_m)
-        n_new = int(labels.max()) + 1 if labels.size else 0
-        if n_new == 0:
-            return 0
-        centre = np.stack([np.bincount(labels, xy[:, i]) for i in range(2)], -1).astype(float)
-        centre /= np.bincount(labels)[:, None]
-        first = np.array([np.flatnonzero(labels == g)[0] for g in range(n_new)])
-        vr = z[first, 2]
-        best_c, u0, d0 = nearest_corridor(self.corridors, centre)
-        x = np.zeros((n_new, N_STATE))
-        p = np.zeros((n_new, N_STATE, N_STATE))
-        for c, cor in enumerate(self.corridors):
-            sel = best_c == c
-            if not sel.any():
-                continue
-            pos, tangent, _, _ = cor.path.lane_geometry(u0[sel], d0[sel])
-            rel = pos - np.asarray(radar.position_m)
-            cos = np.einsum("ti,ti->t", rel, tangent) / np.hypot(
-                np.linalg.norm(rel, axis=-1), radar.height_m
-            )
-            ok = (np.abs(cos) > 0.3) & (radar.max_unambiguous_speed_mps is None)
-            x[sel, 1] = np.where(ok, vr[sel] / np.where(ok, cos, 1.0), 0.0)
-            sv = radar.noise_std(z[first[sel], 0], z[first[sel], 1])[2]
-            p[sel, 1, 1] = np.where(
-                ok, (sv / np.where(ok, np.abs(cos), 1.0)) ** 2 + 1.0,
-                self.config.initial_speed_std_mps**2,
-            )  # fmt: skip
-        x[:, 0], x[:, 3] = u0, d0
-        p[:, 0, 0] = 1.0 + self.config.body_along_std_m**2
-        p[:, 2, 2] = 9.0
-        p[:, 3, 3] = 1.0
-        self.book.add(n_new, time_s)
-        self.tracks.append(_Tracks.opened(best_c, x, p, time_s, self.config.body_along_std_m))
+        radar_row, noise_tab, noise_cnt = self._radar_tables[radar_name][:3]
+        cfg = self.config
+        corridor, x, p, _ = open_tracks(
+            z, radar_row, noise_tab, noise_cnt, self._roads, self._bounds,
+            cfg.cluster_radius_m, cfg.initial_speed_std_mps**2, cfg.body_along_std_m**2,
+        )  # fmt: skip
+        n_new = corridor.size
+        if n_new:
+            self.book.add(n_new, time_s)
+            self.tracks.append(_Tracks.opened(corridor, x, p, time_s, cfg.body_along_std_m))
         return n_new
 
     # -- one scan ---------------------------------------------------------------------------
@@ -414,7 +393,7 @@ class SceneTracker:
         self.log.updated += int(used.sum())
         left = z[~used]
         if left.shape[0]:
-            n_new = self._open(left, radar, time_s)
+            n_new = self._open(left, radar_name, time_s)
             self.log.opened += n_new
             self.log.joined_new += left.shape[0] - n_new
         self._modes(time_s)
@@ -443,79 +422,32 @@ class SceneTracker:
         objects or neither.
         """
         tr = self.tracks
-        n = tr.time_s.size
-        if n < 2:
-            return
-        a, b = np.triu_indices(n, 1)  # every pair: a few dozen tracks
-        near = tr.corridor[a] == tr.corridor[b]
-        a, b = a[near], b[near]
-        pairs = np.stack([a, b], -1)
-        du = np.abs(tr.x[a, 0] - tr.x[b, 0])
-        dd = np.abs(tr.x[a, 3] - tr.x[b, 3])
-        dv = np.abs(tr.x[a, 1] - tr.x[b, 1])
-        sv = np.sqrt(tr.p[a, 1, 1] + tr.p[b, 1, 1])
-        static = tr.static
-        same = (
-            (static[a] == static[b])
-            & (du < tr.spread[a] + tr.spread[b] + 0.5)
-            & (dd < self.config.merge_lateral_m)
-            & (dv < self.config.merge_speed_mps + 3.0 * sv)
-        )
-        conf = self.book.confirmed
-        drop = set()
-        for i, j in pairs[same]:
-            older, younger = (i, j) if self.book.ids[i] < self.book.ids[j] else (j, i)
-            if conf[younger] and not conf[older]:
-                older, younger = younger, older
-            if int(older) not in drop:
-                drop.add(int(younger))
-        self._drop(np.array(sorted(drop), dtype=int))
+        cfg = self.config
+        drop = merged_rows(
+            tr.corridor, tr.x, tr.p, tr.spread, tr.static, self.book.ids, self.book.confirmed,
+            cfg.merge_lateral_m, cfg.merge_speed_mps,
+        )  # fmt: skip
+        self._drop(np.flatnonzero(drop))
 
     def _modes(self, time_s: float) -> None:
+        """Update moving and stopped modes (:func:`._scene_kernels.mode_changes`); raise events."""
         cfg = self.config
         tr = self.tracks
-        conf = self.book.confirmed
-        speed = np.abs(tr.x[:, 1])
-        sd = np.sqrt(tr.p[:, 1, 1])
-        travelled = np.abs(tr.x[:, 0] - tr.anchor_u)
-        moving = (
-            conf & (speed > cfg.moved_speed_mps) & (sd < 0.5 * speed)
-            & (sd < cfg.moving_speed_std_mps)
+        hazard, on_road = mode_changes(
+            time_s, tr.x, tr.p, tr.corridor, self.book.confirmed, self.book.last_hit_s,
+            tr.anchor_u, tr.stopped, tr.moved, tr.direction, tr.slow_since, tr.event_raised,
+            self._crossing_u, self._half_lane, self.site.barrier_m, cfg.moved_speed_mps,
+            cfg.moving_speed_std_mps, cfg.moved_distance_m, cfg.stop_speed_mps,
+            cfg.stop_confirm_s, cfg.stop_seen_s if cfg.stationary_detections else np.inf,
         )  # fmt: skip
-        tr.direction[moving] = np.sign(tr.x[moving, 1])
-        tr.moved |= moving & (travelled > cfg.moved_distance_m)
-        slow = conf & ~tr.stopped & (speed < cfg.stop_speed_mps) & (sd < 0.5)
-        if cfg.stationary_detections:  # a stop is seen, not inferred from missing detections
-            slow &= time_s - self.book.last_hit_s <= cfg.stop_seen_s
-        tr.slow_since = np.where(
-            slow, np.where(np.isnan(tr.slow_since), time_s, tr.slow_since), np.nan
-        )
-        enter = slow & (time_s - tr.slow_since >= cfg.stop_confirm_s)
-        if enter.any():
-            tr.stopped[enter] = True
-            tr.x[enter, 1:3] = 0.0
-            tr.p[enter, 1:3, :] = 0.0
-            tr.p[enter, :, 1:3] = 0.0
-        # hazard: a road user stopped between the barriers
-        to_cross = np.abs(self._crossing_u[tr.corridor] - tr.x[:, 0])
-        on_road = self._on_carriageway()
-        hazard = (
-            tr.stopped & tr.moved & ~tr.event_raised & (to_cross <= self.site.barrier_m) & on_road
-        )
         self._raise("stopped_between_barriers", np.flatnonzero(hazard), time_s)
-        tr.event_raised |= hazard
         if self._warning(time_s):
             self._stop_line_events(time_s, on_road)
 
-    def _on_carriageway(self) -> np.ndarray:
-        """Which tracks are on the road (either lane), not beside it (bool per track)."""
-        tr = self.tracks
-        return np.abs(tr.x[:, 3]) <= 2.0 * self._half_lane[tr.corridor]
-
     def _warning(self, time_s: float) -> bool:
         """Whether the crossing's lights flash or its barriers are down at ``time_s``."""
-        w = self.warnings
-        return bool(np.any((w[:, 0] <= time_s) & (time_s < w[:, 1])))
+        k = bisect.bisect_right(self._warning_starts, time_s) - 1
+        return k >= 0 and time_s < self._warning_ends[k]
 
     def _stop_line_events(self, time_s: float, on_road: np.ndarray) -> None:
         """Raise "will not stop before the stop line" for tracks that cannot stop there.
@@ -581,9 +513,9 @@ class SceneTracker:
         gone = self.book.expired(
             time_s, tr.stopped, tr.occluded, position_std, self.config.stationary_detections
         )
-        # tracks that left every corridor
-        out = (tr.x[:, 0] < 0) | (tr.x[:, 0] > self._length_m[tr.corridor])
-        self._drop(np.union1d(gone, np.flatnonzero(out)))
+        dead = (tr.x[:, 0] < 0) | (tr.x[:, 0] > self._length_m[tr.corridor])  # left its corridor
+        dead[gone] = True
+        self._drop(np.flatnonzero(dead))
 
     def _drop(self, rows: np.ndarray) -> None:
         """Forget the tracks in ``rows`` (book and filter states)."""
@@ -661,6 +593,19 @@ def _frame(columns: list[dict[str, np.ndarray]]) -> pd.DataFrame:
     }
     table["status"] = names[np.asarray(table["status"], dtype=int)]
     return pd.DataFrame(table)
+
+
+def _merged_intervals(intervals: FloatArray) -> tuple[list[float], list[float]]:
+    """Return the starts and ends of the union of half-open intervals (K, 2), in time order."""
+    starts: list[float] = []
+    ends: list[float] = []
+    for a, b in sorted(map(tuple, intervals.tolist())):
+        if starts and a <= ends[-1]:
+            ends[-1] = max(ends[-1], b)
+        elif b > a:
+            starts.append(a)
+            ends.append(b)
+    return starts, ends
 
 
 def _corridor_tables(corridors: list[Corridor]) -> tuple[FloatArray, np.ndarray]:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 from scipy.sparse import coo_matrix
@@ -48,4 +49,38 @@ def cluster_points(points: FloatArray, radius_m: float) -> np.ndarray:
     return connected_components(graph, directed=False)[1]
 
 
-__all__ = ["cluster_points", "gnn_assign"]
+@numba.njit(cache=True)
+def cluster_labels(gx, gy, radius):  # type: ignore[no-untyped-def]
+    """Labels of the groups of points within ``radius`` of each other (single link).
+
+    Compiled, for a few dozen points (all pairs); groups are numbered in the order of their
+    first point, as :func:`cluster_points` (the k-d tree version for many points). Returns
+    the labels (N,) and the number of groups.
+    """
+    n = gx.size
+    parent = np.arange(n)
+    r2 = radius * radius
+    for a in range(n):
+        for b in range(a + 1, n):
+            if (gx[a] - gx[b]) ** 2 + (gy[a] - gy[b]) ** 2 <= r2:
+                ra, rb = a, b
+                while parent[ra] != ra:
+                    ra = parent[ra]
+                while parent[rb] != rb:
+                    rb = parent[rb]
+                if ra != rb:
+                    parent[max(ra, rb)] = min(ra, rb)
+    labels = np.full(n, -1, dtype=np.int64)
+    count = 0
+    for a in range(n):
+        r = a
+        while parent[r] != r:
+            r = parent[r]
+        if labels[r] < 0:
+            labels[r] = count
+            count += 1
+        labels[a] = labels[r]
+    return labels, count
+
+
+__all__ = ["cluster_labels", "cluster_points", "gnn_assign"]

@@ -100,7 +100,7 @@ class TrackBook:
         self.history[rows] = ((self.history[rows] << 1) | hit.astype(np.int64)) & mask
         self.misses[rows] = np.where(hit, 0, self.misses[rows] + 1)
         self.last_hit_s[rows] = np.where(hit, time_s, self.last_hit_s[rows])
-        hits = np.array([int(h).bit_count() for h in self.history[rows]], dtype=np.int64)
+        hits = np.bitwise_count(self.history[rows])
         ok = hits >= self.rules.confirm_hits
         if ready is not None:
             ok &= ready
