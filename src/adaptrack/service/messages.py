@@ -18,6 +18,8 @@ import json
 import math
 from dataclasses import dataclass
 
+import orjson
+
 CSV_HEADER = "radar,time_s,range_m,azimuth_rad,radial_speed_mps"
 FIELDS = ("time_s", "range_m", "azimuth_rad", "radial_speed_mps")
 
@@ -57,27 +59,33 @@ def parse_line(line: str, radars: frozenset[str] | set[str]) -> Detection:
     text = line.strip()
     if text.startswith(("{", "[")):
         values = _json_fields(text)
+        radar = str(values["radar"])
+        raw = [values[name] for name in FIELDS]
     else:
-        parts = [p.strip() for p in text.split(",")]
-        if len(parts) != 5:
-            raise Rejected("malformed", f"expected 5 CSV fields ({CSV_HEADER}); got {len(parts)}")
-        values = dict(zip(("radar", *FIELDS), parts, strict=True))
-    radar = str(values["radar"])
+        radar, *raw = text.split(",")  # float() ignores the spaces around a number
+        radar = radar.strip()
+        if len(raw) != 4:
+            raise Rejected("malformed", f"expected 5 CSV fields ({CSV_HEADER}); got {len(raw) + 1}")
     if radar not in radars:
         raise Rejected("unknown_radar", f"radar {radar!r}; the site has {sorted(radars)}")
-    numbers = {}
-    for name in FIELDS:
-        try:
-            numbers[name] = float(values[name])  # type: ignore[arg-type]
-        except (TypeError, ValueError):
-            raise Rejected(
-                "malformed", f"field {name!r}: {values[name]!r} is not a number"
-            ) from None
-        if not math.isfinite(numbers[name]):
-            raise Rejected("not_finite", f"field {name!r} is {numbers[name]}")
-    if numbers["range_m"] <= 0:
-        raise Rejected("bad_range", f"field 'range_m' must be > 0; got {numbers['range_m']}")
-    return Detection(radar, **numbers)
+    try:
+        numbers = [float(v) for v in raw]  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        numbers = [_number(name, v) for name, v in zip(FIELDS, raw, strict=True)]
+    for name, v in zip(FIELDS, numbers, strict=True):
+        if not math.isfinite(v):
+            raise Rejected("not_finite", f"field {name!r} is {v}")
+    if numbers[1] <= 0:
+        raise Rejected("bad_range", f"field 'range_m' must be > 0; got {numbers[1]}")
+    return Detection(radar, *numbers)
+
+
+def _number(name: str, value: object) -> float:
+    """Return ``value`` as a float, or raise a rejection naming the field."""
+    try:
+        return float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        raise Rejected("malformed", f"field {name!r}: {value!r} is not a number") from None
 
 
 def _json_fields(text: str) -> dict[str, object]:
@@ -100,11 +108,8 @@ def _json_fields(text: str) -> dict[str, object]:
 
 
 def record_line(record: dict[str, object]) -> str:
-    """One output record as a JSON line (NaN written as null)."""
-    clean = {
-        k: None if isinstance(v, float) and not math.isfinite(v) else v for k, v in record.items()
-    }
-    return json.dumps(clean, separators=(",", ":")) + "\n"
+    """Return one output record as a JSON line (``orjson``: NaN and inf written as null)."""
+    return (orjson.dumps(record, option=orjson.OPT_SERIALIZE_NUMPY) + b"\n").decode()
 
 
 __all__ = ["CSV_HEADER", "Detection", "Rejected", "is_header", "parse_line", "record_line"]
