@@ -57,13 +57,14 @@ def parse_line(line: str, radars: frozenset[str] | set[str]) -> Detection:
     ``bad_range``) naming the field and what was expected.
     """
     text = line.strip()
+    raw: list[object]
     if text.startswith(("{", "[")):
         values = _json_fields(text)
         radar = str(values["radar"])
         raw = [values[name] for name in FIELDS]
     else:
-        radar, *raw = text.split(",")  # float() ignores the spaces around a number
-        radar = radar.strip()
+        radar, *parts = text.split(",")  # float() ignores the spaces around a number
+        radar, raw = radar.strip(), list(parts)
         if len(raw) != 4:
             raise Rejected("malformed", f"expected 5 CSV fields ({CSV_HEADER}); got {len(raw) + 1}")
     if radar not in radars:
