@@ -2,12 +2,13 @@
 
 Threads: one per input (TCP server, stdin; a UDP socket is drained by a process of its own,
 :mod:`.udp_receiver`, and read from its pipe) putting received lines on one queue
-(unbounded: input is never dropped); the main thread takes them in arrival order through
-:class:`~.engine.LiveTracker` and writes the records to the output file (or stdout) and to
-every TCP subscriber (each behind a bounded buffer: a subscriber that does not read loses
-*output*, counted, and never stalls the tracker); the live page (:mod:`.web`) runs in its own
-thread. SIGTERM or SIGINT: the listeners stop, what they received is processed, the reorder
-window is flushed, a final snapshot and a ``stats`` record are written, exit status 0.
+(unbounded: input is never dropped); the main thread (at a lower CPU priority: receiving
+never waits on tracking) takes them in arrival order through :class:`~.engine.LiveTracker`
+and writes the records to the output file (or stdout) and to every TCP subscriber (each
+behind a bounded buffer: a subscriber that does not read loses *output*, counted, and never
+stalls the tracker); the live page (:mod:`.web`) runs in its own thread. SIGTERM or SIGINT:
+the listeners stop, what they received is processed, the reorder window is flushed, a final
+snapshot and a ``stats`` record are written, exit status 0.
 
 Every bound address is announced on stderr (``listening udp://127.0.0.1:PORT``), so port 0
 (any free port) can be used.
@@ -15,6 +16,8 @@ Every bound address is announced on stderr (``listening udp://127.0.0.1:PORT``),
 
 from __future__ import annotations
 
+import contextlib
+import os
 import queue
 import signal
 import socketserver
@@ -36,6 +39,7 @@ from .messages import record_line
 UDP_DRAIN_TIMEOUT_S = 120.0  # at exit, the UDP receivers' buffered datagrams are taken
 SUBSCRIBER_BUFFER_BYTES = 4 << 20  # a subscriber's unsent output beyond this is dropped
 FLUSH_PERIOD_S = 0.5  # the output file is flushed this often [s]
+TRACKER_NICENESS = 5  # the tracking thread yields the CPU to the receiving ones
 
 
 @dataclass(frozen=True)
@@ -62,6 +66,21 @@ class Endpoint:
                 + ", ".join(("stdin" if s == "stdin" else f"{s}://HOST:PORT") for s in schemes)
             )
         return cls(parts.scheme, parts.hostname, port)
+
+
+def _yield_to_inputs() -> None:
+    """Lower the calling (tracking) thread's CPU priority by ``TRACKER_NICENESS`` (Linux).
+
+    Receiving is cheap and must never wait (a UDP socket's kernel buffer overflows within a
+    fraction of a second); tracking may lag, its input queued. On a loaded machine the
+    scheduler then serves the receivers first. Elsewhere (no per-thread priority) a no-op.
+    """
+    if sys.platform == "linux":
+        tid = threading.get_native_id()
+        with contextlib.suppress(OSError):
+            os.setpriority(
+                os.PRIO_PROCESS, tid, os.getpriority(os.PRIO_PROCESS, tid) + TRACKER_NICENESS
+            )
 
 
 def announce(message: str) -> None:
@@ -251,6 +270,7 @@ class Service:
         """Process input until SIGTERM / SIGINT (or the end of stdin if it is the only input)."""
         for sig in (signal.SIGTERM, signal.SIGINT):
             signal.signal(sig, lambda *_: self.stopping.set())
+        _yield_to_inputs()
         only_stdin = set(self._input_kinds) == {"stdin"}
         next_state = next_stats = next_flush = time.monotonic()
         last_input = time.monotonic()

@@ -3,11 +3,11 @@ r"""A UDP socket drained by its own process, so that no datagram waits on the tr
 In the service's process a receiving thread shares the interpreter lock with the tracker and
 gets it too rarely: at a replay's full speed the kernel's receive buffer overflowed and
 datagrams were lost. This process (``python -m adaptrack.service.udp_receiver HOST PORT``)
-only receives: one thread takes every datagram into memory, the main thread writes them to
-stdout as frames (``ADDRESS LENGTH\n`` then the datagram), where the pipe's flow control
-makes the service take them at its pace. Its first line is ``PORT\n`` (the bound port);
-at the end of its stdin it drains the socket and writes ``END DROPS\n`` (datagrams the
-kernel dropped, -1 if unknown). SIGINT and SIGTERM are left to the service.
+only receives: one thread takes every datagram into memory (no lock per datagram), the main
+thread writes them to stdout as frames (``ADDRESS LENGTH\n`` then the datagram), where the
+pipe's flow control makes the service take them at its pace. Its first line is ``PORT\n``
+(the bound port); at the end of its stdin it drains the socket and writes ``END DROPS\n``
+(datagrams the kernel dropped, -1 if unknown). SIGINT and SIGTERM are left to the service.
 """
 
 from __future__ import annotations
@@ -18,9 +18,11 @@ import signal
 import socket
 import sys
 import threading
+import time
 from collections import deque
 
 UDP_BUFFER_BYTES = 16 << 20  # requested receive buffer (the kernel may cap it)
+POLL_S = 0.0005  # the writer looks for datagrams this often when it has none [s]
 
 
 def udp_drops(sock: socket.socket) -> int | None:
@@ -40,46 +42,43 @@ def udp_drops(sock: socket.socket) -> int | None:
 class _Receiver:
     def __init__(self, sock: socket.socket) -> None:
         self.sock = sock
-        self.queue: deque[tuple[bytes, tuple[str, int]]] = deque()
-        self.ready = threading.Condition()
+        self.queue: deque[tuple[bytes, tuple[str, int]]] = deque()  # appends are atomic
         self.stop = threading.Event()
         self.done = False
 
     def receive(self) -> None:
         """Take datagrams until stopped, then what the kernel still holds."""
         self.sock.settimeout(0.1)
+        append, recvfrom = self.queue.append, self.sock.recvfrom
         while not self.stop.is_set():
             try:
-                item = self.sock.recvfrom(65535)
+                append(recvfrom(65535))
             except TimeoutError:
                 continue
-            with self.ready:
-                self.queue.append(item)
-                self.ready.notify()
         self.sock.setblocking(False)
         with contextlib.suppress(OSError):
             while True:
-                self.queue.append(self.sock.recvfrom(65535))
-        with self.ready:
-            self.done = True
-            self.ready.notify()
+                append(recvfrom(65535))
+        self.done = True
 
     def write(self, out: object) -> None:
-        """Write frames until the receiver is done and everything is out."""
+        """Write frames until the receiver is done and everything is out.
+
+        Polls the queue (``POLL_S`` when empty): no lock or signal per datagram.
+        """
         while True:
-            with self.ready:
-                while not self.queue and not self.done:
-                    self.ready.wait()
-                items = list(self.queue)
-                self.queue.clear()
-                finished = self.done and not self.queue
-            frames = b"".join(
-                f"{addr[0]}:{addr[1]} {len(data)}\n".encode() + data for data, addr in items
-            )
-            out.write(frames)  # type: ignore[attr-defined]
-            out.flush()  # type: ignore[attr-defined]
-            if finished:
+            finished = self.done
+            items = [self.queue.popleft() for _ in range(len(self.queue))]
+            if items:
+                frames = b"".join(
+                    f"{addr[0]}:{addr[1]} {len(data)}\n".encode() + data for data, addr in items
+                )
+                out.write(frames)  # type: ignore[attr-defined]
+                out.flush()  # type: ignore[attr-defined]
+            elif finished:
                 return
+            else:
+                time.sleep(POLL_S)
 
 
 def _stop_at_end_of_stdin(stop: threading.Event) -> None:
