@@ -10,6 +10,7 @@ from adaptrack.crossing._scene_kernels import (
     VISIBLE_SAMPLES,
     _visible_part,
     merged_rows,
+    mode_changes,
     nearest_sample,
     occluded_rows,
     open_tracks,
@@ -177,3 +178,35 @@ def test_the_younger_of_two_tracks_on_one_body_is_dropped_unless_it_is_the_confi
     assert drop(np.array([False, False, True, True])) == [True, True, False, False]
     x[1, 1] = 12.0  # a different speed: another road user alongside
     assert drop(np.array([True, True, True, True])) == [False, False, True, False]
+
+
+def _creep(speeds, exit_sigmas, speed_std=0.1, dt=0.05):
+    """Feed one confirmed, moved track's speed estimates to ``mode_changes``; stop time."""
+    one = np.ones(1, bool)
+    x, p = np.zeros((1, 4)), np.tile(np.eye(4) * 0.01, (1, 1, 1))
+    p[0, 1, 1] = speed_std**2
+    stopped, slow_since = np.zeros(1, bool), np.full(1, np.nan)
+    for k, v in enumerate(speeds):
+        t = k * dt
+        x[0, 1] = v
+        mode_changes(
+            t, x, p, np.zeros(1, np.int64), one, np.full(1, t), np.zeros(1), stopped, one.copy(),
+            np.ones(1), slow_since, np.zeros(1, bool), np.array([1e3]), np.array([1.75]), 10.0,
+            0.8, 1.0, 3.0, 0.3, exit_sigmas, 0.5, 0.3,
+        )  # fmt: skip
+        if stopped[0]:
+            return t
+    return np.inf
+
+
+def test_a_creep_to_a_halt_stops_once_though_its_noisy_speed_recrosses_the_threshold():
+    # speed estimates of a vehicle creeping to a halt: below 0.3 m/s from 0.5 s, with two
+    # estimates 0.32 and 0.36 m/s (within 2 sigmas of 0.3) at 0.75 and 0.9 s
+    v = np.r_[np.full(10, 0.5), np.full(30, 0.2)]
+    v[[15, 18]] = [0.32, 0.36]
+    assert _creep(v, 2.0) == pytest.approx(1.0)  # 0.5 s after it first went below
+    assert _creep(v, 0.0) == pytest.approx(0.95 + 0.5)  # restarted by each re-crossing
+    # a speed significantly above the threshold (0.6 m/s: 3 sigmas) restarts the count
+    v[18] = 0.6
+    assert _creep(v, 2.0) == pytest.approx(0.95 + 0.5)
+    assert _creep(np.full(40, 0.45), 2.0) == np.inf  # never below the threshold: no stop

@@ -558,17 +558,19 @@ def merged_rows(corridor, x, p, spread, static, ids, confirmed, lateral_m, speed
 def mode_changes(  # type: ignore[no-untyped-def]
     time_s, x, p, corridor, confirmed, last_hit_s, anchor_u, stopped, moved, direction,
     slow_since, event_raised, crossing_u, half_lane, barrier_m, moved_speed, moving_speed_std,
-    moved_distance, stop_speed, stop_confirm_s, seen_s,
+    moved_distance, stop_speed, stop_exit_sigmas, stop_confirm_s, seen_s,
 ):  # fmt: skip
     """Update the moving / stopped modes after a scan in place (``SceneTracker._modes``).
 
     A confirmed track whose speed is known (sigma below half of it and below
     ``moving_speed_std``) to exceed ``moved_speed`` gets its ``direction``; it has ``moved``
-    once also ``moved_distance`` from ``anchor_u``. One slower than ``stop_speed`` (sigma below
-    0.5 m/s, detected within ``seen_s``; inf: not required) for ``stop_confirm_s`` is
-    ``stopped`` (speed and acceleration zeroed with their covariance). Returns the hazard
-    rows (a moved track stopped on the carriageway within ``barrier_m`` of the crossing,
-    raised once: ``event_raised`` set) and which tracks are on the carriageway (bool each).
+    once also ``moved_distance`` from ``anchor_u``. One slower than ``stop_speed`` (sigma
+    below 0.5 m/s, detected within ``seen_s``; inf: not required) is slowing to a stop; it
+    stays so while its speed is not significantly above (``stop_exit_sigmas`` sigmas) and
+    after ``stop_confirm_s`` is ``stopped`` (speed and acceleration zeroed with their
+    covariance). Returns the hazard rows (a moved track stopped on the carriageway within
+    ``barrier_m`` of the crossing, raised once: ``event_raised`` set) and which tracks are
+    on the carriageway (bool each).
     """
     n = x.shape[0]
     hazard = np.zeros(n, dtype=np.bool_)
@@ -581,8 +583,9 @@ def mode_changes(  # type: ignore[no-untyped-def]
                 direction[i] = 1.0 if x[i, 1] > 0.0 else -1.0
                 if abs(x[i, 0] - anchor_u[i]) > moved_distance:
                     moved[i] = True
+        limit = stop_speed if math.isnan(slow_since[i]) else stop_speed + stop_exit_sigmas * sd
         slow = (
-            confirmed[i] and not stopped[i] and speed < stop_speed and sd < 0.5
+            confirmed[i] and not stopped[i] and speed < limit and sd < 0.5
             and time_s - last_hit_s[i] <= seen_s
         )  # fmt: skip
         if not slow:

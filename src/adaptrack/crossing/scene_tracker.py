@@ -22,23 +22,25 @@ coasting time or, for a stopped track, by misses in a row: :mod:`adaptrack.track
 open tentative tracks from the detections left over, clustered within ``cluster_radius_m``. The
 per-track arithmetic runs compiled (:mod:`._scene_kernels`).
 
-Stopped mode: a confirmed track slower than ``stop_speed_mps`` for ``stop_confirm_s`` (and,
-where the radars report stationary objects, ``stationary_detections``, detected within
-``stop_seen_s``: a track that loses its detections is not taken for stopped) is held
-at zero velocity with a small position noise (its covariance stays bounded through closures of
-minutes, seen or not), and leaves the mode when a detection's radial speed shows motion along
-its direction of travel (a stopped track's gate allows a start-up speed in that direction). A
-track that has never moved faster than ``moved_speed_mps`` (with a speed sigma below
-``moving_speed_std_mps``: not the first guess of a folding radar's track) and further than
-``moved_distance_m`` from where it was confirmed (not where it opened: a first detection
-mixed with a ghost or another body's reflection is metres off) is a *static* object (a barrier
-arm, a pole, rails: zero Doppler since the start); a stopped vehicle had moved. Hazard event:
-a moved track stopped on the carriageway (both lanes) within ``barrier_m`` of the crossing
-raises "object stopped between the barriers" (a reflection of a barrier post beside the road
-is not in the way). Given the controller's warning intervals (lights flashing, barriers
-down), a confirmed track approaching the stop line that would need more than
-``stop_decel_mps2`` to stop its front there raises "vehicle will not stop before the stop
-line", with its lead time (distance to the line over speed).
+Stopped mode: a confirmed track slower than ``stop_speed_mps`` for ``stop_confirm_s`` (a
+speed estimate within ``stop_exit_sigmas`` sigmas above it does not restart the count: the
+noise of a vehicle creeping to a halt; and, where the radars report stationary objects,
+``stationary_detections``, detected within ``stop_seen_s``: a track that loses its
+detections is not taken for stopped) is held at zero velocity with a small position noise
+(its covariance stays bounded through closures of minutes, seen or not), and leaves the mode
+when a detection's radial speed shows motion along its direction of travel (a stopped
+track's gate allows a start-up speed in that direction). A track that has never moved faster
+than ``moved_speed_mps`` (with a speed sigma below ``moving_speed_std_mps``: not the first
+guess of a folding radar's track) and further than ``moved_distance_m`` from where it was
+confirmed (not where it opened: a first detection mixed with a ghost or another body's
+reflection is metres off) is a *static* object (a barrier arm, a pole, rails: zero Doppler
+since the start); a stopped vehicle had moved. Hazard event: a moved track stopped on the
+carriageway (both lanes) within ``barrier_m`` of the crossing raises "object stopped between
+the barriers" (a reflection of a barrier post beside the road is not in the way). Given the
+controller's warning intervals (lights flashing, barriers down), a confirmed track
+approaching the stop line that would need more than ``stop_decel_mps2`` to stop its front
+there raises "vehicle will not stop before the stop line", with its lead time (distance to
+the line over speed).
 
 Sensor effects: each radar's declared latency is taken off its timestamps; radial speeds of a
 folding radar are unfolded (:func:`._ekf_kernels.doppler_usable`); a constant azimuth bias of
@@ -115,8 +117,9 @@ class SceneTrackerConfig:
     clutter_gate_probability: float = 0.99  # a static object's own detections (reserved) ...
     clutter_age_s: float = 300.0  # ... once it has stood longer than any closure
     cluster_radius_m: float = 3.0
-    stop_speed_mps: float = 0.3
-    stop_confirm_s: float = 0.5
+    stop_speed_mps: float = 0.3  # a track this slow is slowing to a stop ...
+    stop_exit_sigmas: float = 2.0  # ... stays slowing unless this many sigmas faster ...
+    stop_confirm_s: float = 0.5  # ... and stops after this
     moving_radial_mps: float = 0.3  # a detection this fast (beyond 3 sigma) ends a stop
     start_speed_max_mps: float = 3.0  # a stopped vehicle's gate allows starting up to this
     moved_speed_mps: float = 0.8
@@ -438,7 +441,8 @@ class SceneTracker:
             tr.anchor_u, tr.stopped, tr.moved, tr.direction, tr.slow_since, tr.event_raised,
             self._crossing_u, self._half_lane, self.site.barrier_m, cfg.moved_speed_mps,
             cfg.moving_speed_std_mps, cfg.moved_distance_m, cfg.stop_speed_mps,
-            cfg.stop_confirm_s, cfg.stop_seen_s if cfg.stationary_detections else np.inf,
+            cfg.stop_exit_sigmas, cfg.stop_confirm_s,
+            cfg.stop_seen_s if cfg.stationary_detections else np.inf,
         )  # fmt: skip
         self._raise("stopped_between_barriers", np.flatnonzero(hazard), time_s)
         if self._warning(time_s):
