@@ -1,9 +1,11 @@
 """``adaptrack serve`` over real sockets on 127.0.0.1: no data loss, faults, restart."""
 
 import json
+import os
 import socket
 import subprocess
 import sys
+import threading
 
 import pandas as pd
 import pytest
@@ -150,3 +152,23 @@ def test_kill_9_and_restart_from_the_state_continues_the_tracks(
     # and indeed every number goes on as if nothing had happened
     pd.testing.assert_frame_equal(tracks_of(records), offline_tracks, check_exact=True)
     assert after[-1]["scan_ms_p50"] > 0
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="per-thread CPU priority is Linux only")
+def test_the_tracking_thread_yields_the_cpu_to_the_receivers_alone():
+    from adaptrack.service.server import TRACKER_NICENESS, _yield_to_inputs
+
+    seen = {}
+
+    def tracking():
+        tid = threading.get_native_id()
+        before = os.getpriority(os.PRIO_PROCESS, tid)
+        _yield_to_inputs()
+        seen["change"] = os.getpriority(os.PRIO_PROCESS, tid) - before
+
+    main_before = os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
+    worker = threading.Thread(target=tracking)
+    worker.start()
+    worker.join()
+    assert seen["change"] == min(TRACKER_NICENESS, 19 - main_before)  # 19: the lowest
+    assert os.getpriority(os.PRIO_PROCESS, threading.get_native_id()) == main_before
