@@ -110,6 +110,13 @@ def _lane_frame(roads, bounds, c, u, d):  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True, inline="always")
+def _ground_point(z_row, radar):  # type: ignore[no-untyped-def]
+    """Ground point (x, y) and horizontal range of a detection (range, azimuth, ...)."""
+    rho = math.sqrt(max(z_row[0] ** 2 - radar[2] ** 2, 0.01))
+    return radar[0] + rho * math.sin(z_row[1]), radar[1] + rho * math.cos(z_row[1]), rho
+
+
+@numba.njit(cache=True, inline="always")
 def _visible_part(i, x, spread, corridor, roads, bounds, radar, fields):  # type: ignore[no-untyped-def]
     """Locate the part of track ``i``'s body inside the radar's field of view.
 
@@ -332,9 +339,7 @@ def update_tracks(  # type: ignore[no-untyped-def]
         i = owner[j]
         # body spread: along-track residual of the detection's ground point
         cx, cy, tx, ty, _, px, py = _lane_frame(roads, bounds, corridor[i], x[i, 0], x[i, 3])
-        rho = math.sqrt(max(z[j, 0] ** 2 - radar[2] ** 2, 0.01))
-        gx = radar[0] + rho * math.sin(z[j, 1])
-        gy = radar[1] + rho * math.cos(z[j, 1])
+        gx, gy, rho = _ground_point(z[j], radar)
         along = (gx - px) * tx + (gy - py) * ty
         fast = abs(x[i, 1]) >= BIAS_MIN_SPEED_MPS
         if align and moved[i] and not stopped[i] and direction[i] != 0.0 and fast:
@@ -491,9 +496,7 @@ def open_tracks(  # type: ignore[no-untyped-def]
     n = z.shape[0]
     gx, gy = np.zeros(n), np.zeros(n)
     for j in range(n):
-        rho = math.sqrt(max(z[j, 0] ** 2 - radar[2] ** 2, 0.01))
-        gx[j] = radar[0] + rho * math.sin(z[j, 1])
-        gy[j] = radar[1] + rho * math.cos(z[j, 1])
+        gx[j], gy[j], _ = _ground_point(z[j], radar)
     labels, m = cluster_labels(gx, gy, radius)
     sx, sy, cnt = np.zeros(m), np.zeros(m), np.zeros(m)
     first = np.full(m, -1, dtype=np.int64)
@@ -600,7 +603,7 @@ def mode_changes(  # type: ignore[no-untyped-def]
                     p[i, a, b] = p[i, b, a] = 0.0
         on_road[i] = abs(x[i, 3]) <= 2.0 * half_lane[corridor[i]]
         to_cross = abs(crossing_u[corridor[i]] - x[i, 0])
-        if stopped[i] and moved[i] and not event_raised[i] and to_cross <= barrier_m:
-            if on_road[i]:
-                hazard[i] = event_raised[i] = True
+        if stopped[i] and moved[i] and on_road[i] and to_cross <= barrier_m:
+            hazard[i] = not event_raised[i]
+            event_raised[i] = True
     return hazard, on_road

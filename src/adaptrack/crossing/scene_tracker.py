@@ -261,8 +261,9 @@ class SceneTracker:
         self.site = site
         self.config = config or SceneTrackerConfig()
         # the controller's warning intervals (K, 2) [s]: lights flashing or barriers down
-        self.warnings = np.asarray([] if warnings is None else warnings, float).reshape(-1, 2)
-        self._warning_starts, self._warning_ends = _merged_intervals(self.warnings)
+        self._warning_starts, self._warning_ends = _merged_intervals(
+            np.asarray([] if warnings is None else warnings, float).reshape(-1, 2)
+        )
         self.corridors = site_corridors(site.roads, site.zone_m + site.run_in_m)
         self.book = TrackBook(self.config.rules)
         self.tracks = _Tracks.empty()

@@ -92,8 +92,12 @@ class LiveTracker:
         before = tr.log.total - tr.log.rejected_outside_view
         tr.step(scan.radar, scan.time_s, z)
         self.used += tr.log.total - tr.log.rejected_outside_view - before
-        detail = f"radar {scan.radar!r} at {scan.time_s} s: beyond its field of view"
-        out = [self._reject("outside_view", detail, scan.radar, row) for row in z[tr.outside_view]]
+        out = []
+        if tr.outside_view.any():
+            detail = f"radar {scan.radar!r} at {scan.time_s} s: beyond its field of view"
+            out = [
+                self._reject("outside_view", detail, scan.radar, row) for row in z[tr.outside_view]
+            ]
         out.append(track_lines(tr.columns(tr.last_scan_s)))
         for event in tr.events[self._events_out :]:
             out.append(record_line({"type": "event", **event}))

@@ -69,10 +69,7 @@ def parse_line(line: str, radars: frozenset[str] | set[str]) -> Detection:
             raise Rejected("malformed", f"expected 5 CSV fields ({CSV_HEADER}); got {len(raw) + 1}")
     if radar not in radars:
         raise Rejected("unknown_radar", f"radar {radar!r}; the site has {sorted(radars)}")
-    try:
-        numbers = [float(v) for v in raw]  # type: ignore[arg-type]
-    except (TypeError, ValueError):
-        numbers = [_number(name, v) for name, v in zip(FIELDS, raw, strict=True)]
+    numbers = [_number(name, v) for name, v in zip(FIELDS, raw, strict=True)]
     for name, v in zip(FIELDS, numbers, strict=True):
         if not math.isfinite(v):
             raise Rejected("not_finite", f"field {name!r} is {v}")
