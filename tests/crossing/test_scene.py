@@ -261,3 +261,55 @@ def test_a_sites_own_classes_drive_in_its_scene():
         detections_per_scan(np.array([2.2, 5.0, 6.5, 7.1, 12.0, 16.5])),
         [[1, 1], [1, 2], [1, 2], [2, 4], [2, 4], [2, 4]],
     )
+
+
+def _queue_scan(rng, radar, cor, centres, d, length=5.0, width=1.8, per_body=2):
+    """One scan of two stopped cars: reflections uniform over each body, the radar's noise."""
+    u = np.concatenate([c + rng.uniform(-length / 2, length / 2, per_body) for c in centres])
+    across = d + rng.uniform(-width / 2, width / 2, u.size)
+    ground = cor.path.lane_geometry(u, across)[0]
+    rng_m, az = radar.polar(ground)
+    sr, sa, sv = radar.noise_std(rng_m, az)
+    return np.stack(
+        [rng_m + sr * rng.normal(size=u.size), az + sa * rng.normal(size=u.size),
+         sv * rng.normal(size=u.size)], -1,
+    )  # fmt: skip
+
+
+@pytest.mark.parametrize("kurtosis", [1.8, 0.0])
+def test_one_track_over_two_queued_cars_splits_into_two(kurtosis):
+    """A stopped track that holds two cars of a queue (centres 7 m apart, itself between them
+    with a spread stretched over both: its gate takes both cars' reflections) splits into two
+    tracks on the cars; the part towards the crossing keeps the identity. With the split
+    switched off (kurtosis 0) it stays one track between the cars (the test can fail)."""
+    from adaptrack.crossing.scene_tracker import SceneTrackerConfig, _Tracks
+
+    tracker = SceneTracker(SITE, SceneTrackerConfig(split_kurtosis=kurtosis))
+    cor = tracker.corridors[0]
+    radar = next(r for r in SITE.radars if r.name == "radar_A")
+    half_lane = 0.5 * SITE.roads[cor.first].lane_width_m
+    front, rear = cor.crossing_u - 30.0, cor.crossing_u - 37.0  # approaching with u rising
+    x = np.array([[0.5 * (front + rear), 0.0, 0.0, -half_lane]])
+    p = np.diag([0.01, 1e-4, 1e-4, 0.04])[None]
+    tracker.book.add(1, 0.0)
+    tracker.book.confirmed[:] = True
+    tracker.tracks = _Tracks.opened(np.zeros(1, int), x, p, 0.0, 3.0)
+    tracker.tracks.stopped[:] = tracker.tracks.moved[:] = True
+    tracker.tracks.direction[:] = 1.0
+    rng = np.random.default_rng(5)
+    for k in range(1, 400):  # 20 s
+        tracker.step(
+            radar.name, k * radar.period_s, _queue_scan(rng, radar, cor, (front, rear), -half_lane)
+        )
+    rows = tracker.rows(tracker.last_scan_s)
+    assert set(rows["status"]) == {"stopped"}
+    at = rows[["east_m", "north_m"]].to_numpy()
+    cars = cor.path.lane_geometry(np.array([front, rear]), -half_lane)[0]
+    if kurtosis == 0.0:
+        assert rows["track_id"].tolist() == [1]
+        assert np.hypot(*(at[0] - cars.mean(axis=0))) < 1.0
+        return
+    assert len(rows) == 2
+    err = np.hypot(*(at[:, None, :] - cars[None]).transpose(2, 0, 1))  # track x car
+    assert rows["track_id"].iloc[int(np.argmin(err[:, 0]))] == 1  # the front car keeps id 1
+    assert err.min(axis=0).max() < 0.5

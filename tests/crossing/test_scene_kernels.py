@@ -15,6 +15,7 @@ from adaptrack.crossing._scene_kernels import (
     occluded_rows,
     open_tracks,
     owners,
+    split_rows,
     unambiguous_assignment,
 )
 from adaptrack.crossing.corridor import nearest_corridor
@@ -210,3 +211,29 @@ def test_a_creep_to_a_halt_stops_once_though_its_noisy_speed_recrosses_the_thres
     v[18] = 0.6
     assert _creep(v, 2.0) == pytest.approx(0.95 + 0.5)
     assert _creep(np.full(40, 0.45), 2.0) == np.inf  # never below the threshold: no stop
+
+
+def test_split_finds_two_queued_bodies_from_the_moments_of_their_reflections():
+    """Moments of samples: two 5 m cars 7 m apart (uniform reflections, 0.3 m noise) give
+    the centres +-3.5 m and each body's spread (5 / sqrt(12) m, noise included); one body
+    does not split: a 12 m bus reflecting uniformly (the flattest body: kurtosis 1.8 before
+    the noise) or as N(0, 3^2) clipped to its length, nor a stopped car; a moving track
+    never splits."""
+    rng = np.random.default_rng(2)
+    n = 200_000
+    noise = 0.3 * rng.normal(size=n)
+    samples = {
+        "two cars": rng.choice([-3.5, 3.5], n) + rng.uniform(-2.5, 2.5, n) + noise,
+        "uniform bus": rng.uniform(-6.0, 6.0, n) + noise,
+        "bus": np.clip(3.0 * rng.normal(size=n), -6.0, 6.0) + noise,
+        "car": rng.uniform(-2.5, 2.5, n) + noise,
+    }
+    m2 = np.array([np.mean(r**2) for r in samples.values()])
+    m4 = np.array([np.mean(r**4) for r in samples.values()])
+    stopped = np.ones(4, bool)
+    rows, half, body = split_rows(stopped, m2, m4, 1.8, 2.0)
+    assert rows.tolist() == [0]
+    assert half[0] == pytest.approx(3.5, abs=0.05)
+    assert body[0] == pytest.approx(math.sqrt(25.0 / 12.0 + 0.09), abs=0.1)
+    stopped[0] = False
+    assert split_rows(stopped, m2, m4, 1.8, 2.0)[0].size == 0

@@ -308,10 +308,10 @@ def unambiguous_assignment(d2, gate):  # type: ignore[no-untyped-def]
 
 @numba.njit(cache=True)
 def update_tracks(  # type: ignore[no-untyped-def]
-    order, owner, z, x, p, spread, stopped, moved, direction, slow_since, corridor, roads,
-    bounds, radar, noise_tab, noise_cnt, fields, across_std, moving_radial, start_speed_var,
-    learning_rate, spread_lo, spread_hi, align, lane_half_width, bias, bias_stats, bias_forget,
-    bias_gate,
+    order, owner, z, x, p, spread, along_m2, along_m4, stopped, moved, direction, slow_since,
+    corridor, roads, bounds, radar, noise_tab, noise_cnt, fields, across_std, moving_radial,
+    start_speed_var, learning_rate, shape_rate, spread_lo, spread_hi, align, lane_half_width,
+    bias, bias_stats, bias_forget, bias_gate,
 ):  # fmt: skip
     """Update each owning track with its detections in ``order`` (sequential EKF updates).
 
@@ -329,7 +329,9 @@ def update_tracks(  # type: ignore[no-untyped-def]
     ends the stop of a vehicle that had moved (speed and acceleration freed with variance
     ``start_speed_var``; static objects stay); the body spread follows a moving average (rate
     ``learning_rate``) of the squared along-track residual less the sensor's and the track's
-    share, within ``[spread_lo, spread_hi]``, learnt while the whole body is in view.
+    share, within ``[spread_lo, spread_hi]``, learnt while the whole body is in view; so do
+    the second and fourth moments of the along-track residual (``along_m2``, ``along_m4``,
+    rate ``shape_rate``: see :func:`split_rows`).
     """
     zp, h, rm, jp, jv = _model_scratch()
     xv = np.zeros(N_STATE)
@@ -359,6 +361,8 @@ def update_tracks(  # type: ignore[no-untyped-def]
             sample = max(along * along - sr * sr - (rho * sa) ** 2 - p[i, 0, 0], 0.0)
             var = (1.0 - learning_rate) * spread[i] ** 2 + learning_rate * sample
             spread[i] = math.sqrt(min(max(var, spread_lo**2), spread_hi**2))
+            along_m2[i] += shape_rate * (along * along - along_m2[i])
+            along_m4[i] += shape_rate * (along**4 - along_m4[i])
         _model(
             i, x, spread, corridor, roads, bounds, radar, noise_tab, noise_cnt, fields,
             across_std, xv, zp, h, rm, jp, jv,
@@ -378,6 +382,29 @@ def update_tracks(  # type: ignore[no-untyped-def]
             p[i] = pn
             if stopped[i]:
                 x[i, 1] = x[i, 2] = 0.0
+
+
+@numba.njit(cache=True)
+def split_rows(stopped, along_m2, along_m4, kurtosis_max, min_half_gap):  # type: ignore[no-untyped-def]
+    """Find the stopped tracks whose reflections come from two bodies, and the bodies.
+
+    Reflections of one body scatter about its centre (a kurtosis ``m4 / m2^2`` of about 2-3;
+    a uniform body's is 1.8); two bodies in a queue under one track give two clusters at
+    ``+-a`` (kurtosis below ``kurtosis_max``). Moments of a symmetric two-body mixture with
+    spread ``s`` each: ``m2 = a^2 + s^2``, ``m4 - 3 m2^2 = -2 a^4``. Returns the rows, ``a``
+    and ``s`` [m] of the tracks with ``a >= min_half_gap``.
+    """
+    rows = np.flatnonzero(stopped & (along_m4 < kurtosis_max * along_m2**2))
+    half = np.zeros(rows.size)
+    body = np.zeros(rows.size)
+    keep = np.zeros(rows.size, dtype=np.bool_)
+    for k, i in enumerate(rows):
+        a4 = 0.5 * (3.0 * along_m2[i] ** 2 - along_m4[i])
+        if a4 > 0.0:
+            half[k] = a4**0.25
+            body[k] = math.sqrt(max(along_m2[i] - half[k] ** 2, 0.0))
+            keep[k] = half[k] >= min_half_gap
+    return rows[keep], half[keep], body[keep]
 
 
 @numba.njit(cache=True)

@@ -19,8 +19,9 @@ of view is measured at the centre of its part in view); apply what a miss tells 
 gate hides slow vehicles; a miss behind a nearer track tells nothing); record hits and misses
 (M-of-N confirmation once the speed sigma is below ``confirm_speed_std_mps``, deletion by
 coasting time or, for a stopped track, by misses in a row: :mod:`adaptrack.tracking.lifecycle`);
-open tentative tracks from the detections left over, clustered within ``cluster_radius_m``. The
-per-track arithmetic runs compiled (:mod:`._scene_kernels`).
+open tentative tracks from the detections left over, clustered within ``cluster_radius_m``;
+split a stopped track whose reflections come from two bodies of a queue
+(:meth:`SceneTracker._split`). The per-track arithmetic runs compiled (:mod:`._scene_kernels`).
 
 Stopped mode: a confirmed track slower than ``stop_speed_mps`` for ``stop_confirm_s`` (a
 speed estimate within ``stop_exit_sigmas`` sigmas above it does not restart the count: the
@@ -85,6 +86,7 @@ from ._scene_kernels import (
     owners,
     planar_rows,
     predict_tracks,
+    split_rows,
     unambiguous_assignment,
     update_tracks,
 )
@@ -112,6 +114,9 @@ class SceneTrackerConfig:
     body_along_std_m: float = 1.5  # initial spread of reflections along a body, learnt per track
     spread_learning_rate: float = 0.03
     spread_limits_m: tuple[float, float] = (0.3, 3.0)
+    shape_learning_rate: float = 0.01  # moments of the reflections along a body ...
+    split_kurtosis: float = 1.8  # ... a stopped track's below this are two bodies ...
+    split_min_half_gap_m: float = 2.0  # ... this far either side of it (a queue)
     body_across_std_m: float = 0.5
     gate_probability: float = 0.999
     clutter_gate_probability: float = 0.99  # a static object's own detections (reserved) ...
@@ -189,6 +194,8 @@ class _Tracks:
     line_event_raised: np.ndarray  # "will not stop before the stop line" raised
     anchor_u: FloatArray  # where along the corridor it was confirmed (opened, until then)
     spread: FloatArray  # body spread of the reflections along the track [m]
+    along_m2: FloatArray  # moving 2nd and 4th moments of the along-track residual [m^2, m^4]
+    along_m4: FloatArray
     direction: FloatArray  # +1 / -1: direction of travel along u once known, else 0
     miss_run: FloatArray  # probability of the current run of misses for a moving target
     occluded: np.ndarray  # hidden behind a nearer track at its last scan without a detection
@@ -204,7 +211,8 @@ class _Tracks:
             corridor, x, p, np.full(n, time_s), stopped=no, slow_since=np.full(n, np.nan),
             moved=no.copy(), event_raised=no.copy(), line_event_raised=no.copy(),
             anchor_u=x[:, 0].copy(),
-            spread=np.full(n, spread_m), direction=np.zeros(n), miss_run=np.ones(n),
+            spread=np.full(n, spread_m), along_m2=np.full(n, spread_m**2),
+            along_m4=np.full(n, 3.0 * spread_m**4), direction=np.zeros(n), miss_run=np.ones(n),
             occluded=no.copy(),
         )  # fmt: skip
 
@@ -365,11 +373,12 @@ class SceneTracker:
                 owner, order = owners(d2, logdet, self._gate, ti, di)
                 lo, hi = cfg.spread_limits_m
                 update_tracks(
-                    order, owner, z, tr.x, tr.p, tr.spread, tr.stopped, tr.moved,
-                    tr.direction, tr.slow_since, tr.corridor, self._roads, self._bounds,
-                    radar_row, noise_tab, noise_cnt, fields, cfg.body_across_std_m,
-                    cfg.moving_radial_mps, cfg.start_speed_max_mps**2,
-                    cfg.spread_learning_rate, lo, hi, cfg.estimate_azimuth_bias,
+                    order, owner, z, tr.x, tr.p, tr.spread, tr.along_m2, tr.along_m4,
+                    tr.stopped, tr.moved, tr.direction, tr.slow_since, tr.corridor,
+                    self._roads, self._bounds, radar_row, noise_tab, noise_cnt, fields,
+                    cfg.body_across_std_m, cfg.moving_radial_mps, cfg.start_speed_max_mps**2,
+                    cfg.spread_learning_rate, cfg.shape_learning_rate, lo, hi,
+                    cfg.estimate_azimuth_bias,
                     self._half_lane, bias, stats,
                     1.0 - 1.0 / cfg.bias_memory, cfg.bias_gate_m,
                 )  # fmt: skip
@@ -401,6 +410,7 @@ class SceneTracker:
             self.log.opened += n_new
             self.log.joined_new += left.shape[0] - n_new
         self._modes(time_s)
+        self._split(time_s)
         self._delete(time_s)
         self._merge()
 
@@ -417,6 +427,39 @@ class SceneTracker:
             return
         mine = (d2[static] <= self._clutter_gate).any(axis=0)
         d2[np.ix_(~static, mine)] = np.inf
+
+    def _split(self, time_s: float) -> None:
+        """Split a stopped track holding two queued bodies (:func:`._scene_kernels.split_rows`).
+
+        Only road users that moved (static clutter stays whole: a rail reflects all along the
+        crossing). The part towards the crossing keeps the track's identity, the other becomes a new
+        confirmed stopped road user; each is placed at its cluster with that spread (within
+        the limits) and half a metre more position sigma.
+        """
+        cfg = self.config
+        tr = self.tracks
+        rows, half, body = split_rows(
+            tr.stopped & tr.moved, tr.along_m2, tr.along_m4, cfg.split_kurtosis,
+            cfg.split_min_half_gap_m,
+        )  # fmt: skip
+        if rows.size == 0:
+            return
+        towards = np.sign(self._crossing_u[tr.corridor[rows]] - tr.x[rows, 0])
+        towards[towards == 0] = 1.0
+        rear = _Tracks(
+            **{name: getattr(tr, name)[rows].copy() for name in _Tracks.__dataclass_fields__}
+        )
+        spread = np.clip(body, *cfg.spread_limits_m)
+        for part, sign in ((tr, 1.0), (rear, -1.0)):
+            k = rows if part is tr else slice(None)
+            part.x[k, 0] += sign * towards * half
+            part.anchor_u[k] = part.x[k, 0]
+            part.p[k, 0, 0] += 0.25
+            part.spread[k] = spread
+            part.along_m2[k] = spread**2
+            part.along_m4[k] = 3.0 * spread**4
+        self.book.add_copies(rows, time_s)
+        self.tracks.append(rear)
 
     def _merge(self) -> None:
         """Drop the younger of two tracks on one body.

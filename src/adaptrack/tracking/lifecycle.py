@@ -88,6 +88,13 @@ class TrackBook:
         self.born_s = np.concatenate([self.born_s, np.full(n, time_s)])
         return new
 
+    def add_copies(self, rows: np.ndarray, time_s: float) -> np.ndarray:
+        """Open new tracks born at ``time_s`` with the hit records of ``rows`` (a split)."""
+        new = self.add(rows.size, time_s)
+        for name in ("history", "confirmed", "misses", "last_hit_s"):
+            getattr(self, name)[-rows.size :] = getattr(self, name)[rows]
+        return new
+
     def record(
         self, rows: np.ndarray, hit: np.ndarray, time_s: float, ready: np.ndarray | None = None
     ) -> np.ndarray:
