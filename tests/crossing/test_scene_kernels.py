@@ -231,9 +231,10 @@ def test_split_finds_two_queued_bodies_from_the_moments_of_their_reflections():
     m2 = np.array([np.mean(r**2) for r in samples.values()])
     m4 = np.array([np.mean(r**4) for r in samples.values()])
     stopped = np.ones(4, bool)
-    rows, half, body = split_rows(stopped, m2, m4, 1.8, 2.0)
+    moved = np.ones(4, bool)
+    rows, half, body = split_rows(stopped, moved, m2, m4, 1.8, 2.0)
     assert rows.tolist() == [0]
     assert half[0] == pytest.approx(3.5, abs=0.05)
     assert body[0] == pytest.approx(math.sqrt(25.0 / 12.0 + 0.09), abs=0.1)
     stopped[0] = False
-    assert split_rows(stopped, m2, m4, 1.8, 2.0)[0].size == 0
+    assert split_rows(stopped, moved, m2, m4, 1.8, 2.0)[0].size == 0

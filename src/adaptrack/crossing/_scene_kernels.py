@@ -385,26 +385,29 @@ def update_tracks(  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True)
-def split_rows(stopped, along_m2, along_m4, kurtosis_max, min_half_gap):  # type: ignore[no-untyped-def]
-    """Find the stopped tracks whose reflections come from two bodies, and the bodies.
+def split_rows(stopped, moved, along_m2, along_m4, kurtosis_max, min_half_gap):  # type: ignore[no-untyped-def]
+    """Find the stopped road users whose reflections come from two bodies, and the bodies.
 
     Reflections of one body scatter about its centre (a kurtosis ``m4 / m2^2`` of about 2-3;
     a uniform body's is 1.8); two bodies in a queue under one track give two clusters at
     ``+-a`` (kurtosis below ``kurtosis_max``). Moments of a symmetric two-body mixture with
     spread ``s`` each: ``m2 = a^2 + s^2``, ``m4 - 3 m2^2 = -2 a^4``. Returns the rows, ``a``
-    and ``s`` [m] of the tracks with ``a >= min_half_gap``.
+    and ``s`` [m] of the tracks (``stopped`` and ``moved``: static clutter never splits) with
+    ``a >= min_half_gap``.
     """
-    rows = np.flatnonzero(stopped & (along_m4 < kurtosis_max * along_m2**2))
-    half = np.zeros(rows.size)
-    body = np.zeros(rows.size)
-    keep = np.zeros(rows.size, dtype=np.bool_)
-    for k, i in enumerate(rows):
-        a4 = 0.5 * (3.0 * along_m2[i] ** 2 - along_m4[i])
-        if a4 > 0.0:
-            half[k] = a4**0.25
-            body[k] = math.sqrt(max(along_m2[i] - half[k] ** 2, 0.0))
-            keep[k] = half[k] >= min_half_gap
-    return rows[keep], half[keep], body[keep]
+    rows = np.zeros(0, dtype=np.int64)
+    half = np.zeros(0)
+    body = np.zeros(0)
+    for i in range(stopped.size):
+        m2, m4 = along_m2[i], along_m4[i]
+        if not (stopped[i] and moved[i] and m4 < kurtosis_max * m2 * m2):
+            continue
+        a = (0.5 * (3.0 * m2 * m2 - m4)) ** 0.25  # NaN (kurtosis above 3) never passes
+        if a >= min_half_gap:
+            rows = np.append(rows, i)
+            half = np.append(half, a)
+            body = np.append(body, math.sqrt(max(m2 - a * a, 0.0)))
+    return rows, half, body
 
 
 @numba.njit(cache=True)

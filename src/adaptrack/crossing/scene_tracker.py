@@ -207,12 +207,13 @@ class _Tracks:
         """Return new tracks on ``corridor`` rows with states ``x``, ``p`` at ``time_s``."""
         n = corridor.size
         no = np.zeros(n, bool)
+        m2, m4 = _one_body_moments(spread_m)
         return cls(
             corridor, x, p, np.full(n, time_s), stopped=no, slow_since=np.full(n, np.nan),
             moved=no.copy(), event_raised=no.copy(), line_event_raised=no.copy(),
             anchor_u=x[:, 0].copy(),
-            spread=np.full(n, spread_m), along_m2=np.full(n, spread_m**2),
-            along_m4=np.full(n, 3.0 * spread_m**4), direction=np.zeros(n), miss_run=np.ones(n),
+            spread=np.full(n, spread_m), along_m2=np.full(n, m2), along_m4=np.full(n, m4),
+            direction=np.zeros(n), miss_run=np.ones(n),
             occluded=no.copy(),
         )  # fmt: skip
 
@@ -227,6 +228,21 @@ class _Tracks:
     def static(self) -> np.ndarray:
         """Stopped objects that never moved (clutter: a post, a rail), bool per track."""
         return self.stopped & ~self.moved
+
+    def taken(self, rows: np.ndarray) -> _Tracks:
+        """Return a copy of the tracks in ``rows``."""
+        return _Tracks(**{name: getattr(self, name)[rows] for name in self.__dataclass_fields__})
+
+    def place(self, rows: np.ndarray | slice, u: FloatArray, spread: FloatArray) -> None:
+        """Move stopped ``rows`` to ``u`` along their corridor with a new body ``spread`` [m].
+
+        Their position sigma grows by half a metre; the reflection moments restart at one
+        body's (Gaussian).
+        """
+        self.x[rows, 0] = self.anchor_u[rows] = u
+        self.p[rows, 0, 0] += 0.25
+        self.spread[rows] = spread
+        self.along_m2[rows], self.along_m4[rows] = _one_body_moments(spread)
 
     def append(self, other: _Tracks) -> None:
         for name in self.__dataclass_fields__:
@@ -432,34 +448,26 @@ class SceneTracker:
         """Split a stopped track holding two queued bodies (:func:`._scene_kernels.split_rows`).
 
         Only road users that moved (static clutter stays whole: a rail reflects all along the
-        crossing). The part towards the crossing keeps the track's identity, the other becomes a new
-        confirmed stopped road user; each is placed at its cluster with that spread (within
-        the limits) and half a metre more position sigma.
+        crossing). The part towards the crossing keeps the track's identity, the other becomes
+        a new confirmed stopped road user; each is placed at its cluster with that spread
+        (within the limits) and half a metre more position sigma (:meth:`_Tracks.place`).
         """
         cfg = self.config
         tr = self.tracks
         rows, half, body = split_rows(
-            tr.stopped & tr.moved, tr.along_m2, tr.along_m4, cfg.split_kurtosis,
+            tr.stopped, tr.moved, tr.along_m2, tr.along_m4, cfg.split_kurtosis,
             cfg.split_min_half_gap_m,
         )  # fmt: skip
         if rows.size == 0:
             return
-        towards = np.sign(self._crossing_u[tr.corridor[rows]] - tr.x[rows, 0])
-        towards[towards == 0] = 1.0
-        rear = _Tracks(
-            **{name: getattr(tr, name)[rows].copy() for name in _Tracks.__dataclass_fields__}
-        )
+        towards = np.where(self._crossing_u[tr.corridor[rows]] >= tr.x[rows, 0], 1.0, -1.0)
+        u = tr.x[rows, 0]
         spread = np.clip(body, *cfg.spread_limits_m)
-        for part, sign in ((tr, 1.0), (rear, -1.0)):
-            k = rows if part is tr else slice(None)
-            part.x[k, 0] += sign * towards * half
-            part.anchor_u[k] = part.x[k, 0]
-            part.p[k, 0, 0] += 0.25
-            part.spread[k] = spread
-            part.along_m2[k] = spread**2
-            part.along_m4[k] = 3.0 * spread**4
+        rear = tr.taken(rows)
+        tr.place(rows, u + towards * half, spread)
+        rear.place(slice(None), u - towards * half, spread)
         self.book.add_copies(rows, time_s)
-        self.tracks.append(rear)
+        tr.append(rear)
 
     def _merge(self) -> None:
         """Drop the younger of two tracks on one body.
@@ -641,6 +649,11 @@ def _frame(columns: list[dict[str, np.ndarray]]) -> pd.DataFrame:
     }
     table["status"] = names[np.asarray(table["status"], dtype=int)]
     return pd.DataFrame(table)
+
+
+def _one_body_moments(spread_m: FloatArray | float) -> tuple[FloatArray | float, ...]:
+    """Second and fourth moments [m^2, m^4] of one body's reflections (Gaussian, that spread)."""
+    return spread_m**2, 3.0 * spread_m**4
 
 
 def _merged_intervals(intervals: FloatArray) -> tuple[list[float], list[float]]:
