@@ -83,6 +83,25 @@ def test_a_nearer_body_on_the_line_of_sight_hides_what_is_behind_it():
     assert out.tolist() == [False, True, False]
 
 
+def test_a_track_inside_a_nearer_body_is_its_duplicate_not_hidden_by_it():
+    roads = _road()
+    bounds = np.array([[0, roads.shape[1]]])
+    radar = np.array([0.0, 0.0, 6.0, 0.0, 1.0, 0.1])
+    # a 12 m bus (spread 3 m: body to 2 spreads = 6 m either side of its centre at 20 m); a
+    # track 5 m behind its centre lies on the bus itself (its rear's reflections), one 7 m
+    # behind is another road user in the bus's shadow; on another corridor 5 m is hidden too
+    x = np.zeros((3, 4))
+    x[:, 0] = [20.0, 25.0, 27.0]
+    spread = np.array([3.0, 1.0, 1.0])
+    corridor = np.zeros(3, np.int64)
+    out = occluded_rows(np.array([1, 2]), x, spread, corridor, roads, bounds, radar)
+    assert out.tolist() == [False, True]
+    bounds2 = np.array([[0, roads.shape[1]], [0, roads.shape[1]]])
+    corridor[1] = 1
+    out = occluded_rows(np.array([1]), x, spread, corridor, roads, bounds2, radar)
+    assert out.tolist() == [True]
+
+
 def test_a_body_reaching_past_the_radars_range_is_seen_over_its_near_part():
     roads = _road()
     bounds = np.array([[0, roads.shape[1]]])

@@ -415,7 +415,10 @@ def occluded_rows(rows, x, spread, corridor, roads, bounds, radar):  # type: ign
     """Which tracks of ``rows`` a nearer track may hide from the radar (bool per row).
 
     A track hides what lies behind it within its apparent half width: twice its body spread
-    along its heading and 1 m across, seen from the radar.
+    along its heading and 1 m across, seen from the radar. It does not hide a track on its
+    corridor whose centre lies within its own body (``BODY_HALF_SPREADS`` spreads along):
+    no other road user can be there, so that track is a duplicate of its body and its
+    misses count.
     """
     n = x.shape[0]
     rng = np.zeros(n)
@@ -434,6 +437,9 @@ def occluded_rows(rows, x, spread, corridor, roads, bounds, radar):  # type: ign
         i = rows[k]
         for j in range(n):
             if j == i or rng[j] >= rng[i]:
+                continue
+            inside = abs(x[i, 0] - x[j, 0]) < BODY_HALF_SPREADS * spread[j]
+            if inside and corridor[j] == corridor[i]:
                 continue
             d = (az[i] - az[j] + math.pi) % (2.0 * math.pi) - math.pi
             if abs(d) < half[j]:

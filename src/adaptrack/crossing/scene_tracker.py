@@ -16,7 +16,8 @@ three-dimensional innovation); assign one detection per track by global nearest 
 give every further gated detection to the track most likely to have made it (the body's
 other reflections; least ``d2 + ln det S``); update (a body reaching out of the radar's field
 of view is measured at the centre of its part in view); apply what a miss tells (the Doppler
-gate hides slow vehicles; a miss behind a nearer track tells nothing); record hits and misses
+gate hides slow vehicles; a miss behind a nearer track tells nothing,
+unless it lies within that track's own body: a duplicate); record hits and misses
 (M-of-N confirmation once the speed sigma is below ``confirm_speed_std_mps``, deletion by
 coasting time or, for a stopped track, by misses in a row: :mod:`adaptrack.tracking.lifecycle`);
 open tentative tracks from the detections left over, clustered within ``cluster_radius_m``;
