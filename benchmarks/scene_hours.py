@@ -9,7 +9,8 @@ hazard (a standstill between the barriers) and the false "stopped" events, and t
 "will not stop before the stop line" event for every user that ran the line (with the
 scene's warning intervals given to the tracker) and the false ones; then the false events
 per simulated hour over all seeds. ``--fold-kmh`` makes every radar fold its radial
-speeds at that value; ``--set NAME=VALUE`` changes a
+speeds at that value; ``--object-list`` makes the radars label their detections with object
+ids (reissued, sometimes swapped) that the tracker takes as hints; ``--set NAME=VALUE`` changes a
 :class:`~adaptrack.crossing.scene_tracker.SceneTrackerConfig` setting (numbers, true/false).
 Not a timing benchmark (accuracy and events; the time is indicative).
 """
@@ -34,6 +35,9 @@ def main() -> None:
     ap.add_argument("--duration", type=float, default=1200.0, help="per seed [s]")
     ap.add_argument("--fold-kmh", type=float, default=None)
     ap.add_argument("--set", action="append", default=[], metavar="NAME=VALUE")
+    ap.add_argument(
+        "--object-list", action="store_true", help="radars label detections with object ids"
+    )
     args = ap.parse_args()
     changes: dict[str, float | bool] = {}
     for item in args.set:
@@ -49,7 +53,9 @@ def main() -> None:
         site = dataclasses.replace(site, radars=radars)
     n_false, n_line_false, hours = 0, 0, 0.0
     for seed in args.seeds:
-        m = mixed_traffic_study(site, seed, args.duration, config=config)
+        m = mixed_traffic_study(
+            site, seed, args.duration, config=config, object_list=args.object_list
+        )
         n_false += len(m.false_stop_times_s)
         n_line_false += len(m.false_line_times_s)
         hours += args.duration / 3600.0

@@ -80,7 +80,7 @@ def stonesoup_scene(site: Site, detections: pd.DataFrame, accel_psd: float = 4.0
     tracks: set = set()
     rows = []
     latency = {r.name: r.latency_s for r in site.radars}
-    for radar, stamp, z in iter_scans(detections, latency):
+    for radar, stamp, z, _ in iter_scans(detections, latency):
         t = stamp - latency[radar]  # the same declared latency as adaptrack's
         model, height = models[radar]
         z = _centroids(z[np.abs(z[:, 2]) >= MOVING_MPS], height, cfg.cluster_radius_m)

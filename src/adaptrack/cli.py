@@ -454,26 +454,37 @@ def track(
     warnings: Path | None = typer.Option(
         None,
         "--warnings",
-        help="Raw detections: the crossing's warning intervals (start_s, end_s), for the "
-        "'will not stop before the stop line' prediction.",
+        help="The crossing's warning intervals (start_s, end_s), for the "
+        "'will not stop before the stop line' prediction (scene tracker).",
+    ),
+    ids: str = typer.Option(
+        "hint",
+        "--ids",
+        help="An object list's object_id: 'hint' (the scene tracker, ids as association "
+        "hints) or 'truth' (one track per id with the site's road estimator).",
     ),
 ) -> None:
     """Track radar detections at a site; write the estimates.
 
-    With an ``object_id`` column (a radar object list): every object with the site's road
-    estimator, the deployed one of ``--config`` (the road EKF with constant acceleration
-    without it); the reflection-point scatter follows the ``vehicle_class`` column (a car
-    when absent). Without ``object_id`` (raw detections): the many-object scene tracker
-    (its settings from the ``[scene_tracker]`` table of ``--config``, if any); tracks go
-    to ``--out`` (status tentative tracks excluded) and hazard events to ``--events``
-    (with ``--warnings``, also the predicted "will not stop before the stop line").
+    The many-object scene tracker (its settings from the ``[scene_tracker]`` table of
+    ``--config``, if any) takes raw detections, and an object list's ``object_id`` column as
+    association hints, not truth (``--ids hint``): tracks go to ``--out`` (status tentative
+    tracks excluded) and hazard events to ``--events`` (with ``--warnings``, also the
+    predicted "will not stop before the stop line"). With ``--ids truth`` every object id is
+    one track of the site's road estimator, the deployed one of ``--config`` (the road EKF with
+    constant acceleration without it); the reflection-point scatter follows the
+    ``vehicle_class`` column (a car when absent).
     """
     st = _load_site(site)
-    if "object_id" not in read_table(measurements).columns:
+    if ids not in ("hint", "truth"):
+        _fail(f"--ids must be 'hint' or 'truth'; got {ids!r}")
+    if ids == "hint":
         _track_scene_file(measurements, st, out, events, warnings, config)
         return
+    if "object_id" not in read_table(measurements).columns:
+        _fail(f"{measurements}: --ids truth needs an object_id column")
     if warnings is not None:
-        _fail("--warnings applies to raw detections (without object_id)")
+        _fail("--warnings applies to the scene tracker (--ids hint)")
     try:
         objects = read_detections(measurements, st)
         estimator = (

@@ -63,6 +63,8 @@ def test_simulate_then_track_meets_the_requirement(simulated):
         str(simulated / "est.csv"),
         "--config",
         str(tuned),
+        "--ids",
+        "truth",
     )
     assert proc.returncode == 0, proc.stderr
     est = pd.read_csv(simulated / "est.csv")
@@ -101,7 +103,7 @@ def test_track_bad_input(simulated, change, message):
     path = simulated / "bad.csv"
     bad.to_csv(path, index=False)
     out = simulated / "never.csv"
-    proc = run("track", str(path), "--out", str(out))
+    proc = run("track", str(path), "--out", str(out), "--ids", "truth")
     assert proc.returncode == 1
     assert proc.stderr.startswith("error: ")
     assert re.search(message, proc.stderr), proc.stderr

@@ -194,7 +194,7 @@ def test_azimuth_biases_are_estimated_against_the_lanes():
     for estimate in (True, False):
         tracker = SceneTracker(SITE, SceneTrackerConfig(estimate_azimuth_bias=estimate))
         rows = []
-        for radar, t, z in iter_scans(rec.detections):
+        for radar, t, z, _ in iter_scans(rec.detections):
             tracker.step(radar, t, z)
             rows.append(tracker.rows(tracker.last_scan_s))
         score = score_scene(rec.truth, pd.concat(rows), SITE.zone_m)

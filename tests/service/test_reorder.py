@@ -60,8 +60,8 @@ def test_release_order_is_the_offline_order(seed):
         live += buf.ready()
     live += buf.flush()
     offline = list(iter_scans(table, latency))
-    assert [(s.radar, s.time_s) for s in live] == [(r, t) for r, t, _ in offline]
-    for s, (_, _, z) in zip(live, offline, strict=True):
+    assert [(s.radar, s.time_s) for s in live] == [(r, t) for r, t, _, _ in offline]
+    for s, (_, _, z, _) in zip(live, offline, strict=True):
         np.testing.assert_array_equal(s.z, z)
 
 

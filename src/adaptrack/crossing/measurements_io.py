@@ -117,16 +117,27 @@ def _polar_columns(
 
 
 def read_scene_detections(path: str | Path, site: Site) -> pd.DataFrame:
-    """Read and validate detections without identities.
+    """Read and validate detections for the scene tracker.
 
-    Columns ``SCENE_COLUMNS`` (``azimuth_deg`` accepted); errors name file, row and column.
-    Rows come back sorted by time, stably.
+    Columns ``SCENE_COLUMNS`` (``azimuth_deg`` accepted), and ``object_id`` for a radar object
+    list: the sensor's ids (integers, -1: none), kept as association hints. Errors name file,
+    row and column. Rows come back sorted by time, stably.
     """
     p = Path(path)
-    names, t, r, az, vr = _polar_columns(read_table(p), p, site)
+    frame = read_table(p)
+    names, t, r, az, vr = _polar_columns(frame, p, site)
     out = pd.DataFrame(
         {"radar": names, "time_s": t, "range_m": r, "azimuth_rad": az, "radial_speed_mps": vr}
     )
+    if "object_id" in frame.columns:
+        oid = numeric_column(frame, "object_id", p)
+        bad = (oid != np.round(oid)) | (oid < -1)
+        if bad.any():
+            row = int(np.argmax(bad))
+            raise DataFormatError(
+                f"{p}: row {row + 1}, column 'object_id': {oid[row]} is not an integer >= -1"
+            )
+        out["object_id"] = oid.astype(np.int64)
     return out.sort_values("time_s", kind="stable", ignore_index=True)
 
 

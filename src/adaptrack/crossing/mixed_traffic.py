@@ -25,6 +25,7 @@ import pandas as pd
 from .._typing import FloatArray
 from ._figures import draw_site, svg_of
 from .compliance import CONFIDENCE, POSITION_LIMIT_M, SPEED_LIMIT_KMH
+from .object_list import object_list_ids
 from .radar_sim import radial_geometry
 from .scene import Stall, scene_spec, simulate_scene
 from .scene_metrics import event_outcomes, score_scene, stop_line_outcomes
@@ -131,18 +132,26 @@ def mixed_traffic_study(
     config: SceneTrackerConfig | None = None,
     confidence: float = CONFIDENCE,
     on_scan: Callable[[int, int], None] | None = None,
+    object_list: bool = False,
 ) -> MixedTraffic:
     """Simulate, track (with ``config``) and score ``duration_s`` of the site's scene.
 
-    See the module docstring. Raises ValueError when the site has no scene (no flow between
+    See the module docstring. ``object_list``: the radars label their detections with
+    object ids (:func:`.object_list.object_list_ids`: reissued, sometimes swapped) that the
+    tracker takes as hints. Raises ValueError when the site has no scene (no flow between
     two roads).
     """
     road = sorted(site.roads)[-1]
     stall = Stall(road, STALL_AT * duration_s, 0.0, STALL_S)
     spec = scene_spec(site, duration_s=duration_s, stalls=(stall,))
     rec = simulate_scene(site, spec, seed)
+    detections = (
+        rec.detections.assign(object_id=object_list_ids(rec, seed))
+        if object_list
+        else rec.detections
+    )
     start = time.perf_counter()
-    tracks, events, _ = track_scene(site, rec.detections, config, on_scan, spec.warnings())
+    tracks, events, _ = track_scene(site, detections, config, on_scan, spec.warnings())
     elapsed = time.perf_counter() - start
     score = score_scene(rec.truth, tracks, site.zone_m, confidence=confidence)
     hazards, false_stops = event_outcomes(rec.truth, events, site.barrier_m)

@@ -138,6 +138,7 @@ class SceneTrackerConfig:
     stop_decel_mps2: float = 4.0  # a driver is expected to stop for the lights at this
     stationary_detections: bool = True  # the radars report stopped objects at zero Doppler
     stop_seen_s: float = 0.3  # ... so a stop counts only while detections show it
+    sensor_id_bonus: float = 0.0  # chi-square units off a detection with a track's sensor id
     estimate_azimuth_bias: bool = False  # align each radar's azimuths to the lanes (opt-in)
     bias_memory: float = 20000.0  # detections the alignment remembers (forgetting 1 - 1/this)
     bias_min_samples: float = 300.0  # ... before it is applied
@@ -200,12 +201,22 @@ class _Tracks:
     direction: FloatArray  # +1 / -1: direction of travel along u once known, else 0
     miss_run: FloatArray  # probability of the current run of misses for a moving target
     occluded: np.ndarray  # hidden behind a nearer track at its last scan without a detection
+    sensor_id: np.ndarray  # (T, radars) the object id each radar last reported for it (-1 none)
 
     @classmethod
     def opened(
-        cls, corridor: np.ndarray, x: FloatArray, p: FloatArray, time_s: float, spread_m: float
+        cls,
+        corridor: np.ndarray,
+        x: FloatArray,
+        p: FloatArray,
+        time_s: float,
+        spread_m: float,
+        sensor_id: np.ndarray,
     ) -> _Tracks:
-        """Return new tracks on ``corridor`` rows with states ``x``, ``p`` at ``time_s``."""
+        """Return new tracks on ``corridor`` rows with states ``x``, ``p`` at ``time_s``.
+
+        ``sensor_id`` (n, radars): the sensor's object ids they start with (-1: none).
+        """
         n = corridor.size
         no = np.zeros(n, bool)
         m2, m4 = _one_body_moments(spread_m)
@@ -215,15 +226,16 @@ class _Tracks:
             anchor_u=x[:, 0].copy(),
             spread=np.full(n, spread_m), along_m2=np.full(n, m2), along_m4=np.full(n, m4),
             direction=np.zeros(n), miss_run=np.ones(n),
-            occluded=no.copy(),
+            occluded=no.copy(), sensor_id=sensor_id,
         )  # fmt: skip
 
     @classmethod
-    def empty(cls) -> _Tracks:
-        """Return no track."""
+    def empty(cls, n_radars: int) -> _Tracks:
+        """Return no track (sensor ids kept for ``n_radars`` radars)."""
         return cls.opened(
-            np.zeros(0, int), np.zeros((0, N_STATE)), np.zeros((0, N_STATE, N_STATE)), 0.0, 0.0
-        )
+            np.zeros(0, int), np.zeros((0, N_STATE)), np.zeros((0, N_STATE, N_STATE)), 0.0, 0.0,
+            np.zeros((0, n_radars), np.int64),
+        )  # fmt: skip
 
     @property
     def static(self) -> np.ndarray:
@@ -291,10 +303,11 @@ class SceneTracker:
         )
         self.corridors = site_corridors(site.roads, site.zone_m + site.run_in_m)
         self.book = TrackBook(self.config.rules)
-        self.tracks = _Tracks.empty()
+        self.tracks = _Tracks.empty(len(site.radars))
         self.events: list[dict[str, object]] = []
         self.log = ScanLog()
         self._radars = {r.name: r for r in site.radars}
+        self._radar_index = {r.name: i for i, r in enumerate(site.radars)}
         self._radar_tables = {
             r.name: (
                 r.kernel_row(), *r.noise_table(), r.field_table(),
@@ -315,18 +328,26 @@ class SceneTracker:
         self.outside_view = np.zeros(0, bool)  # the last scan's detections outside every field
 
     # -- track opening ----------------------------------------------------------------------
-    def _open(self, z: FloatArray, radar_name: str, time_s: float) -> int:
-        """Open one tentative track per cluster of detections ``z`` (n, 3); return the count."""
+    def _open(self, z: FloatArray, ids: np.ndarray, radar_name: str, time_s: float) -> int:
+        """Open one tentative track per cluster of detections ``z`` (n, 3); return the count.
+
+        Each starts with the sensor object id (``ids`` (n,), -1: none) of its first detection.
+        """
         radar_row, noise_tab, noise_cnt = self._radar_tables[radar_name][:3]
         cfg = self.config
-        corridor, x, p, _ = open_tracks(
+        corridor, x, p, labels = open_tracks(
             z, radar_row, noise_tab, noise_cnt, self._roads, self._bounds,
             cfg.cluster_radius_m, cfg.initial_speed_std_mps**2, cfg.body_along_std_m**2,
         )  # fmt: skip
         n_new = corridor.size
         if n_new:
             self.book.add(n_new, time_s)
-            self.tracks.append(_Tracks.opened(corridor, x, p, time_s, cfg.body_along_std_m))
+            sensor_id = np.full((n_new, len(self._radars)), -1, np.int64)
+            first = np.unique(labels, return_index=True)[1]  # each cluster's first detection
+            sensor_id[:, self._radar_index[radar_name]] = ids[first]
+            self.tracks.append(
+                _Tracks.opened(corridor, x, p, time_s, cfg.body_along_std_m, sensor_id)
+            )
         return n_new
 
     # -- one scan ---------------------------------------------------------------------------
@@ -334,11 +355,16 @@ class SceneTracker:
         """Timestamp of the radar's last scan processed [s] (-inf before its first)."""
         return self._last_time.get(radar_name, -np.inf)
 
-    def step(self, radar_name: str, time_s: float, z: FloatArray) -> None:
+    def step(
+        self, radar_name: str, time_s: float, z: FloatArray, ids: np.ndarray | None = None
+    ) -> None:
         """Process the detections ``z`` (n, 3) of one radar scan stamped ``time_s``.
 
         The scan was made at ``time_s`` less the radar's declared latency
-        (:attr:`last_scan_s` after the call; see :meth:`rows`).
+        (:attr:`last_scan_s` after the call; see :meth:`rows`). ``ids`` (n,): the sensor's
+        object ids of an object-list radar (integers >= 0; -1: none). They are hints, not
+        truth: a detection with the id that radar last gave a track costs
+        ``sensor_id_bonus`` less in the assignment, within the same gate.
         """
         radar = self._radars.get(radar_name)
         if radar is None:
@@ -352,6 +378,7 @@ class SceneTracker:
         z = np.asarray(z, dtype=float).reshape(-1, 3)
         if not np.all(np.isfinite(z)):
             raise ValueError(f"radar {radar_name!r} at {time_s} s: a detection is not finite")
+        ids = _sensor_ids(ids, z.shape[0], radar_name, time_s)
         self._last_time[radar_name] = time_s
         time_s = float(radar.measured_at(time_s))
         self.last_scan_s = time_s
@@ -369,6 +396,8 @@ class SceneTracker:
         self.outside_view = ~view
         self.log.rejected_outside_view += int(self.outside_view.sum())
         z = z[view]
+        ids = ids[view]
+        r_col = self._radar_index[radar_name]
         n_t = tr.time_s.size
         used = np.zeros(z.shape[0], dtype=bool)
         if n_t:
@@ -384,6 +413,7 @@ class SceneTracker:
             hit = np.zeros(n_t, dtype=bool)
             if z.shape[0]:
                 self._reserve_clutter(d2)
+                self._favour_sensor_ids(d2, ids, r_col)
                 simple, ti, di = unambiguous_assignment(d2, self._gate)
                 if not simple:
                     ti, di = gnn_assign(np.where(d2 <= self._gate, d2, np.inf), self._gate)
@@ -403,6 +433,7 @@ class SceneTracker:
                     self.azimuth_bias_rad[radar_name] = float(stats[1] / stats[0])
                 used[order] = True
                 hit[owner[order]] = True
+                tr.sensor_id[ti, r_col] = ids[di]  # its own detection's, not a body's other
             tr.miss_run[hit] = 1.0
             missed = np.flatnonzero(seen & ~hit)
             hidden = occluded_rows(
@@ -423,13 +454,20 @@ class SceneTracker:
         self.log.updated += int(used.sum())
         left = z[~used]
         if left.shape[0]:
-            n_new = self._open(left, radar_name, time_s)
+            n_new = self._open(left, ids[~used], radar_name, time_s)
             self.log.opened += n_new
             self.log.joined_new += left.shape[0] - n_new
         self._modes(time_s)
         self._split(time_s)
         self._delete(time_s)
         self._merge()
+
+    def _favour_sensor_ids(self, d2: FloatArray, ids: np.ndarray, radar_col: int) -> None:
+        """Take ``sensor_id_bonus`` off gated ``d2`` where a detection has a track's sensor id."""
+        last = self.tracks.sensor_id[:, radar_col]
+        same = (last[:, None] == ids[None, :]) & (ids >= 0)[None, :] & (d2 <= self._gate)
+        if same.any():
+            d2[same] = np.maximum(d2[same] - self.config.sensor_id_bonus, 0.0)
 
     def _reserve_clutter(self, d2: FloatArray) -> None:
         """Give a static object's detections to it alone (``d2`` rows of others set to inf).
@@ -652,6 +690,19 @@ def _frame(columns: list[dict[str, np.ndarray]]) -> pd.DataFrame:
     return pd.DataFrame(table)
 
 
+def _sensor_ids(ids: np.ndarray | None, n: int, radar_name: str, time_s: float) -> np.ndarray:
+    """Return the sensor object ids of a scan's ``n`` detections as int64 (-1s for ``None``)."""
+    if ids is None:
+        return np.full(n, -1, np.int64)
+    raw = np.asarray(ids)
+    if raw.shape != (n,) or not np.issubdtype(raw.dtype, np.integer) or np.any(raw < -1):
+        raise ValueError(
+            f"radar {radar_name!r} at {time_s} s: sensor ids must be {n} integers >= -1 "
+            f"(one per detection); got shape {raw.shape} dtype {raw.dtype}"
+        )
+    return raw.astype(np.int64)
+
+
 def _one_body_moments(spread_m: FloatArray | float) -> tuple[FloatArray | float, ...]:
     """Second and fourth moments [m^2, m^4] of one body's reflections (Gaussian, that spread)."""
     return spread_m**2, 3.0 * spread_m**4
@@ -682,23 +733,29 @@ def _corridor_tables(corridors: list[Corridor]) -> tuple[FloatArray, np.ndarray]
 
 def iter_scans(
     detections: pd.DataFrame, latency_s: dict[str, float] | None = None
-) -> Iterator[tuple[str, float, FloatArray]]:
+) -> Iterator[tuple[str, float, FloatArray, np.ndarray]]:
     """Yield the scans of a detection table in time order (radar name breaks ties).
 
     A scan is the detections (range_m, azimuth_rad, radial_speed_mps) of one radar at one
-    timestamp. With radars' ``latency_s``, the order is that of the times the scans were made
-    (timestamps less latency); the timestamps are yielded.
+    timestamp, with their sensor object ids (the ``object_id`` column of an object list; -1
+    without it). With radars' ``latency_s``, the order is that of the times the scans were
+    made (timestamps less latency); the timestamps are yielded.
     """
     t = detections["time_s"].to_numpy()
     radar = detections["radar"].astype(str).to_numpy()
     z = detections[["range_m", "azimuth_rad", "radial_speed_mps"]].to_numpy(dtype=float)
+    ids = (
+        detections["object_id"].to_numpy(dtype=np.int64)
+        if "object_id" in detections.columns
+        else np.full(t.size, -1, np.int64)
+    )
     made = t - pd.Series(radar).map(latency_s or {}).fillna(0.0).to_numpy()
     order = np.lexsort((radar, made))
-    t, radar, z = t[order], radar[order], z[order]
+    t, radar, z, ids = t[order], radar[order], z[order], ids[order]
     cut = np.flatnonzero((np.diff(t) != 0) | (radar[1:] != radar[:-1])) + 1
     starts = np.concatenate([[0], cut, [t.size]]) if t.size else np.zeros(1, int)
     for a, b in itertools.pairwise(starts):
-        yield str(radar[a]), float(t[a]), z[a:b]
+        yield str(radar[a]), float(t[a]), z[a:b], ids[a:b]
 
 
 def track_scene(
@@ -710,6 +767,9 @@ def track_scene(
 ) -> tuple[pd.DataFrame, pd.DataFrame, ScanLog]:
     """Track a detection table scan by scan (:func:`iter_scans`).
 
+    An ``object_id`` column (a radar object list) gives the sensor's ids as association hints
+    (:meth:`SceneTracker.step`).
+
     ``on_scan(done, total)`` is called after each scan (progress); ``warnings`` (K, 2): when
     the crossing's lights flash or its barriers are down [s] (none: no stop-line prediction).
     Returns the track rows of every scan, the hazard events and the detection log.
@@ -717,8 +777,8 @@ def track_scene(
     tracker = SceneTracker(site, config, warnings)
     scans = list(iter_scans(detections, {r.name: r.latency_s for r in site.radars}))
     out = []
-    for i, (radar, t, z) in enumerate(scans):
-        tracker.step(radar, t, z)
+    for i, (radar, t, z, ids) in enumerate(scans):
+        tracker.step(radar, t, z, ids)
         out.append(tracker.columns(tracker.last_scan_s))
         if on_scan is not None:
             on_scan(i + 1, len(scans))

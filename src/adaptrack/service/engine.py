@@ -26,7 +26,7 @@ from ..crossing.site import Site
 from .messages import Rejected, is_header, parse_line, record_line
 from .reorder import ReorderBuffer, Scan
 
-STATE_VERSION = 3  # 2: merged warning intervals; 3: tracks keep moments of their reflections
+STATE_VERSION = 4  # 2: merged warning intervals; 3: moments of reflections; 4: sensor ids
 LATENCY_SAMPLES = 1 << 18  # processing times kept for the percentiles (an hour of scans)
 
 Record = dict[str, object]  # an output record before encoding
