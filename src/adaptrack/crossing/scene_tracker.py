@@ -464,6 +464,8 @@ class SceneTracker:
 
     def _favour_sensor_ids(self, d2: FloatArray, ids: np.ndarray, radar_col: int) -> None:
         """Take ``sensor_id_bonus`` off gated ``d2`` where a detection has a track's sensor id."""
+        if self.config.sensor_id_bonus == 0.0 or ids.max(initial=-1) < 0:
+            return  # the default, and raw detections: no work per scan
         last = self.tracks.sensor_id[:, radar_col]
         same = (last[:, None] == ids[None, :]) & (ids >= 0)[None, :] & (d2 <= self._gate)
         if same.any():
