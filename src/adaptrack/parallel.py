@@ -113,7 +113,7 @@ def task_pool(workers: int = 1, scheduler: str | None = None) -> Iterator[TaskPo
             n_workers=workers,
             threads_per_worker=1,
             processes=True,
-            dashboard_address=None,
+            dashboard_address=":0",  # a free port (None is 8787: a second run failed)
             silence_logs=logging.ERROR,
         ) as cluster,
         Client(cluster) as client,

@@ -11,6 +11,11 @@ from adaptrack.crossing.site import load_site
 SITE = load_site("lx_default")
 
 
+def _no_ids(n):
+    """No sensor object ids for ``n`` hand-made tracks (one column per radar of SITE)."""
+    return np.full((n, len(SITE.radars)), -1, np.int64)
+
+
 @pytest.fixture(scope="module")
 def free_flow():
     spec = scene_spec(SITE, duration_s=120.0, closure_s=0.0, stalls=())
@@ -185,7 +190,7 @@ def test_learnt_clutter_reserves_its_own_detections():
     tracker.book.add(2, 0.0)  # an old static object and a road user
     tracker.book.add(1, 150.0)  # a young static object
     x, p = np.zeros((3, 4)), np.tile(np.eye(4), (3, 1, 1))
-    tracker.tracks = _Tracks.opened(np.zeros(3, int), x, p, 200.0, 1.0)
+    tracker.tracks = _Tracks.opened(np.zeros(3, int), x, p, 200.0, 1.0, _no_ids(3))
     tracker.tracks.stopped[[0, 2]] = True  # rows 0 and 2 never moved: static
     d2 = np.array([[1.0, 50.0, 2.0], [3.0, 4.0, 5.0], [60.0, 0.5, 70.0]])
     tracker._reserve_clutter(d2)
@@ -214,7 +219,9 @@ def test_will_not_stop_before_the_stop_line_rule():
     x = np.stack([u, [20.0, 10.0, 20.0], np.zeros(3), np.full(3, -half_lane)], -1)
     tracker.book.add(3, 10.0)  # detected at 10 s
     tracker.book.confirmed[:] = True
-    tracker.tracks = _Tracks.opened(np.zeros(3, int), x, np.tile(np.eye(4), (3, 1, 1)), 10.0, 1.5)
+    tracker.tracks = _Tracks.opened(
+        np.zeros(3, int), x, np.tile(np.eye(4), (3, 1, 1)), 10.0, 1.5, _no_ids(3)
+    )
     tracker.tracks.moved[:] = True
     tracker._stop_line_events(10.0, np.ones(3, bool))  # all in the lane
     ev = tracker.events
@@ -230,7 +237,7 @@ def test_will_not_stop_before_the_stop_line_rule():
     quiet = SceneTracker(SITE)  # no warning: no prediction
     quiet.book.add(1, 0.0)
     quiet.book.confirmed[:] = True
-    quiet.tracks = _Tracks.opened(np.zeros(1, int), x[:1], np.eye(4)[None], 10.0, 1.5)
+    quiet.tracks = _Tracks.opened(np.zeros(1, int), x[:1], np.eye(4)[None], 10.0, 1.5, _no_ids(1))
     quiet.tracks.moved[:] = True
     quiet._modes(10.0)
     assert quiet.events == []
@@ -293,7 +300,7 @@ def test_one_track_over_two_queued_cars_splits_into_two(kurtosis):
     p = np.diag([0.01, 1e-4, 1e-4, 0.04])[None]
     tracker.book.add(1, 0.0)
     tracker.book.confirmed[:] = True
-    tracker.tracks = _Tracks.opened(np.zeros(1, int), x, p, 0.0, 3.0)
+    tracker.tracks = _Tracks.opened(np.zeros(1, int), x, p, 0.0, 3.0, _no_ids(1))
     tracker.tracks.stopped[:] = tracker.tracks.moved[:] = True
     tracker.tracks.direction[:] = 1.0
     rng = np.random.default_rng(5)
