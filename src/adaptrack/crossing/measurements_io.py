@@ -116,6 +116,19 @@ def _polar_columns(
     return names, t, r, az, vr
 
 
+def _object_ids(frame: pd.DataFrame, p: Path, minimum: int | None = None) -> np.ndarray:
+    """Return the ``object_id`` column as int64: integers (at least ``minimum``), row named."""
+    oid = numeric_column(frame, "object_id", p)
+    bad = (oid != np.round(oid)) | (oid < (-np.inf if minimum is None else minimum))
+    if bad.any():
+        row = int(np.argmax(bad))
+        least = "" if minimum is None else f" >= {minimum}"
+        raise DataFormatError(
+            f"{p}: row {row + 1}, column 'object_id': {oid[row]} is not an integer{least}"
+        )
+    return oid.astype(np.int64)
+
+
 def read_scene_detections(path: str | Path, site: Site) -> pd.DataFrame:
     """Read and validate detections for the scene tracker.
 
@@ -130,14 +143,7 @@ def read_scene_detections(path: str | Path, site: Site) -> pd.DataFrame:
         {"radar": names, "time_s": t, "range_m": r, "azimuth_rad": az, "radial_speed_mps": vr}
     )
     if "object_id" in frame.columns:
-        oid = numeric_column(frame, "object_id", p)
-        bad = (oid != np.round(oid)) | (oid < -1)
-        if bad.any():
-            row = int(np.argmax(bad))
-            raise DataFormatError(
-                f"{p}: row {row + 1}, column 'object_id': {oid[row]} is not an integer >= -1"
-            )
-        out["object_id"] = oid.astype(np.int64)
+        out["object_id"] = _object_ids(frame, p, minimum=-1)
     return out.sort_values("time_s", kind="stable", ignore_index=True)
 
 
@@ -165,10 +171,7 @@ def read_detections(path: str | Path, site: Site) -> list[ObjectDetections]:
     p = Path(path)
     frame = read_table(p)
     names, t, r, az, vr = _polar_columns(frame, p, site, ("object_id",))
-    oid = numeric_column(frame, "object_id", p)
-    if np.any(oid != np.round(oid)):
-        row = int(np.argmax(oid != np.round(oid)))
-        raise DataFormatError(f"{p}: row {row + 1}, column 'object_id': not an integer")
+    oid = _object_ids(frame, p)
     out = []
     for obj in np.unique(oid):
         sel = np.flatnonzero(oid == obj)
