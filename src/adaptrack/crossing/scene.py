@@ -493,6 +493,7 @@ def detect(
     for r_i, radar in enumerate(site.radars):
         scans = _radar_scans(radar, spec.duration_s, rng.uniform(0.0, radar.period_s))
         # object states at the scan times: the traffic steps are STEP_S apart, take the nearest
+        # and move it on to the scan time
         k = np.rint(tab["time_s"].to_numpy() / STEP_S).astype(np.int64)
         scan_k = np.rint(scans / STEP_S).astype(np.int64)
         at = np.isin(k, scan_k)
@@ -502,10 +503,11 @@ def detect(
         cls = rows["vehicle_class"].to_numpy()
         length = users.loc[obj, "length_m"].to_numpy()
         width = users.loc[obj, "width_m"].to_numpy()
-        centre = rows[["east_m", "north_m"]].to_numpy()
         hd = rows["heading_rad"].to_numpy()
         fwd = np.stack([np.sin(hd), np.cos(hd)], -1)
         vel = rows["speed_mps"].to_numpy()[:, None] * fwd
+        ahead_s = scans[scan_of] - k[at] * STEP_S
+        centre = rows[["east_m", "north_m"]].to_numpy() + ahead_s[:, None] * vel
         rel = centre - np.asarray(radar.position_m)
         rng_c, az_c, _ = radial_geometry(centre, vel, radar)
         near = radar.in_view(rng_c, az_c) | (rng_c < radar.max_range_m + 20.0)
