@@ -355,3 +355,35 @@ def test_one_track_over_two_queued_cars_splits_into_two(kurtosis):
     err = np.hypot(*(at[:, None, :] - cars[None]).transpose(2, 0, 1))  # track x car
     assert rows["track_id"].iloc[int(np.argmin(err[:, 0]))] == 1  # the front car keeps id 1
     assert err.min(axis=0).max() < 0.5
+
+
+def test_a_stopped_users_body_spread_stays_what_it_learnt_while_moving():
+    """A queued car's track keeps the body spread it learnt while moving (1.25 m) while
+    reflections of its body (uniform over 5 m) and of the car stopped 5.5 m behind it come
+    in: in a queue the bodies touch, and a spread stretched by a neighbour's reflections
+    widens the gate that takes more of them (learning on, it reached 1.38 m here). The
+    reflections' moments still learn (they decide a split, switched off here)."""
+    from adaptrack.crossing.scene_tracker import SceneTrackerConfig, _Tracks
+
+    tracker = SceneTracker(SITE, SceneTrackerConfig(split_kurtosis=0.0))
+    cor = tracker.corridors[0]
+    radar = next(r for r in SITE.radars if r.name == "radar_A")
+    half_lane = 0.5 * SITE.roads[cor.first].lane_width_m
+    front, rear = cor.crossing_u - 30.0, cor.crossing_u - 35.5
+    x = np.array([[front, 0.0, 0.0, -half_lane]])
+    p = np.diag([0.01, 1e-4, 1e-4, 0.04])[None]
+    tracker.book.add(1, 0.0)
+    tracker.book.confirmed[:] = True
+    tracker.tracks = _Tracks.opened(np.zeros(1, int), x, p, 0.0, 1.25, _no_ids(1))
+    tracker.tracks.stopped[:] = tracker.tracks.moved[:] = True
+    tracker.tracks.direction[:] = 1.0
+    rng = np.random.default_rng(8)
+    for k in range(1, 200):  # 10 s
+        tracker.step(
+            radar.name, k * radar.period_s, _queue_scan(rng, radar, cor, (front, rear), -half_lane)
+        )
+    first = tracker.book.ids.tolist().index(1)
+    assert tracker.tracks.stopped[first]
+    assert tracker.tracks.spread[first] == 1.25
+    # the moments learn on (towards a uniform 5 m body's 25 / 12 m^2 and the neighbour's)
+    assert tracker.tracks.along_m2[first] > 1.1 * 1.25**2

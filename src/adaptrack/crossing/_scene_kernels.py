@@ -329,9 +329,11 @@ def update_tracks(  # type: ignore[no-untyped-def]
     ends the stop of a vehicle that had moved (speed and acceleration freed with variance
     ``start_speed_var``; static objects stay); the body spread follows a moving average (rate
     ``learning_rate``) of the squared along-track residual less the sensor's and the track's
-    share, within ``[spread_lo, spread_hi]``, learnt while the whole body is in view; so do
-    the second and fourth moments of the along-track residual (``along_m2``, ``along_m4``,
-    rate ``shape_rate``: see :func:`split_rows`).
+    share, within ``[spread_lo, spread_hi]``, learnt while the whole body is in view and the
+    road user is not stopped (queued bodies touch: a neighbour's reflections would stretch
+    it, and its gate with it); the second and fourth moments of the along-track residual
+    (``along_m2``, ``along_m4``, rate ``shape_rate``: see :func:`split_rows`) are learnt
+    while the whole body is in view, stopped or not.
     """
     zp, h, rm, jp, jv = _model_scratch()
     xv = np.zeros(N_STATE)
@@ -357,10 +359,11 @@ def update_tracks(  # type: ignore[no-untyped-def]
         sr = curve_at(noise_tab, noise_cnt, 0, z[j, 0])
         sa = curve_at(noise_tab, noise_cnt, 1, off_boresight(z[j, 1], radar))
         whole = _visible_part(i, x, spread, corridor, roads, bounds, radar, fields)[0] == 0.0
-        if whole:
+        if whole and not (stopped[i] and moved[i]):
             sample = max(along * along - sr * sr - (rho * sa) ** 2 - p[i, 0, 0], 0.0)
             var = (1.0 - learning_rate) * spread[i] ** 2 + learning_rate * sample
             spread[i] = math.sqrt(min(max(var, spread_lo**2), spread_hi**2))
+        if whole:
             along_m2[i] += shape_rate * (along * along - along_m2[i])
             along_m4[i] += shape_rate * (along**4 - along_m4[i])
         _model(

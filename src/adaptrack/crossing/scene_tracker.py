@@ -112,7 +112,7 @@ class SceneTrackerConfig:
     accel_psd: float = 4.0  # white jerk PSD along the corridor [m^2/s^5]
     lateral_psd: float = 0.02  # lateral random walk [m^2/s]
     stopped_psd: float = 1e-4  # position random walk while stopped [m^2/s]
-    body_along_std_m: float = 1.5  # initial spread of reflections along a body, learnt per track
+    body_along_std_m: float = 1.5  # initial body spread along; learnt per track as it moves
     spread_learning_rate: float = 0.03
     spread_limits_m: tuple[float, float] = (0.3, 3.0)
     shape_learning_rate: float = 0.01  # moments of the reflections along a body ...
