@@ -318,26 +318,39 @@ def _queue_scan(rng, radar, cor, centres, d, length=5.0, width=1.8, per_body=2):
     )  # fmt: skip
 
 
+def _queue_lane(tracker):
+    """The first corridor of ``tracker``, radar_A (looking along it) and half its lane [m]."""
+    cor = tracker.corridors[0]
+    radar = next(r for r in SITE.radars if r.name == "radar_A")
+    return cor, radar, 0.5 * SITE.roads[cor.first].lane_width_m
+
+
+def _one_stopped_track(tracker, u, d, spread):
+    """Make ``tracker`` hold one confirmed road user (id 1) stopped at ``(u, d)`` on its
+    first corridor, approaching the crossing, with body ``spread`` [m]."""
+    from adaptrack.crossing.scene_tracker import _Tracks
+
+    x = np.array([[u, 0.0, 0.0, d]])
+    p = np.diag([0.01, 1e-4, 1e-4, 0.04])[None]
+    tracker.book.add(1, 0.0)
+    tracker.book.confirmed[:] = True
+    tracker.tracks = _Tracks.opened(np.zeros(1, int), x, p, 0.0, spread, _no_ids(1))
+    tracker.tracks.stopped[:] = tracker.tracks.moved[:] = True
+    tracker.tracks.direction[:] = 1.0
+
+
 @pytest.mark.parametrize("kurtosis", [1.8, 0.0])
 def test_one_track_over_two_queued_cars_splits_into_two(kurtosis):
     """A stopped track that holds two cars of a queue (centres 7 m apart, itself between them
     with a spread stretched over both: its gate takes both cars' reflections) splits into two
     tracks on the cars; the part towards the crossing keeps the identity. With the split
     switched off (kurtosis 0) it stays one track between the cars (the test can fail)."""
-    from adaptrack.crossing.scene_tracker import SceneTrackerConfig, _Tracks
+    from adaptrack.crossing.scene_tracker import SceneTrackerConfig
 
     tracker = SceneTracker(SITE, SceneTrackerConfig(split_kurtosis=kurtosis))
-    cor = tracker.corridors[0]
-    radar = next(r for r in SITE.radars if r.name == "radar_A")
-    half_lane = 0.5 * SITE.roads[cor.first].lane_width_m
+    cor, radar, half_lane = _queue_lane(tracker)
     front, rear = cor.crossing_u - 30.0, cor.crossing_u - 37.0  # approaching with u rising
-    x = np.array([[0.5 * (front + rear), 0.0, 0.0, -half_lane]])
-    p = np.diag([0.01, 1e-4, 1e-4, 0.04])[None]
-    tracker.book.add(1, 0.0)
-    tracker.book.confirmed[:] = True
-    tracker.tracks = _Tracks.opened(np.zeros(1, int), x, p, 0.0, 3.0, _no_ids(1))
-    tracker.tracks.stopped[:] = tracker.tracks.moved[:] = True
-    tracker.tracks.direction[:] = 1.0
+    _one_stopped_track(tracker, 0.5 * (front + rear), -half_lane, 3.0)
     rng = np.random.default_rng(5)
     for k in range(1, 400):  # 20 s
         tracker.step(
@@ -363,20 +376,12 @@ def test_a_stopped_users_body_spread_stays_what_it_learnt_while_moving():
     in: in a queue the bodies touch, and a spread stretched by a neighbour's reflections
     widens the gate that takes more of them (learning on, it reached 1.38 m here). The
     reflections' moments still learn (they decide a split, switched off here)."""
-    from adaptrack.crossing.scene_tracker import SceneTrackerConfig, _Tracks
+    from adaptrack.crossing.scene_tracker import SceneTrackerConfig
 
     tracker = SceneTracker(SITE, SceneTrackerConfig(split_kurtosis=0.0))
-    cor = tracker.corridors[0]
-    radar = next(r for r in SITE.radars if r.name == "radar_A")
-    half_lane = 0.5 * SITE.roads[cor.first].lane_width_m
+    cor, radar, half_lane = _queue_lane(tracker)
     front, rear = cor.crossing_u - 30.0, cor.crossing_u - 35.5
-    x = np.array([[front, 0.0, 0.0, -half_lane]])
-    p = np.diag([0.01, 1e-4, 1e-4, 0.04])[None]
-    tracker.book.add(1, 0.0)
-    tracker.book.confirmed[:] = True
-    tracker.tracks = _Tracks.opened(np.zeros(1, int), x, p, 0.0, 1.25, _no_ids(1))
-    tracker.tracks.stopped[:] = tracker.tracks.moved[:] = True
-    tracker.tracks.direction[:] = 1.0
+    _one_stopped_track(tracker, front, -half_lane, 1.25)
     rng = np.random.default_rng(8)
     for k in range(1, 200):  # 10 s
         tracker.step(
