@@ -10,18 +10,7 @@ from adaptrack.crossing.measurements_io import read_scene_detections, read_warni
 from adaptrack.crossing.scene_tracker import load_scene_config, track_scene
 from adaptrack.service.engine import LiveTracker, load_state
 
-
-def records(live, lines):
-    """The records the live tracker writes for ``lines`` (JSON lines decoded)."""
-    out = []
-    for line in lines:
-        out += live.feed(line, "test")
-    out += live.flush()
-    return [json.loads(x) for chunk in out for x in chunk.splitlines()]
-
-
-def tracks_of(recs):
-    return pd.DataFrame([r for r in recs if r["type"] == "track"]).drop(columns="type")
+from .records import live_records, tracks_of
 
 
 def assert_accounted(live):
@@ -39,7 +28,7 @@ def offline(scene_files):
 
 def test_live_tracks_and_events_equal_offline_exactly(scene_files, offline):
     live = LiveTracker(scene_files.site, window_s=0.2, warnings=read_warnings(scene_files.warnings))
-    recs = records(live, scene_files.detections.read_text().splitlines())
+    recs = live_records(live, scene_files.detections.read_text().splitlines())
     tracks, events, log = offline
     pd.testing.assert_frame_equal(tracks_of(recs), tracks, check_exact=True)
     got = pd.DataFrame([r for r in recs if r["type"] == "event"]).drop(columns="type")
@@ -64,7 +53,7 @@ def test_bad_lines_become_rejections_and_the_tracks_are_unchanged(scene_files, o
     stale = lines[50].split(",")
     mixed.insert(3000, ",".join([stale[0], str(float(stale[1]) - 5.0), *stale[2:]]))  # clock back
     live = LiveTracker(scene_files.site, warnings=read_warnings(scene_files.warnings))
-    recs = records(live, mixed)
+    recs = live_records(live, mixed)
     pd.testing.assert_frame_equal(tracks_of(recs), offline[0], check_exact=True)
     rejections = [r for r in recs if r["type"] == "rejection"]
     reasons = [r["reason"] for r in rejections if r["reason"] != "outside_view"]
@@ -80,7 +69,7 @@ def test_a_snapshot_resumes_to_the_same_numbers(scene_files, tmp_path):
     lines = scene_files.lines
     warn = read_warnings(scene_files.warnings)
     whole = LiveTracker(scene_files.site, warnings=warn)
-    expected = records(whole, lines)
+    expected = live_records(whole, lines)
     first = LiveTracker(scene_files.site, warnings=warn)
     cut = len(lines) // 2
     part = []
@@ -89,7 +78,7 @@ def test_a_snapshot_resumes_to_the_same_numbers(scene_files, tmp_path):
     first.save(tmp_path / "state.pkl")
     resumed = load_state(tmp_path / "state.pkl", scene_files.site)
     assert resumed.received == cut and resumed.buffer.pending == first.buffer.pending > 0
-    rest = records(resumed, lines[cut:])
+    rest = live_records(resumed, lines[cut:])
     pd.testing.assert_frame_equal(tracks_of(part + rest), tracks_of(expected), check_exact=True)
     assert not (tmp_path / "state.pkl.tmp").exists()
 

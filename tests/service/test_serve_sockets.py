@@ -14,6 +14,7 @@ from adaptrack.crossing.measurements_io import read_warnings
 from adaptrack.service.engine import LiveTracker, load_state
 
 from .live_process import read_records, replay, send_udp, wait_until
+from .records import live_records, tracks_of
 
 
 @pytest.fixture(scope="module")
@@ -27,16 +28,6 @@ def offline_tracks(scene_files, tmp_path_factory):
     )  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     return pd.read_parquet(out)
-
-
-def reference_run(live, lines):
-    """Records of ``live`` fed ``lines`` and then released (the input falls silent)."""
-    out = [text for line in lines for text in live.feed(line)] + live.flush()
-    return [json.loads(one) for text in out for one in text.splitlines() if one.strip()]
-
-
-def tracks_of(records):
-    return pd.DataFrame([r for r in records if r["type"] == "track"]).drop(columns="type")
 
 
 def test_replay_at_max_rate_over_udp_loses_nothing_and_equals_offline(
@@ -161,7 +152,7 @@ def test_kill_9_and_restart_from_the_state_continues_the_tracks(
     # and indeed every number goes on as if nothing had happened: as in a service that ran
     # on through the same silence at the cut (the window released there, as the first did)
     reference = LiveTracker(scene_files.site, warnings=read_warnings(scene_files.warnings))
-    expected = [*reference_run(reference, lines[:cut]), *reference_run(reference, lines[cut:])]
+    expected = [*live_records(reference, lines[:cut]), *live_records(reference, lines[cut:])]
     assert len(tracks_of(records)) == len(offline_tracks)
     pd.testing.assert_frame_equal(tracks_of(records), tracks_of(expected), check_exact=True)
     assert after[-1]["scan_ms_p50"] > 0

@@ -359,11 +359,11 @@ def update_tracks(  # type: ignore[no-untyped-def]
         sr = curve_at(noise_tab, noise_cnt, 0, z[j, 0])
         sa = curve_at(noise_tab, noise_cnt, 1, off_boresight(z[j, 1], radar))
         whole = _visible_part(i, x, spread, corridor, roads, bounds, radar, fields)[0] == 0.0
-        if whole and not (stopped[i] and moved[i]):
-            sample = max(along * along - sr * sr - (rho * sa) ** 2 - p[i, 0, 0], 0.0)
-            var = (1.0 - learning_rate) * spread[i] ** 2 + learning_rate * sample
-            spread[i] = math.sqrt(min(max(var, spread_lo**2), spread_hi**2))
         if whole:
+            if not (stopped[i] and moved[i]):
+                sample = max(along * along - sr * sr - (rho * sa) ** 2 - p[i, 0, 0], 0.0)
+                var = (1.0 - learning_rate) * spread[i] ** 2 + learning_rate * sample
+                spread[i] = math.sqrt(min(max(var, spread_lo**2), spread_hi**2))
             along_m2[i] += shape_rate * (along * along - along_m2[i])
             along_m4[i] += shape_rate * (along**4 - along_m4[i])
         _model(
