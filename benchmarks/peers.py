@@ -39,10 +39,12 @@ def adaptrack_filter(t: np.ndarray, z: np.ndarray, backend: str = "auto") -> np.
     return at.kalman_filter(t, z, MODEL, H, R, _prior(t), backend=backend).filtered.mean
 
 
-def adaptrack_per_track_cov(t: np.ndarray, z: np.ndarray, backend: str = "auto") -> np.ndarray:
+def adaptrack_per_track_cov(
+    t: np.ndarray, z: np.ndarray, backend: str = "auto", form: str = "auto"
+) -> np.ndarray:
     """``kalman_filter``'s general path: every track carries its own covariance recursion."""
     prior = _prior(t, z.shape[0])
-    return at.kalman_filter(t, z, MODEL, H, R, prior, backend=backend).filtered.mean
+    return at.kalman_filter(t, z, MODEL, H, R, prior, backend=backend, form=form).filtered.mean
 
 
 def adaptrack_fleet(
@@ -83,13 +85,15 @@ def filterpy_rts(t: np.ndarray, z: np.ndarray) -> np.ndarray:
     return rts_smoother(res.filtered.mean, res.filtered.cov, fs, qs)[0][None]
 
 
-def pykalman_filter(t: np.ndarray, z: np.ndarray) -> np.ndarray:
+def pykalman_filter(t: np.ndarray, z: np.ndarray, square_root: bool = False) -> np.ndarray:
+    """pykalman's ``KalmanFilter`` (or its ``CholeskyKalmanFilter``), one track at a time."""
     from pykalman import KalmanFilter
+    from pykalman.sqrt import CholeskyKalmanFilter
 
     phi, qd = at.discretize(MODEL, DT)
     out = np.empty(z.shape[:-1] + (3,))
     for i in range(z.shape[0]):
-        kf = KalmanFilter(
+        kf = (CholeskyKalmanFilter if square_root else KalmanFilter)(
             transition_matrices=phi,
             observation_matrices=H,
             transition_covariance=qd,

@@ -150,8 +150,8 @@ def test_mask_wrong_dtype_and_shape():
 def test_bad_options():
     with pytest.raises(ValueError, match="nan_policy must be 'raise' or 'missing'"):
         run(nan_policy="drop")
-    with pytest.raises(ValueError, match="form must be 'joseph' or 'standard'"):
-        run(form="sqrt")
+    with pytest.raises(ValueError, match="form must be 'auto', 'joseph', 'standard' or 'sqrt'"):
+        run(form="cholesky")
     with pytest.raises(
         ValueError, match="method must be 'expm', 'analytic', 'taylor', 'source' or 'auto'"
     ):

@@ -20,10 +20,12 @@ CASES = {
 
 
 @pytest.mark.parametrize("name", list(CASES))
-@pytest.mark.parametrize("form", ["joseph", "standard"])
+@pytest.mark.parametrize("form", ["joseph", "standard", "sqrt"])
 def test_compiled_equals_numpy(name, form):
     cfg = CASES[name]
-    rng = np.random.default_rng([list(CASES).index(name), form == "joseph"])
+    rng = np.random.default_rng(
+        [list(CASES).index(name), ["joseph", "standard", "sqrt"].index(form)]
+    )
     model = Singer(time_constant_s=[3.0, 8.0], accel_std_mps2=[1.0, 2.5], n_axes=2)
     n_tr, n_st = 4, 60
     t = np.cumsum(rng.uniform(0.02, 0.5, (n_tr, n_st) if cfg["per_track_times"] else n_st), axis=-1)

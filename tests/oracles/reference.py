@@ -144,3 +144,31 @@ def to_seed(a):
     """Permute an adaptrack-order (r, v, w) matrix or vector to seed order (w, v, r)."""
     a = np.asarray(a)
     return PI @ a @ PI.T if a.ndim == 2 and a.shape == (3, 3) else PI @ a
+
+
+def kalman_mp(transition, process_cov, h, r, z, x0, p0, dps=50):
+    """Filtered means and covariances of the linear Kalman filter at ``dps`` digits.
+
+    ``transition``, ``process_cov`` (T, n, n) map step k-1 to k (as in a FilterResult), ``z``
+    (T, m), ``h`` (m, n), ``r`` (m, m), prior ``x0``, ``p0``; textbook covariance form
+    ``P = P - K S K^T`` with the inverse of ``S``: at 50 digits its cancellation is harmless.
+    """
+
+    def mat(a):
+        return mp.matrix(np.asarray(a, dtype=float).tolist())
+
+    with mp.workdps(dps):
+        x, p, hm, rm = mat(np.reshape(x0, (-1, 1))), mat(p0), mat(h), mat(r)
+        means, covs = [], []
+        for k in range(len(z)):
+            f = mat(transition[k])
+            x = f * x
+            p = f * p * f.T + mat(process_cov[k])
+            s = hm * p * hm.T + rm
+            gain = p * hm.T * mp.inverse(s)
+            x = x + gain * (mat(np.reshape(z[k], (-1, 1))) - hm * x)
+            p = p - gain * s * gain.T
+            p = (p + p.T) / 2
+            means.append([float(v) for v in x])
+            covs.append(to_float(p.tolist()))
+    return np.array(means), np.array(covs)

@@ -1,0 +1,175 @@
+"""Compiled (numba) square-root Kalman filter over (N tracks, T steps).
+
+The NumPy reference is :mod:`adaptrack.filters.square_root` (QR of the pre-arrays); this
+kernel triangularises the same pre-arrays with Householder reflections from the right and
+returns what :func:`adaptrack.filters._kernels.kalman_kernel` returns.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from .._kernel_linalg import cholesky_into
+
+_LOG_2PI = math.log(2.0 * math.pi)
+
+
+@numba.njit(cache=True, inline="always")
+def lower_triangularize(a, rows, cols):  # type: ignore[no-untyped-def]
+    """In place: ``a[:rows, :cols] -> [L, 0]`` with ``L L^T`` unchanged (Householder, right)."""
+    for i in range(rows):
+        tail = 0.0
+        for c in range(i + 1, cols):
+            tail += a[i, c] * a[i, c]
+        if tail == 0.0:
+            continue
+        norm = math.sqrt(a[i, i] * a[i, i] + tail)
+        alpha = -norm if a[i, i] >= 0.0 else norm
+        v0 = a[i, i] - alpha
+        vv = v0 * v0 + tail
+        for j in range(i + 1, rows):
+            acc = a[j, i] * v0
+            for c in range(i + 1, cols):
+                acc += a[j, c] * a[i, c]
+            f = 2.0 * acc / vv
+            a[j, i] -= f * v0
+            for c in range(i + 1, cols):
+                a[j, c] -= f * a[i, c]
+        a[i, i] = alpha
+        for c in range(i + 1, cols):
+            a[i, c] = 0.0
+
+
+@numba.njit(cache=True, inline="always")
+def _outer_into(f, out, k):  # type: ignore[no-untyped-def]
+    """``out = F F^T`` of the leading (k, k) block of ``f`` (exactly symmetric)."""
+    for a in range(k):
+        for b in range(a + 1):
+            acc = 0.0
+            for c in range(k):
+                acc += f[a, c] * f[b, c]
+            out[a, b] = acc
+            out[b, a] = acc
+
+
+@numba.njit(cache=True)
+def sqrt_kernel(x0, s0, phi, sq, u, z, mask, h, r, off):  # type: ignore[no-untyped-def]
+    """Filter every track of the batch in square-root form.
+
+    Shapes: x0 (N|1, n), s0 (N|1, n, n) a factor of the prior covariance, phi (N|1, T, n, n),
+    sq (N|1, T, n, n) factors of ``Qd``, u (N|1, T, n), z (N, T, m), mask (N, T, m), h (m, n),
+    r (N|1, T|1, m, m), off (m,). Raises ValueError if a masked ``R`` is not positive definite.
+    """
+    n_tr, n_st, m = z.shape
+    n = h.shape[1]
+    pm = np.empty((n_tr, n_st, n))
+    pc = np.empty((n_tr, n_st, n, n))
+    fm = np.empty((n_tr, n_st, n))
+    fc = np.empty((n_tr, n_st, n, n))
+    nu_o = np.empty((n_tr, n_st, m))
+    s_o = np.empty((n_tr, n_st, m, m))
+    k_o = np.empty((n_tr, n_st, n, m))
+    nis_o = np.empty((n_tr, n_st))
+    ll_o = np.empty((n_tr, n_st))
+    nobs_o = np.empty((n_tr, n_st))
+    x = np.empty(n)
+    xp = np.empty(n)
+    fac = np.empty((n, n))
+    pre1 = np.empty((n, 2 * n))
+    pre2 = np.empty((m + n, m + n))
+    rm = np.empty((m, m))
+    sr = np.empty((m, m))
+    nu = np.empty(m)
+    w = np.empty(m)
+    for i in range(n_tr):
+        ix, ip, ir = min(i, x0.shape[0] - 1), min(i, phi.shape[0] - 1), min(i, r.shape[0] - 1)
+        iu = min(i, u.shape[0] - 1)
+        for a in range(n):
+            x[a] = x0[ix, a]
+            for b in range(n):
+                fac[a, b] = s0[ix, a, b]
+        for k in range(n_st):
+            ph, sqk, on = phi[ip, k], sq[ip, k], mask[i, k]
+            # predict: [Phi S, Sq] -> [S-, 0]
+            for a in range(n):
+                acc = u[iu, k, a]
+                for b in range(n):
+                    acc += ph[a, b] * x[b]
+                xp[a] = acc
+                for b in range(n):
+                    acc = 0.0
+                    for c in range(n):
+                        acc += ph[a, c] * fac[c, b]
+                    pre1[a, b] = acc
+                    pre1[a, n + b] = sqk[a, b]
+            lower_triangularize(pre1, n, 2 * n)
+            # update pre-array [[Sr, Hm S-], [0, S-]]
+            rk = r[ir, min(k, r.shape[1] - 1)]
+            nobs = 0.0
+            for a in range(m):
+                nobs += 1.0 if on[a] else 0.0
+                for b in range(m):
+                    if on[a] and on[b]:
+                        rm[a, b] = rk[a, b]
+                    else:
+                        rm[a, b] = 1.0 if a == b else 0.0
+            if not cholesky_into(rm, sr):
+                raise ValueError("measurement covariance is not positive definite")
+            for a in range(m + n):
+                for b in range(m + n):
+                    pre2[a, b] = 0.0
+            for a in range(m):
+                acc = 0.0
+                for b in range(n):
+                    acc += h[a, b] * xp[b]
+                nu[a] = (z[i, k, a] - off[a] - acc) if on[a] else 0.0
+                for b in range(a + 1):
+                    pre2[a, b] = sr[a, b]
+                if on[a]:
+                    for b in range(n):
+                        acc = 0.0
+                        for c in range(n):
+                            acc += h[a, c] * pre1[c, b]
+                        pre2[a, m + b] = acc
+            for a in range(n):
+                for b in range(n):
+                    pre2[m + a, m + b] = pre1[a, b]
+            lower_triangularize(pre2, m + n, m + n)
+            # w = Ss^-1 nu; x+ = x- + Kb w; K^T = Ss^-T Kb^T
+            logdet = 0.0
+            nis = 0.0
+            for a in range(m):
+                acc = nu[a]
+                for c in range(a):
+                    acc -= pre2[a, c] * w[c]
+                w[a] = acc / pre2[a, a]
+                nis += w[a] * w[a]
+                logdet += 2.0 * math.log(abs(pre2[a, a]))
+            for a in range(n):
+                acc = xp[a]
+                for c in range(m):
+                    acc += pre2[m + a, c] * w[c]
+                x[a] = acc
+                for b in range(n):
+                    fac[a, b] = pre2[m + a, m + b]
+            for a in range(n):
+                for b in range(m - 1, -1, -1):
+                    acc = pre2[m + a, b]
+                    for c in range(b + 1, m):
+                        acc -= pre2[c, b] * k_o[i, k, a, c]
+                    k_o[i, k, a, b] = acc / pre2[b, b]
+            _outer_into(pre1, pc[i, k], n)
+            _outer_into(fac, fc[i, k], n)
+            _outer_into(pre2, s_o[i, k], m)
+            for a in range(n):
+                pm[i, k, a] = xp[a]
+                fm[i, k, a] = x[a]
+            for a in range(m):
+                nu_o[i, k, a] = nu[a]
+            nis_o[i, k] = nis
+            ll_o[i, k] = -0.5 * (logdet + nis + nobs * _LOG_2PI) if nobs > 0 else 0.0
+            nobs_o[i, k] = nobs
+    return pm, pc, fm, fc, nu_o, s_o, nis_o, ll_o, k_o, nobs_o
