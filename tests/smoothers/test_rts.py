@@ -1,6 +1,7 @@
 """RTS smoother: dense joint posterior oracle, batching, missing data."""
 
 import numpy as np
+import pytest
 
 import adaptrack as at
 from adaptrack.models import Singer, discretize
@@ -84,3 +85,40 @@ def test_rts_rejects_non_results():
 
     with pytest.raises(TypeError, match="result must be a FilterResult"):
         at.rts_smooth("not a result")
+
+
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+@pytest.mark.parametrize("form", ["standard", "joseph"])
+def test_smoother_with_a_singular_prediction_is_least_squares(backend, form):
+    """Known velocity, no process noise: every prediction is singular (rank 1).
+
+    The smoothed position at step 0 is the least-squares fit of ``z_k - v t_k`` with the
+    prior as one more observation: variance ``1 / (1 / p0 + T / r)``.
+    """
+    t = np.arange(6.0)
+    z = (2.0 * t + np.array([0.3, -0.1, 0.4, -0.5, 0.2, 0.0]))[:, None]
+    prior = at.GaussianState([1.0, 2.0], np.diag([100.0, 0.0]), 0.0)
+    model = at.models.ConstantVelocity(accel_psd=0.0)
+    res = at.kalman_filter(t, z, model, [[1.0, 0.0]], [[0.5]], prior, backend=backend)
+    sm = at.rts_smooth(res, form=form, backend=backend)
+    info = 1.0 / 100.0 + 6 / 0.5
+    x0 = (1.0 / 100.0 + np.sum(z[:, 0] - 2.0 * t) / 0.5) / info
+    np.testing.assert_allclose(sm.mean[:, 0], x0 + 2.0 * t, rtol=1e-12)
+    np.testing.assert_allclose(sm.cov[:, 0, 0], 1.0 / info, rtol=1e-10)
+    np.testing.assert_array_equal(sm.cov[:, 1, :], 0.0)
+
+
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+def test_joseph_form_smoother_equals_the_difference_form_when_both_are_exact(backend):
+    rng = np.random.default_rng(11)
+    model = at.models.Singer(time_constant_s=[4.0, 9.0], accel_std_mps2=[1.5, 0.4], n_axes=2)
+    t = np.cumsum(rng.uniform(0.05, 3.0, (3, 50)), axis=-1)
+    h = np.hstack([np.eye(2), np.zeros((2, 4))])
+    z = rng.normal(size=(3, 50, 2)) * 20
+    prior = at.GaussianState(np.zeros((3, 6)), np.broadcast_to(30 * np.eye(6), (3, 6, 6)), 0.0)
+    res = at.kalman_filter(t, z, model, h, np.diag([1.0, 4.0]), prior, backend=backend)
+    a = at.rts_smooth(res, form="standard", backend=backend)
+    b = at.rts_smooth(res, form="joseph", backend=backend)
+    ref = at.rts_smooth(res, form="joseph", backend="numpy")
+    for x, y in ((a.mean, b.mean), (a.cov, b.cov), (ref.cov, b.cov)):
+        assert np.max(np.abs(x - y)) <= 1e-9 * np.max(np.abs(x))

@@ -228,7 +228,7 @@ def kalman_filter(
         result = _solve(problem, compiled)
     except CovarianceError:
         return _solve(replace(problem, form="sqrt"), compiled)
-    if _joseph_loses_digits(result):
+    if joseph_loses_digits(result):
         return _solve(replace(problem, form="sqrt"), compiled)
     return result
 
@@ -240,7 +240,7 @@ def kalman_filter(
 JOSEPH_MAX_RATIO = 1e8
 
 
-def _joseph_loses_digits(result: FilterResult) -> bool:
+def joseph_loses_digits(result: FilterResult) -> bool:
     """Whether any step's ``trace(S) / lambda_min(R)`` exceeds :data:`JOSEPH_MAX_RATIO`."""
     r_min = np.linalg.eigvalsh(result.measurement_cov)[..., 0]
     s_trace = np.trace(result.info.innovation_cov, axis1=-2, axis2=-1)

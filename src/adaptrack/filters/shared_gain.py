@@ -170,7 +170,8 @@ def shared_gain_filter(
         from ..smoothers._kernels import rts_kernel
 
         zeros = np.zeros((1, n_steps, n))
-        _, ps = rts_kernel(zeros, fc[None], zeros, pc[None], np.ascontiguousarray(phi[None]))
+        c4 = np.ascontiguousarray
+        _, ps = rts_kernel(zeros, fc[None], zeros, pc[None], c4(phi[None]), c4(qd[None]), False)
         ps = ps[0]
     else:
         ps = fc.copy()

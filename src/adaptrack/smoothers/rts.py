@@ -8,12 +8,17 @@ Uses only the stored predicted/filtered moments and transitions (models are neve
 
 from __future__ import annotations
 
+from typing import Literal
+
 import numpy as np
 
 from .._backend import SHARED_MIN_TRACKS, Backend, use_compiled
 from .._linalg import matvec, mT, symmetrize
 from .._typing import FloatArray
+from ..filters.run import joseph_loses_digits
 from ..types import FilterResult, GaussianState, _trusted
+
+SmootherForm = Literal["auto", "standard", "joseph"]
 
 
 def _shared(a: FloatArray, batch_ndim: int) -> FloatArray | None:
@@ -24,16 +29,51 @@ def _shared(a: FloatArray, batch_ndim: int) -> FloatArray | None:
 
 
 def _gains(pf: FloatArray, pp_next: FloatArray, phi_next: FloatArray) -> FloatArray:
-    return mT(np.linalg.solve(pp_next, phi_next @ pf))
+    """``C = P_k|k Phi^T P_{k+1|k}^-1``; the pseudo-inverse where ``P_{k+1|k}`` is singular.
+
+    A singular prediction (a known component and no process noise) is legitimate: its range
+    holds that of ``Phi P_k|k``, so the pseudo-inverse gives the smoother gain.
+    """
+    try:
+        return mT(np.linalg.solve(pp_next, phi_next @ pf))
+    except np.linalg.LinAlgError:
+        return mT(np.linalg.pinv(pp_next, hermitian=True) @ (phi_next @ pf))
 
 
-def rts_smooth(result: FilterResult, *, backend: Backend = "auto") -> GaussianState:
+def _smoothed_cov(
+    pf: FloatArray,
+    c: FloatArray,
+    sc_next: FloatArray,
+    pp_next: FloatArray,
+    phi_next: FloatArray,
+    qd_next: FloatArray,
+    joseph: bool,
+) -> FloatArray:
+    """Return ``P_k|T`` in difference or Joseph form.
+
+    ``P_k|k + C (P_{k+1|T} - P_{k+1|k}) C^T``, or
+    ``(I - C Phi) P_k|k (I - C Phi)^T + C (Qd + P_{k+1|T}) C^T`` (a sum of PSD terms).
+    """
+    if not joseph:
+        return symmetrize(pf + c @ (sc_next - pp_next) @ mT(c))
+    a = np.eye(pf.shape[-1]) - c @ phi_next
+    return symmetrize(a @ pf @ mT(a) + c @ (qd_next + sc_next) @ mT(c))
+
+
+def rts_smooth(
+    result: FilterResult, *, form: SmootherForm = "auto", backend: Backend = "auto"
+) -> GaussianState:
     """Smooth a Kalman filter result (fixed interval, all tracks at once).
 
     Parameters
     ----------
     result : FilterResult
         Output of :func:`adaptrack.kalman_filter`, shapes (..., T, n).
+    form : {"auto", "standard", "joseph"}
+        Covariance recursion: the textbook difference form, or the Joseph form, a sum of
+        positive semi-definite terms that stays PSD where the difference cancels (after long
+        gaps or very precise measurements); ``"auto"``: Joseph where the filter's own problem
+        is ill-conditioned (the criterion of :func:`adaptrack.kalman_filter`'s ``"auto"``).
     backend : {"auto", "numpy", "numba"}
         NumPy reference or the compiled kernel (same results to rounding); ``"auto"`` uses the
         kernel from 20,000 track-steps on unless 64 or more tracks share their covariances.
@@ -56,31 +96,41 @@ def rts_smooth(result: FilterResult, *, backend: Backend = "auto") -> GaussianSt
     """
     if not isinstance(result, FilterResult):
         raise TypeError(f"result must be a FilterResult; got {type(result).__name__}")
+    if form not in ("auto", "standard", "joseph"):
+        raise ValueError(f"form must be 'auto', 'standard' or 'joseph'; got {form!r}")
+    joseph = form == "joseph" or (form == "auto" and joseph_loses_digits(result))
     pred, filt = result.predicted, result.filtered
     b = pred.mean.ndim - 2
     n_steps = pred.mean.shape[-2]
-    sh = [_shared(a, b) for a in (filt.cov, pred.cov, result.transition)]
+    sh = [_shared(a, b) for a in (filt.cov, pred.cov, result.transition, result.process_cov)]
     shared = [a for a in sh if a is not None]
-    if len(shared) < 3:
+    if len(shared) < 4:
         shared = []
     n_tracks = filt.mean.size // (filt.dim * n_steps)
     if use_compiled(backend, filt.mean.size // filt.dim) and (
         backend == "numba" or not (shared and n_tracks >= SHARED_MIN_TRACKS)
     ):
-        return _rts_compiled(result)
+        return _rts_compiled(result, joseph)
     sm = np.array(filt.mean)
     sc = np.array(shared[0]) if shared else np.array(filt.cov)
     tail = (slice(None),) * b
     for k in range(n_steps - 2, -1, -1):
-        if shared:
-            pf, pp, phi = shared
-            c = _gains(pf[k], pp[k + 1], phi[k + 1])
-            sc[k] = symmetrize(pf[k] + c @ (sc[k + 1] - pp[k + 1]) @ c.T)
-        else:
-            i, j = tail + (k,), tail + (k + 1,)
-            c = _gains(filt.cov[i], pred.cov[j], result.transition[j])
-            sc[i] = symmetrize(filt.cov[i] + c @ (sc[j] - pred.cov[j]) @ mT(c))
         i, j = tail + (k,), tail + (k + 1,)
+        if shared:
+            pf, pp, phi, qd = shared
+            c = _gains(pf[k], pp[k + 1], phi[k + 1])
+            sc[k] = _smoothed_cov(pf[k], c, sc[k + 1], pp[k + 1], phi[k + 1], qd[k + 1], joseph)
+        else:
+            c = _gains(filt.cov[i], pred.cov[j], result.transition[j])
+            sc[i] = _smoothed_cov(
+                filt.cov[i],
+                c,
+                sc[j],
+                pred.cov[j],
+                result.transition[j],
+                result.process_cov[j],
+                joseph,
+            )
         sm[i] = filt.mean[i] + matvec(c, sm[j] - pred.mean[j])
     cov = np.broadcast_to(sc, filt.cov.shape) if shared else sc
     sm.flags.writeable = False
@@ -89,7 +139,7 @@ def rts_smooth(result: FilterResult, *, backend: Backend = "auto") -> GaussianSt
     return _trusted(GaussianState, mean=sm, cov=cov, time=filt.time)
 
 
-def _rts_compiled(result: FilterResult) -> GaussianState:
+def _rts_compiled(result: FilterResult, joseph: bool) -> GaussianState:
     """Run the RTS recursion through the compiled kernel."""
     from ._kernels import rts_kernel
 
@@ -105,6 +155,8 @@ def _rts_compiled(result: FilterResult) -> GaussianState:
         c(pred.mean.reshape(flat + (n,))),
         c(pred.cov.reshape(flat + (n, n))),
         c(result.transition.reshape(flat + (n, n))),
+        c(result.process_cov.reshape(flat + (n, n))),
+        joseph,
     )
     sm = sm.reshape(lead + (n_steps, n))
     sc = sc.reshape(lead + (n_steps, n, n))
