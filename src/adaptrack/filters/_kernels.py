@@ -162,6 +162,28 @@ def kf_step(  # type: ignore[no-untyped-def]
     return ok, nis, logdet, nobs
 
 
+@numba.njit(cache=True)
+def filter_outputs(n_tr, n_st, n, m):  # type: ignore[no-untyped-def]
+    """Empty outputs of a filter kernel, in its return order.
+
+    Predicted and filtered means (N, T, n) and covariances (N, T, n, n), innovations (N, T, m),
+    their covariances (N, T, m, m), NIS and log-likelihood (N, T), gains (N, T, n, m) and the
+    observed-component counts (N, T).
+    """
+    return (
+        np.empty((n_tr, n_st, n)),
+        np.empty((n_tr, n_st, n, n)),
+        np.empty((n_tr, n_st, n)),
+        np.empty((n_tr, n_st, n, n)),
+        np.empty((n_tr, n_st, m)),
+        np.empty((n_tr, n_st, m, m)),
+        np.empty((n_tr, n_st)),
+        np.empty((n_tr, n_st)),
+        np.empty((n_tr, n_st, n, m)),
+        np.empty((n_tr, n_st)),
+    )
+
+
 @numba.njit(cache=True, fastmath=False)
 def kalman_kernel(x0, p0, phi, qd, u, z, mask, h, r, off, joseph):  # type: ignore[no-untyped-def]
     """Filter every track of the batch.
@@ -171,16 +193,7 @@ def kalman_kernel(x0, p0, phi, qd, u, z, mask, h, r, off, joseph):  # type: igno
     """
     n_tr, n_st, m = z.shape
     n = h.shape[1]
-    pm = np.empty((n_tr, n_st, n))
-    pc = np.empty((n_tr, n_st, n, n))
-    fm = np.empty((n_tr, n_st, n))
-    fc = np.empty((n_tr, n_st, n, n))
-    nu_o = np.empty((n_tr, n_st, m))
-    s_o = np.empty((n_tr, n_st, m, m))
-    k_o = np.empty((n_tr, n_st, n, m))
-    nis_o = np.empty((n_tr, n_st))
-    ll_o = np.empty((n_tr, n_st))
-    nobs_o = np.empty((n_tr, n_st))
+    pm, pc, fm, fc, nu_o, s_o, nis_o, ll_o, k_o, nobs_o = filter_outputs(n_tr, n_st, n, m)
     x = np.empty(n)
     xp = np.empty(n)
     p = np.empty((n, n))

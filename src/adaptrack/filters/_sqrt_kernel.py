@@ -13,6 +13,7 @@ import numba
 import numpy as np
 
 from .._kernel_linalg import cholesky_into
+from ._kernels import filter_outputs
 
 _LOG_2PI = math.log(2.0 * math.pi)
 
@@ -65,16 +66,7 @@ def sqrt_kernel(x0, s0, phi, sq, u, z, mask, h, r, off):  # type: ignore[no-unty
     """
     n_tr, n_st, m = z.shape
     n = h.shape[1]
-    pm = np.empty((n_tr, n_st, n))
-    pc = np.empty((n_tr, n_st, n, n))
-    fm = np.empty((n_tr, n_st, n))
-    fc = np.empty((n_tr, n_st, n, n))
-    nu_o = np.empty((n_tr, n_st, m))
-    s_o = np.empty((n_tr, n_st, m, m))
-    k_o = np.empty((n_tr, n_st, n, m))
-    nis_o = np.empty((n_tr, n_st))
-    ll_o = np.empty((n_tr, n_st))
-    nobs_o = np.empty((n_tr, n_st))
+    pm, pc, fm, fc, nu_o, s_o, nis_o, ll_o, k_o, nobs_o = filter_outputs(n_tr, n_st, n, m)
     x = np.empty(n)
     xp = np.empty(n)
     fac = np.empty((n, n))

@@ -421,6 +421,62 @@ def _raise_not_pd(what: str, k: int, tracks: list[int] | None) -> None:
     )
 
 
+class _Recorder:
+    """Per-step outputs of a filter run over batch + (T,), turned into a FilterResult."""
+
+    def __init__(self, batch: tuple[int, ...], n_steps: int, n: int, m: int) -> None:
+        self.pm, self.pc = _alloc(batch, n_steps, n), _alloc(batch, n_steps, n, n)
+        self.fm, self.fc = _alloc(batch, n_steps, n), _alloc(batch, n_steps, n, n)
+        self.nu, self.s = _alloc(batch, n_steps, m), _alloc(batch, n_steps, m, m)
+        self.nis, self.ll = _alloc(batch, n_steps), _alloc(batch, n_steps)
+        self.nobs, self.k = _alloc(batch, n_steps), _alloc(batch, n_steps, n, m)
+
+    def store(
+        self,
+        sv: tuple[slice | int, ...],
+        pm: FloatArray,
+        pc: FloatArray,
+        fm: FloatArray,
+        fc: FloatArray,
+        info: StepInfo,
+    ) -> None:
+        """Keep step ``sv``'s predicted and filtered moments and its StepInfo."""
+        self.pm[sv], self.pc[sv], self.fm[sv], self.fc[sv] = pm, pc, fm, fc
+        self.nu[sv], self.s[sv], self.nis[sv] = info.innovation, info.innovation_cov, info.nis
+        self.ll[sv], self.nobs[sv], self.k[sv] = info.log_likelihood, info.n_observed, info.gain
+
+    def result(
+        self,
+        t: FloatArray,
+        phi: FloatArray,
+        qd: FloatArray,
+        u: FloatArray,
+        mask: BoolArray,
+        h: FloatArray,
+        r: FloatArray,
+    ) -> FilterResult:
+        """Return the FilterResult of the recorded steps and the run's inputs."""
+        return _result(
+            t,
+            self.pm,
+            self.pc,
+            self.fm,
+            self.fc,
+            phi,
+            qd,
+            u,
+            self.nu,
+            self.s,
+            self.nis,
+            self.ll,
+            self.k,
+            self.nobs,
+            mask,
+            h,
+            r,
+        )
+
+
 def _run_general(
     t: FloatArray,
     z: FloatArray,
@@ -443,11 +499,7 @@ def _run_general(
     phi_b = np.broadcast_to(phi, batch + (n_steps, n, n))
     qd_b = np.broadcast_to(qd, batch + (n_steps, n, n))
     u_b = np.broadcast_to(u, batch + (n_steps, n))
-    pm, pc = _alloc(batch, n_steps, n), _alloc(batch, n_steps, n, n)
-    fm, fc = _alloc(batch, n_steps, n), _alloc(batch, n_steps, n, n)
-    nu_a, s_a = _alloc(batch, n_steps, m), _alloc(batch, n_steps, m, m)
-    nis_a, ll_a, nobs_a = _alloc(batch, n_steps), _alloc(batch, n_steps), _alloc(batch, n_steps)
-    k_a = _alloc(batch, n_steps, n, m)
+    out = _Recorder(batch, n_steps, n, m)
     state = _trusted(
         GaussianState,
         mean=np.broadcast_to(initial.mean, batch + (n,)),
@@ -462,28 +514,9 @@ def _run_general(
             state, info = _update(prior, z[sv], h, rk, mask[sv], form, off)
         except np.linalg.LinAlgError:
             _raise_not_pd("innovation covariance", k, _bad_tracks(prior.cov, h, rk, mask[sv]))
-        pm[sv], pc[sv], fm[sv], fc[sv] = prior.mean, prior.cov, state.mean, state.cov
-        nu_a[sv], s_a[sv], nis_a[sv] = info.innovation, info.innovation_cov, info.nis
-        ll_a[sv], nobs_a[sv], k_a[sv] = info.log_likelihood, info.n_observed, info.gain
-    return _result(
-        tb,
-        pm,
-        pc,
-        fm,
-        fc,
-        phi_b,
-        qd_b,
-        u_b,
-        nu_a,
-        s_a,
-        nis_a,
-        ll_a,
-        k_a,
-        nobs_a,
-        mask,
-        h,
-        np.broadcast_to(r, batch + ((n_steps,) if r_per_step else ()) + (m, m)),
-    )
+        out.store(sv, prior.mean, prior.cov, state.mean, state.cov, info)
+    r_b = np.broadcast_to(r, batch + ((n_steps,) if r_per_step else ()) + (m, m))
+    return out.result(tb, phi_b, qd_b, u_b, mask, h, r_b)
 
 
 def _run_sqrt(
@@ -509,11 +542,7 @@ def _run_sqrt(
     u_b = np.broadcast_to(u, batch + (n_steps, n))
     sq = lower_factor(qd)  # (T, n, n) or batch + (T, n, n): factored once, not per track
     sq_b = np.broadcast_to(sq, batch + (n_steps, n, n))
-    pm, pc = _alloc(batch, n_steps, n), _alloc(batch, n_steps, n, n)
-    fm, fc = _alloc(batch, n_steps, n), _alloc(batch, n_steps, n, n)
-    nu_a, s_a = _alloc(batch, n_steps, m), _alloc(batch, n_steps, m, m)
-    nis_a, ll_a, nobs_a = _alloc(batch, n_steps), _alloc(batch, n_steps), _alloc(batch, n_steps)
-    k_a = _alloc(batch, n_steps, n, m)
+    out = _Recorder(batch, n_steps, n, m)
     x = np.broadcast_to(initial.mean, batch + (n,))
     factor = np.broadcast_to(lower_factor(initial.cov), batch + (n, n))
     for k in range(n_steps):
@@ -521,28 +550,9 @@ def _run_sqrt(
         xp, sp = sqrt_predict(x, factor, phi_b[sv], sq_b[sv], u_b[sv])
         rk = r[sv] if r_per_step else r
         x, factor, info = sqrt_update(xp, sp, z[sv], h, rk, mask[sv], off)
-        pm[sv], pc[sv], fm[sv], fc[sv] = xp, covariance(sp), x, covariance(factor)
-        nu_a[sv], s_a[sv], nis_a[sv] = info.innovation, info.innovation_cov, info.nis
-        ll_a[sv], nobs_a[sv], k_a[sv] = info.log_likelihood, info.n_observed, info.gain
-    return _result(
-        tb,
-        pm,
-        pc,
-        fm,
-        fc,
-        phi_b,
-        qd_b,
-        u_b,
-        nu_a,
-        s_a,
-        nis_a,
-        ll_a,
-        k_a,
-        nobs_a,
-        mask,
-        h,
-        np.broadcast_to(r, batch + ((n_steps,) if r_per_step else ()) + (m, m)),
-    )
+        out.store(sv, xp, covariance(sp), x, covariance(factor), info)
+    r_b = np.broadcast_to(r, batch + ((n_steps,) if r_per_step else ()) + (m, m))
+    return out.result(tb, phi_b, qd_b, u_b, mask, h, r_b)
 
 
 def _bad_tracks(cov: FloatArray, h: FloatArray, r: FloatArray, mask: BoolArray) -> list[int] | None:

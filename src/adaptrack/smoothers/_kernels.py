@@ -8,7 +8,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from .._kernel_linalg import cholesky_into, cholesky_solve_into
+from .._kernel_linalg import cholesky_into, cholesky_solve_into, matmul_into
 
 
 @numba.njit(cache=True)
@@ -31,12 +31,7 @@ def rts_kernel(fm, fc, pm, pc, phi, qd, joseph):  # type: ignore[no-untyped-def]
         ip = min(i, phi.shape[0] - 1)
         for k in range(n_st - 2, -1, -1):
             # B = Phi P_k|k  (n x n); solve P_{k+1|k} C^T = B for C^T column by column
-            for a in range(n):
-                for q in range(n):
-                    acc = 0.0
-                    for r in range(n):
-                        acc += phi[ip, k + 1, a, r] * fc[i, k, r, q]
-                    b[a, q] = acc
+            matmul_into(phi[ip, k + 1], fc[i, k], b)
             if cholesky_into(pc[i, k + 1], lo):
                 cholesky_solve_into(lo, b, d)
             else:  # singular prediction: a known component without process noise
@@ -76,12 +71,7 @@ def rts_kernel(fm, fc, pm, pc, phi, qd, joseph):  # type: ignore[no-untyped-def]
                         for r in range(n):
                             acc -= c[a, r] * phi[ip, k + 1, r, q]
                         b[a, q] = acc
-                for a in range(n):
-                    for q in range(n):
-                        acc = 0.0
-                        for r in range(n):
-                            acc += b[a, r] * fc[i, k, r, q]
-                        e[a, q] = acc
+                matmul_into(b, fc[i, k], e)
                 for a in range(n):
                     for q in range(n):
                         acc = 0.0
