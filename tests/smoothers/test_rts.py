@@ -122,3 +122,13 @@ def test_joseph_form_smoother_equals_the_difference_form_when_both_are_exact(bac
     ref = at.rts_smooth(res, form="joseph", backend="numpy")
     for x, y in ((a.mean, b.mean), (a.cov, b.cov), (ref.cov, b.cov)):
         assert np.max(np.abs(x - y)) <= 1e-9 * np.max(np.abs(x))
+
+
+def test_rts_smooth_rejects_an_unknown_form():
+    t = np.arange(3.0)
+    prior = at.GaussianState([0.0, 0.0], np.eye(2), 0.0)
+    res = at.kalman_filter(
+        t, t[:, None], at.models.ConstantVelocity(accel_psd=0.1), [[1.0, 0.0]], [[1.0]], prior
+    )
+    with pytest.raises(ValueError, match="form must be 'auto', 'standard' or 'joseph'; got 'ud'"):
+        at.rts_smooth(res, form="ud")
