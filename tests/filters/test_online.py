@@ -6,6 +6,8 @@ import pytest
 import adaptrack as at
 from adaptrack.filters.online import OnlineFilter
 from adaptrack.models import ConstantAcceleration, ConstantVelocity, Singer
+from tests.filters.test_square_root import ill_conditioned_problem
+from tests.oracles.reference import kalman_mp
 
 CASES = [
     (ConstantVelocity(accel_psd=0.5), 1),
@@ -27,7 +29,7 @@ def _stream(model, m, rng, n_steps=60):
     return t, z, h, r, prior
 
 
-@pytest.mark.parametrize("form", ["joseph", "standard"])
+@pytest.mark.parametrize("form", ["joseph", "standard", "sqrt"])
 @pytest.mark.parametrize(("model", "m"), CASES)
 def test_stream_equals_the_sequence_filter(model, m, form, rng):
     t, z, h, r, prior = _stream(model, m, rng)
@@ -103,7 +105,7 @@ def test_bad_input_raises_and_leaves_the_filter_unchanged(rng):
         OnlineFilter(model, h, -r, prior)
 
 
-@pytest.mark.parametrize("form", ["joseph", "standard"])
+@pytest.mark.parametrize("form", ["joseph", "standard", "sqrt"])
 @pytest.mark.parametrize(("model", "m"), CASES)
 def test_update_many_equals_row_by_row_updates(model, m, form, rng):
     """A block of rows gives the per-row updates' numbers (and the sequence filter's), also
@@ -171,3 +173,27 @@ def test_jittered_stream_with_a_known_input_equals_the_sequence_filter(method, r
     scale = np.abs(ref.filtered.mean).max()
     np.testing.assert_allclose(got, ref.filtered.mean[:150], rtol=0, atol=1e-10 * scale)
     np.testing.assert_allclose(f.mean, ref.filtered.mean[-1], rtol=0, atol=1e-10 * scale)
+
+
+@pytest.mark.parametrize("block", [False, True], ids=["update", "update_many"])
+def test_auto_form_continues_in_square_root_form_where_joseph_would_lose_digits(block):
+    """The ill-conditioned stream of the batch filter's test (condition ratio 1.1e12): the
+    default form switches to the square root at the first such step and matches the 50-digit
+    reference as the batch filter does; a well-conditioned stream stays Joseph, bit for bit."""
+    t, z, model, h, r, prior = ill_conditioned_problem()
+    f = OnlineFilter(model, h, r, at.GaussianState(prior.mean, prior.cov, t[0] - 1.0))
+    if block:
+        f.update_many(t, z)
+    else:
+        for k in range(t.size):
+            f.update(t[k], z[k])
+    res = at.kalman_filter(t, z, model, h, r, at.GaussianState(prior.mean, prior.cov, t[0] - 1.0))
+    mean, cov = kalman_mp(res.transition, res.process_cov, h, r, z, prior.mean, prior.cov)
+    sigma = np.sqrt(np.diagonal(cov[-1]))
+    assert np.max(np.abs(f.mean - mean[-1]) / sigma) < 1e-2
+    assert np.max(np.abs(f.cov - cov[-1]) / np.outer(sigma, sigma)) < 1e-6
+    easy = np.diag([1.0, 2.0])
+    auto, joseph = (OnlineFilter(model, h, easy, prior, form=form) for form in ("auto", "joseph"))
+    for k in range(1, t.size):
+        assert auto.update(t[k], z[k]) == joseph.update(t[k], z[k])
+    np.testing.assert_array_equal(auto.cov, joseph.cov)

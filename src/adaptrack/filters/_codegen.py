@@ -31,7 +31,9 @@ GENERATED_MAX_STATES = 6  # larger states use the generic kernels (straight-line
 # n = 9, m = 3 takes minutes to compile once)
 _VERSION = 3
 DT_TOLERANCE_S = 1e-9  # online steps this close share one discretisation (clock round-off)
-WS_NEXT_ROW, WS_H_MAX = 7, 8  # OnlineFilter work-buffer header: next bank row, series table h_max
+# OnlineFilter work-buffer header: next bank row, series table h_max, the largest trace(S) the
+# Joseph step takes (beyond it the filter continues in square-root form)
+WS_NEXT_ROW, WS_H_MAX, WS_TRACE_LIMIT = 7, 8, 9
 _FILL = ("from adaptrack.filters._kernels import series_bank_row as fill",)
 
 
@@ -182,14 +184,15 @@ def _sym(i: int, j: int) -> tuple[int, int]:
     return (i, j) if i <= j else (j, i)
 
 
-def kf_step_lines(n: int, m: int) -> list[str]:
+def kf_step_lines(n: int, m: int, trace_limit: str | None = None) -> list[str]:
     """Straight-line predict + Joseph update on scalar locals, every component present.
 
     Reads ``x{i}``, ``P{i}_{j}`` (i <= j), ``F{i}_{j}``, ``Q{i}_{j}``, ``u{i}``, ``H{a}_{j}``,
     ``R{a}_{b}``, ``o{a}`` (noise mean) and ``z{a}``; leaves the predicted moments in
     ``xp{i}``, ``pp{i}_{j}``, the filtered ones back in ``x{i}``, ``P{i}_{j}``, the innovation in
     ``nu{a}``, ``S{a}_{b}``, the transposed gain in ``kt{a}_{i}`` and ``nis``, ``logdet``.
-    A non-positive pivot of ``S`` executes ``return 2`` (the inputs are unchanged).
+    A non-positive pivot of ``S`` executes ``return 2``, a ``trace(S)`` above the expression
+    ``trace_limit`` (if given) ``return 6`` (in both cases the inputs are unchanged).
     """
 
     def p(i: int, j: int) -> str:
@@ -236,6 +239,8 @@ def kf_step_lines(n: int, m: int) -> list[str]:
     ]
     out += product("hp", m, n, n, lambda a, j, k: f"H{a}_{k} * {pp(k, j)}")
     out += symmetric("S", m, n, lambda a, b, k: f"hp{a}_{k} * H{b}_{k}", lambda a, b: f"R{a}_{b}")
+    if trace_limit is not None:
+        out += [f"if {dot([s_(a, a) for a in range(m)])} > {trace_limit}:", "    return 6"]
     if m == 1:  # S is a scalar: one reciprocal instead of a square root and two divisions
         out += ["d0 = S0_0", "if not d0 > 0.0:", "    return 2", "iS = 1.0 / d0"]
         out += [f"kt0_{j} = hp0_{j} * iS" for j in range(n)]
@@ -344,7 +349,7 @@ def _online_source(
 
     A failed step returns ``-status`` and changes nothing: 1 non-finite measurement, 2 ``S``
     not positive definite, 3 a step length not in the bank (no series table), 4 wrong shape,
-    5 a time before the filter's.
+    5 a time before the filter's, 6 ``trace(S)`` above the Joseph limit.
     """
     hdr_time = layout[0]
     body = [
@@ -370,7 +375,11 @@ def _online_source(
     body += [f"F{i}_{j} = bank[row, {1 + i * n + j}]" for i in range(n) for j in range(n)]
     body += [f"Q{i}_{j} = bank[row, {1 + n * n + i * n + j}]" for i in range(n) for j in range(n)]
     body += [f"u{i} = bank[row, {1 + 2 * n * n + i}]" for i in range(n)]
-    body += [line.replace("return 2", "return -2.0") for line in kf_step_lines(n, m)]
+    limit = f"ws[{WS_TRACE_LIMIT}]"
+    body += [
+        line.replace("return 2", "return -2.0").replace("return 6", "return -6.0")
+        for line in kf_step_lines(n, m, limit)
+    ]
     body += _store_state(n, layout)
     body += [
         f"ws[{hdr_time - 3}] = nis",
@@ -395,8 +404,8 @@ def _online_run_source(
 
     The steps of ``online_step`` for rows ``k, k + 1, ...`` of validated ``times`` (T,) and
     ``z`` (T, m), the state in locals between steps; stops at the end (status 0), at a step
-    length not in the bank (3) or a non-positive-definite ``S`` (2), with the state of the rows
-    before ``k`` written back to ``ws``.
+    length not in the bank (3), a non-positive-definite ``S`` (2) or a ``trace(S)`` above the
+    Joseph limit (6), with the state of the rows before ``k`` written back to ``ws``.
     """
     hdr_time = layout[0]
     body = [_bank_view(n, bank), *_load_state(n, m, layout)]
@@ -419,9 +428,9 @@ def _online_run_source(
     step += [f"Q{i}_{j} = bank[row, {1 + n * n + i * n + j}]" for i in range(n) for j in range(n)]
     step += [f"u{i} = bank[row, {1 + 2 * n * n + i}]" for i in range(n)]
     step += [f"z{a} = z[k, {a}]" for a in range(m)]
-    for line in kf_step_lines(n, m):
-        if line.strip() == "return 2":
-            step += [line.replace("return 2", "status = 2"), "    break"]
+    for line in kf_step_lines(n, m, f"ws[{WS_TRACE_LIMIT}]"):
+        if line.strip() in ("return 2", "return 6"):
+            step += [line.replace("return ", "status = "), "    break"]
         elif line.startswith("logdet = "):  # only the last step's is kept: after the loop
             step += [f"last_d{a} = d{a}" for a in range(m)]
         else:

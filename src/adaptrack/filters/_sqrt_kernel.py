@@ -45,7 +45,7 @@ def lower_triangularize(a, rows, cols):  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True, inline="always")
-def _outer_into(f, out, k):  # type: ignore[no-untyped-def]
+def outer_into(f, out, k):  # type: ignore[no-untyped-def]
     """``out = F F^T`` of the leading (k, k) block of ``f`` (exactly symmetric)."""
     for a in range(k):
         for b in range(a + 1):
@@ -54,6 +54,116 @@ def _outer_into(f, out, k):  # type: ignore[no-untyped-def]
                 acc += f[a, c] * f[b, c]
             out[a, b] = acc
             out[b, a] = acc
+
+
+@numba.njit(cache=True)
+def lower_factor_into(a, out, c):  # type: ignore[no-untyped-def]
+    """``out`` = a factor ``L L^T = A`` of symmetric PSD ``a`` (k, k); ``c`` is (k, k) scratch.
+
+    The compiled :func:`adaptrack.filters.square_root.lower_factor`: Cholesky of ``A`` scaled to
+    unit diagonal, its eigen-based factor where that is not positive definite.
+    """
+    k = a.shape[0]
+    d = np.empty(k)
+    for i in range(k):
+        d[i] = math.sqrt(max(a[i, i], 0.0))
+    for i in range(k):
+        for j in range(k):
+            c[i, j] = a[i, j] / ((d[i] if d[i] > 0.0 else 1.0) * (d[j] if d[j] > 0.0 else 1.0))
+    if not cholesky_into(c, out):
+        vals, vecs = np.linalg.eigh(0.5 * (c + c.T))
+        for i in range(k):
+            for j in range(k):
+                out[i, j] = vecs[i, j] * math.sqrt(max(vals[j], 0.0))
+    else:
+        for i in range(k):
+            for j in range(i + 1, k):
+                out[i, j] = 0.0
+    for i in range(k):
+        for j in range(k):
+            out[i, j] *= d[i]
+
+
+@numba.njit(cache=True)
+def sqrt_step(x, fac, ph, sqk, uk, zk, on, h, rk, off, xp, pre1, pre2, rm, sr, nu, w, kt):  # type: ignore[no-untyped-def]
+    """One predict + update in square-root form, in place on ``x`` (n,) and ``fac`` (n, n).
+
+    ``ph``, ``sqk`` (a factor of ``Qd``), ``uk``: the step's transition; ``zk``, ``on`` (m,) the
+    measurement and its present components; ``rk`` (m, m). Leaves the predicted mean in ``xp``,
+    the predicted factor in ``pre1[:, :n]``, ``Ss`` (``S = Ss Ss^T``) in ``pre2[:m, :m]``, the
+    innovation in ``nu`` and the gain in ``kt`` (n, m). Returns ``(ok, nis, logdet, n_obs)``;
+    not ok (nothing changed) if the masked ``R`` is not positive definite.
+    """
+    n = fac.shape[0]
+    m = zk.shape[0]
+    nobs = 0.0
+    for a in range(m):
+        nobs += 1.0 if on[a] else 0.0
+        for b in range(m):
+            if on[a] and on[b]:
+                rm[a, b] = rk[a, b]
+            else:
+                rm[a, b] = 1.0 if a == b else 0.0
+    if not cholesky_into(rm, sr):
+        return False, 0.0, 0.0, nobs
+    # predict: [Phi S, Sq] -> [S-, 0]
+    for a in range(n):
+        acc = uk[a]
+        for b in range(n):
+            acc += ph[a, b] * x[b]
+        xp[a] = acc
+        for b in range(n):
+            acc = 0.0
+            for c in range(n):
+                acc += ph[a, c] * fac[c, b]
+            pre1[a, b] = acc
+            pre1[a, n + b] = sqk[a, b]
+    lower_triangularize(pre1, n, 2 * n)
+    # update pre-array [[Sr, Hm S-], [0, S-]]
+    for a in range(m + n):
+        for b in range(m + n):
+            pre2[a, b] = 0.0
+    for a in range(m):
+        acc = 0.0
+        for b in range(n):
+            acc += h[a, b] * xp[b]
+        nu[a] = (zk[a] - off[a] - acc) if on[a] else 0.0
+        for b in range(a + 1):
+            pre2[a, b] = sr[a, b]
+        if on[a]:
+            for b in range(n):
+                acc = 0.0
+                for c in range(n):
+                    acc += h[a, c] * pre1[c, b]
+                pre2[a, m + b] = acc
+    for a in range(n):
+        for b in range(n):
+            pre2[m + a, m + b] = pre1[a, b]
+    lower_triangularize(pre2, m + n, m + n)
+    # w = Ss^-1 nu; x+ = x- + Kb w; K^T = Ss^-T Kb^T
+    logdet = 0.0
+    nis = 0.0
+    for a in range(m):
+        acc = nu[a]
+        for c in range(a):
+            acc -= pre2[a, c] * w[c]
+        w[a] = acc / pre2[a, a]
+        nis += w[a] * w[a]
+        logdet += 2.0 * math.log(abs(pre2[a, a]))
+    for a in range(n):
+        acc = xp[a]
+        for c in range(m):
+            acc += pre2[m + a, c] * w[c]
+        x[a] = acc
+        for b in range(n):
+            fac[a, b] = pre2[m + a, m + b]
+    for a in range(n):
+        for b in range(m - 1, -1, -1):
+            acc = pre2[m + a, b]
+            for c in range(b + 1, m):
+                acc -= pre2[c, b] * kt[a, c]
+            kt[a, b] = acc / pre2[b, b]
+    return True, nis, logdet, nobs
 
 
 @numba.njit(cache=True)
@@ -84,78 +194,15 @@ def sqrt_kernel(x0, s0, phi, sq, u, z, mask, h, r, off):  # type: ignore[no-unty
             for b in range(n):
                 fac[a, b] = s0[ix, a, b]
         for k in range(n_st):
-            ph, sqk, on = phi[ip, k], sq[ip, k], mask[i, k]
-            # predict: [Phi S, Sq] -> [S-, 0]
-            for a in range(n):
-                acc = u[iu, k, a]
-                for b in range(n):
-                    acc += ph[a, b] * x[b]
-                xp[a] = acc
-                for b in range(n):
-                    acc = 0.0
-                    for c in range(n):
-                        acc += ph[a, c] * fac[c, b]
-                    pre1[a, b] = acc
-                    pre1[a, n + b] = sqk[a, b]
-            lower_triangularize(pre1, n, 2 * n)
-            # update pre-array [[Sr, Hm S-], [0, S-]]
-            rk = r[ir, min(k, r.shape[1] - 1)]
-            nobs = 0.0
-            for a in range(m):
-                nobs += 1.0 if on[a] else 0.0
-                for b in range(m):
-                    if on[a] and on[b]:
-                        rm[a, b] = rk[a, b]
-                    else:
-                        rm[a, b] = 1.0 if a == b else 0.0
-            if not cholesky_into(rm, sr):
+            ok, nis, logdet, nobs = sqrt_step(
+                x, fac, phi[ip, k], sq[ip, k], u[iu, k], z[i, k], mask[i, k], h,
+                r[ir, min(k, r.shape[1] - 1)], off, xp, pre1, pre2, rm, sr, nu, w, k_o[i, k],
+            )  # fmt: skip
+            if not ok:
                 raise ValueError("measurement covariance is not positive definite")
-            for a in range(m + n):
-                for b in range(m + n):
-                    pre2[a, b] = 0.0
-            for a in range(m):
-                acc = 0.0
-                for b in range(n):
-                    acc += h[a, b] * xp[b]
-                nu[a] = (z[i, k, a] - off[a] - acc) if on[a] else 0.0
-                for b in range(a + 1):
-                    pre2[a, b] = sr[a, b]
-                if on[a]:
-                    for b in range(n):
-                        acc = 0.0
-                        for c in range(n):
-                            acc += h[a, c] * pre1[c, b]
-                        pre2[a, m + b] = acc
-            for a in range(n):
-                for b in range(n):
-                    pre2[m + a, m + b] = pre1[a, b]
-            lower_triangularize(pre2, m + n, m + n)
-            # w = Ss^-1 nu; x+ = x- + Kb w; K^T = Ss^-T Kb^T
-            logdet = 0.0
-            nis = 0.0
-            for a in range(m):
-                acc = nu[a]
-                for c in range(a):
-                    acc -= pre2[a, c] * w[c]
-                w[a] = acc / pre2[a, a]
-                nis += w[a] * w[a]
-                logdet += 2.0 * math.log(abs(pre2[a, a]))
-            for a in range(n):
-                acc = xp[a]
-                for c in range(m):
-                    acc += pre2[m + a, c] * w[c]
-                x[a] = acc
-                for b in range(n):
-                    fac[a, b] = pre2[m + a, m + b]
-            for a in range(n):
-                for b in range(m - 1, -1, -1):
-                    acc = pre2[m + a, b]
-                    for c in range(b + 1, m):
-                        acc -= pre2[c, b] * k_o[i, k, a, c]
-                    k_o[i, k, a, b] = acc / pre2[b, b]
-            _outer_into(pre1, pc[i, k], n)
-            _outer_into(fac, fc[i, k], n)
-            _outer_into(pre2, s_o[i, k], m)
+            outer_into(pre1, pc[i, k], n)
+            outer_into(fac, fc[i, k], n)
+            outer_into(pre2, s_o[i, k], m)
             for a in range(n):
                 pm[i, k, a] = xp[a]
                 fm[i, k, a] = x[a]

@@ -3,7 +3,9 @@
 :class:`OnlineFilter` keeps its state, the model matrices and all scratch space in one
 preallocated buffer and runs the same predict + Joseph update as the batch kernel
 (:func:`adaptrack.filters._kernels.kf_step`), so a stream filtered step by step gives the
-numbers of :func:`adaptrack.kalman_filter` to rounding. Transitions are cached by step length
+numbers of :func:`adaptrack.kalman_filter` to rounding. Like it, the default ``form="auto"``
+continues in square-root form (:func:`adaptrack.filters._sqrt_kernel.sqrt_step`) from the first
+step where the Joseph form would lose digits. Transitions are cached by step length
 (steps within 1 ns of a cached one share it: clock round-off, e.g. ``0.15 - 0.1 != 0.05``). For
 the exact methods a new step length is discretised inside the compiled step from a series table
 (:mod:`adaptrack.models.series_table`), so a jittered stream costs about a microsecond per
@@ -17,7 +19,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .._typing import ArrayLike, FloatArray
+from .._typing import ArrayLike, BoolArray, FloatArray
 from .._validation import as_float_array, check_symmetric_pd
 from ..models.continuous import MotionModel, as_motion_model
 from ..models.discretize import Method, Noise, discretize_with_input
@@ -28,15 +30,19 @@ from ._codegen import (
     GENERATED_MAX_STATES,
     WS_H_MAX,
     WS_NEXT_ROW,
+    WS_TRACE_LIMIT,
     online_kernel,
     online_run_kernel,
 )
 from ._kernels import _LOG_2PI, kf_step, series_bank_row
-from .kalman import CovarianceError, UpdateForm, _check_form
+from ._sqrt_kernel import lower_factor_into, outer_into, sqrt_step
+from .kalman import CovarianceError
+from .run import JOSEPH_MAX_RATIO, FilterForm
+from .square_root import lower_factor
 
 # header: n, m, Joseph form (0/1), nis, log-likelihood, observed components, time, next bank
-# row, series table h_max
-_HEADER = 9
+# row, series table h_max, Joseph trace(S) limit
+_HEADER = 10
 _TIME = 6
 _SERIES_BLOCKS = ("series_phi", "series_qd", "series_off")
 
@@ -64,6 +70,14 @@ def _offsets(
         "nu": (m,),
         "w": (m,),
         "ikh": (n, n),
+        # square-root form: factor of P, pre-arrays, factor of Qd and its scratch, gain
+        "fac": (n, n),
+        "pre1": (n, 2 * n),
+        "pre2": (m + n, m + n),
+        "sq": (n, n),
+        "sq_tmp": (n, n),
+        "sr": (m, m),
+        "gain": (n, m),
     }
     if series is not None:
         for name, coef in zip(_SERIES_BLOCKS, series[:3], strict=True):
@@ -94,7 +108,10 @@ class OnlineFilter:
     Every component present, the Joseph form and up to 6 states run a kernel generated for the
     (n, m) at hand (under a microsecond per call from Python); a ``mask``,
     ``form="standard"`` or larger states use the generic compiled step (a few microseconds).
-    Both give the numbers of :func:`adaptrack.kalman_filter` to rounding.
+    Both give the numbers of :func:`adaptrack.kalman_filter` to rounding. The square-root form
+    (``form="sqrt"``, and ``"auto"`` from the first step whose ``trace(S)`` exceeds
+    ``JOSEPH_MAX_RATIO`` times the smallest eigenvalue of ``R``: a long gap, a vast prior, an
+    ill-conditioned ``R``) runs a compiled step from Python (several microseconds).
 
     Parameters
     ----------
@@ -131,7 +148,7 @@ class OnlineFilter:
         method: Method = "expm",
         noise: Noise = "white",
         order: int = 2,
-        form: UpdateForm = "joseph",
+        form: FilterForm = "auto",
         measurement_noise_mean: ArrayLike | None = None,
         cache_size: int = 16,
     ) -> None:
@@ -153,7 +170,9 @@ class OnlineFilter:
         check_symmetric_pd(initial.cov, "initial.cov", semidefinite=True)
         if cache_size < 1:
             raise ValueError(f"cache_size must be >= 1; got {cache_size}")
-        joseph = _check_form(form) == "joseph"
+        if form not in ("auto", "joseph", "standard", "sqrt"):
+            raise ValueError(f"form must be 'auto', 'joseph', 'standard' or 'sqrt'; got {form!r}")
+        joseph = form != "standard"
         self._discretization = (method, noise, order)
         # exact white-noise discretisation of a new step length in microseconds (a jittered
         # stream meets one per update) instead of a matrix exponential in NumPy
@@ -170,6 +189,9 @@ class OnlineFilter:
             for block, coef in zip(self._series, series[:3], strict=True):
                 block[:] = coef
         self._ws[0], self._ws[1], self._ws[2] = n, m, 1.0 if joseph else 0.0
+        # auto: Joseph while trace(S) <= JOSEPH_MAX_RATIO * lambda_min(R), then square root
+        limit = JOSEPH_MAX_RATIO * np.linalg.eigvalsh(r)[0] if form == "auto" else np.inf
+        self._ws[WS_TRACE_LIMIT] = limit
         self._ws[_TIME] = float(initial.time)
         self._block("x")[:] = initial.mean
         self._block("p")[:] = initial.cov
@@ -180,7 +202,10 @@ class OnlineFilter:
         self._m = m
         self._blocks = {name: self._block(name) for name in self._layout if name != "end"}
         self._fast = self._fast_run = None
-        if joseph and n <= GENERATED_MAX_STATES:
+        self._sqrt, self._auto = False, form == "auto"
+        if form == "sqrt" or np.trace(r) > limit:
+            self._to_sqrt()
+        elif joseph and n <= GENERATED_MAX_STATES:
             at = self._layout
             offsets = (_TIME, at["x"][0], at["p"][0], at["h"][0], at["r"][0], at["off"][0])
             table = (
@@ -191,6 +216,12 @@ class OnlineFilter:
             bank = (at["bank"][0], int(cache_size))
             self._fast = online_kernel(n, m, offsets, table, bank)
             self._fast_run = online_run_kernel(n, m, offsets, table, bank)
+
+    def _to_sqrt(self) -> None:
+        """Continue in square-root form from the current state (for the rest of the stream)."""
+        self._sqrt = True
+        self._fast = self._fast_run = None
+        self._blocks["fac"][:] = lower_factor(self._blocks["p"])
 
     def _block(self, name: str) -> FloatArray:
         pos, shape = self._layout[name]
@@ -230,7 +261,9 @@ class OnlineFilter:
             nis = self._fast(self._ws, time, z)
             if nis >= 0.0:
                 return nis
-            if nis != -3.0:  # -3: a step length not in the bank yet (no series table)
+            if nis == -6.0 or (nis == -2.0 and self._auto):  # Joseph loses digits / fails
+                self._to_sqrt()
+            elif nis != -3.0:  # -3: a step length not in the bank yet (no series table)
                 self._raise(int(-nis), time, z)
         return self._update_slow(float(time), np.asarray(z, dtype=np.float64), mask)
 
@@ -266,23 +299,25 @@ class OnlineFilter:
             )
         n = self.model.state_dim
         out = StreamEstimates(np.empty((n_rows, n)), np.empty((n_rows, n)), np.empty(n_rows))
-        if self._fast_run is None:
-            for k in range(n_rows):
-                out.nis[k] = self.update(t[k], z[k])
-                out.mean[k] = self._blocks["x"]
-                out.variance[k] = np.diagonal(self._blocks["p"])
-            return out
         k = 0
-        while True:
+        while self._fast_run is not None:
             status, k = self._fast_run(self._ws, t, z, k, *out)
             if status == 0:
                 return out
-            if status != 3:
+            if status == 6 or (status == 2 and self._auto):  # the rest in square-root form
+                self._to_sqrt()
+            elif status == 3:  # a new step length: discretise, go on
+                self._row(t[k] - self._ws[_TIME])
+            else:
                 raise CovarianceError(
                     f"innovation covariance is not positive definite at row {k} "
                     f"(t = {t[k]} s); rows 0-{k - 1} are applied"
                 )
-            self._row(t[k] - self._ws[_TIME])  # a new step length: discretise, go on
+        for row in range(k, n_rows):
+            out.nis[row] = self.update(t[row], z[row])
+            out.mean[row] = self._blocks["x"]
+            out.variance[row] = np.diagonal(self._blocks["p"])
+        return out
 
     def _update_slow(self, t: float, z: FloatArray, mask: ArrayLike | None) -> float:
         dt = t - self._ws[_TIME]
@@ -297,18 +332,40 @@ class OnlineFilter:
             self._raise(1, t, z)
         n = self.model.state_dim
         phi, qd, u = np.split(self._bank[self._row(dt), 1:], [n * n, 2 * n * n])
+        phi, qd = phi.reshape(n, n), qd.reshape(n, n)
         blk = self._blocks
-        ok, nis, logdet, nobs = kf_step(  # the generic compiled step, in the work buffer
-            blk["x"], blk["p"], phi.reshape(n, n), qd.reshape(n, n), u, z, present, blk["h"],
-            blk["r"], blk["off"], self._ws[2] != 0.0, blk["xp"], blk["pp"], blk["tmp"],
-            blk["hm"], blk["rm"], blk["hp"], blk["s"], blk["lo"], blk["kt"], blk["nu"],
-            blk["w"], blk["ikh"],
-        )  # fmt: skip
-        if not ok:
-            self._raise(2, t, z)
+        if self._sqrt:
+            nis, logdet, nobs = self._sqrt_step(phi, qd, u, z, present)
+        else:
+            x, p = blk["x"].copy(), blk["p"].copy()
+            ok, nis, logdet, nobs = kf_step(  # the generic compiled step, in the work buffer
+                blk["x"], blk["p"], phi, qd, u, z, present, blk["h"], blk["r"], blk["off"],
+                self._ws[2] != 0.0, blk["xp"], blk["pp"], blk["tmp"], blk["hm"], blk["rm"],
+                blk["hp"], blk["s"], blk["lo"], blk["kt"], blk["nu"], blk["w"], blk["ikh"],
+            )  # fmt: skip
+            if self._auto and (not ok or np.trace(blk["s"]) > self._ws[WS_TRACE_LIMIT]):
+                blk["x"][:], blk["p"][:] = x, p
+                self._to_sqrt()
+                nis, logdet, nobs = self._sqrt_step(phi, qd, u, z, present)
+            elif not ok:
+                self._raise(2, t, z)
         self._ws[3:_TIME] = nis, -0.5 * (logdet + nis + nobs * _LOG_2PI) if nobs else 0.0, nobs
         self._ws[_TIME] = t
         return float(nis)
+
+    def _sqrt_step(
+        self, phi: FloatArray, qd: FloatArray, u: FloatArray, z: FloatArray, present: BoolArray
+    ) -> tuple[float, float, float]:
+        """One square-root step on the work buffer; returns NIS, log det S, observed count."""
+        blk = self._blocks
+        lower_factor_into(qd, blk["sq"], blk["sq_tmp"])
+        _, nis, logdet, nobs = sqrt_step(  # R is positive definite: the step cannot fail
+            blk["x"], blk["fac"], phi, blk["sq"], u, z, present, blk["h"], blk["r"], blk["off"],
+            blk["xp"], blk["pre1"], blk["pre2"], blk["rm"], blk["sr"], blk["nu"], blk["w"],
+            blk["gain"],
+        )  # fmt: skip
+        outer_into(blk["fac"], blk["p"], self.model.state_dim)
+        return nis, logdet, nobs
 
     def _raise(self, status: int, time: float, z: FloatArray) -> None:
         if status == 1:
