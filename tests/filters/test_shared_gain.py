@@ -77,8 +77,11 @@ def test_bad_input_is_named(backend, rng):
     model, m, n_tracks = CASES[2]
     t, z, h, r, mask, prior = _problem(model, m, n_tracks, rng)
     k = int(np.flatnonzero(mask[:, 1])[3])
-    z[4, k, 1] = np.inf
-    with pytest.raises(ValueError, match=f"inf at track 4, step {k}, component 1"):
+    z[4, k, 1] = np.nan
+    with pytest.raises(ValueError, match=f"nan at track 4, step {k}, component 1 where the"):
+        shared_gain_filter(t, z, model, h, r, prior, mask=mask, backend=backend)
+    z[4, k, 1] = np.inf  # never valid (as in kalman_filter)
+    with pytest.raises(ValueError, match=rf"measurements must be finite; got inf at index \(4, {k}"):
         shared_gain_filter(t, z, model, h, r, prior, mask=mask, backend=backend)
     z[4, k, 1] = 0.0
     with pytest.raises(ValueError, match="one pattern shared by all tracks"):

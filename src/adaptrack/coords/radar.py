@@ -9,15 +9,28 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._linalg import mT
+from .._linalg import mT, symmetrize
 from .._typing import ArrayLike, FloatArray
-from .._validation import as_float_array
+from .._validation import as_float_array, check_symmetric_pd
 
 
 def wrap_to_pi(angle: ArrayLike) -> FloatArray:
     """Wrap angles [rad] to [-pi, pi)."""
     a = as_float_array(angle, "angle")
     return (a + np.pi) % (2 * np.pi) - np.pi
+
+
+def _polar(polar: ArrayLike) -> FloatArray:
+    """Return validated (range, azimuth, elevation) (..., 3): finite, range >= 0."""
+    a = as_float_array(polar, "polar", min_ndim=1)
+    if a.shape[-1] != 3:
+        raise ValueError(
+            f"polar must have shape (..., 3) (range, azimuth, elevation); got {a.shape}"
+        )
+    if np.any(a[..., 0] < 0):
+        idx = tuple(int(i) for i in np.argwhere(a[..., 0] < 0)[0])
+        raise ValueError(f"polar range must be >= 0; got {a[idx + (0,)]} at index {idx}")
+    return a
 
 
 def polar_to_enu(polar: ArrayLike) -> FloatArray:
@@ -28,11 +41,7 @@ def polar_to_enu(polar: ArrayLike) -> FloatArray:
     >>> polar_to_enu([1000.0, 0.0, 0.0]).round(6)
     array([   0., 1000.,    0.])
     """
-    a = as_float_array(polar, "polar", min_ndim=1)
-    if a.shape[-1] != 3:
-        raise ValueError(
-            f"polar must have shape (..., 3) (range, azimuth, elevation); got {a.shape}"
-        )
+    a = _polar(polar)
     r, e, b = a[..., 0], a[..., 1], a[..., 2]
     return r[..., None] * np.stack([np.cos(b) * np.sin(e), np.cos(b) * np.cos(e), np.sin(b)], -1)
 
@@ -162,12 +171,21 @@ def polar_kinematics_jacobian(a: ArrayLike) -> FloatArray:
 
 def polar_to_enu_cov(polar: ArrayLike, polar_cov: ArrayLike) -> FloatArray:
     """Covariance (..., 3, 3) of ENU positions converted from (r, az, el) with covariance."""
-    a = as_float_array(polar, "polar", min_ndim=1)
+    a = _polar(polar)
     c = as_float_array(polar_cov, "polar_cov", min_ndim=2)
+    if c.shape[-2:] != (3, 3):
+        raise ValueError(f"polar_cov must have shape (..., 3, 3); got {c.shape}")
+    check_symmetric_pd(c, "polar_cov", semidefinite=True)
+    try:
+        batch = np.broadcast_shapes(a.shape[:-1], c.shape[:-2])
+    except ValueError:
+        raise ValueError(
+            f"polar {a.shape} and polar_cov {c.shape} must have broadcastable batch shapes"
+        ) from None
     r, e, b = a[..., 0:1], a[..., 1], a[..., 2]
     d = _unit_derivatives(e, b)
-    j = np.stack([d["u"], r * d["ue"], r * d["ub"]], -1)
-    return j @ c @ mT(j)
+    j = np.broadcast_to(np.stack([d["u"], r * d["ue"], r * d["ub"]], -1), batch + (3, 3))
+    return symmetrize(j @ c @ mT(j))
 
 
 def polar_kinematics_cov_to_ecef(

@@ -103,9 +103,14 @@ def mode_update_into(ll, log_c, joint, log_mu, mu):  # type: ignore[no-untyped-d
     for j in range(n_models):
         joint[j] = ll[j] + log_c[j]
     total = _logsumexp(joint)
+    norm = 0.0
     for j in range(n_models):
         log_mu[j] = joint[j] - total
         mu[j] = math.exp(log_mu[j])
+        norm += mu[j]
+    for j in range(n_models):  # renormalise: 1 up to the rounding of large log-likelihoods
+        mu[j] /= norm
+        log_mu[j] -= math.log(norm)
     return total
 
 

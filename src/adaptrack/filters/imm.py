@@ -216,6 +216,8 @@ def imm_filter(
         ll_mix[..., k] = logsumexp(joint, axis=-1)
         log_mu = joint - ll_mix[..., k][..., None]
         mu = np.exp(log_mu)
+        total = mu.sum(axis=-1, keepdims=True)  # 1 up to the rounding of large log-likelihoods
+        mu, log_mu = mu / total, log_mu - np.log(total)
         probs[..., k, :] = mu
         means = np.stack([states[j].mean[..., out_idx[j]] for j in range(n_models)], -2)
         covs = np.stack(

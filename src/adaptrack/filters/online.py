@@ -15,6 +15,7 @@ update too; other methods discretise it in NumPy.
 from __future__ import annotations
 
 import math
+import numbers
 from typing import NamedTuple
 
 import numpy as np
@@ -88,6 +89,21 @@ def _offsets(
         pos += math.prod(shape)
     out["end"] = (pos, ())
     return out
+
+
+def _time(value: object) -> float:
+    """Return a measurement time [s] as float: a real scalar (Python, NumPy or 0-d array)."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (numbers.Real, np.ndarray)):
+        raise TypeError(f"time must be a real number [s]; got {type(value).__name__}")
+    arr = np.asarray(value)
+    if arr.ndim != 0 or not np.isrealobj(arr):
+        raise TypeError(f"time must be a real scalar [s]; got an array of shape {arr.shape}")
+    return float(arr)
+
+
+def _measurement(value: ArrayLike) -> FloatArray:
+    """Return a measurement as a float array (its shape is checked by the step)."""
+    return as_float_array(value, "measurement", allow_nan=True)
 
 
 class StreamEstimates(NamedTuple):
@@ -256,7 +272,9 @@ class OnlineFilter:
         CovarianceError
             If the innovation covariance is not positive definite (filter unchanged).
         """
-        z = measurement if type(measurement) is np.ndarray else np.asarray(measurement, float)
+        if type(time) is not float:  # the compiled step takes a float (a one-line check)
+            time = _time(time)
+        z = measurement if type(measurement) is np.ndarray else _measurement(measurement)
         if mask is None and self._fast is not None:
             nis = self._fast(self._ws, time, z)
             if nis >= 0.0:

@@ -186,6 +186,10 @@ def kalman_filter(
             f"{idx}: {np.broadcast_to(initial.time, batch)[idx]} > "
             f"{np.broadcast_to(t0, batch)[idx]}"
         )
+    if measurement_noise_mean is not None:
+        mu = as_float_array(measurement_noise_mean, "measurement_noise_mean")
+        if mu.shape not in ((), (m,)):
+            raise ValueError(f"measurement_noise_mean must have shape ({m},); got {mu.shape}")
     mk = np.array(_component_mask(mask, z.shape, "mask"))
     nan = np.isnan(z) & mk
     if np.any(nan):
@@ -224,6 +228,8 @@ def kalman_filter(
     )
     if form != "auto":
         return _solve(problem, compiled)
+    if _ill_conditioned(r):  # S >= R: every step would exceed the Joseph limit
+        return _solve(replace(problem, form="sqrt"), compiled)
     try:
         result = _solve(problem, compiled)
     except CovarianceError:
@@ -240,9 +246,19 @@ def kalman_filter(
 JOSEPH_MAX_RATIO = 1e8
 
 
+def _ill_conditioned(r: FloatArray) -> bool:
+    """Whether some ``R`` (..., m, m) has ``trace(R) > JOSEPH_MAX_RATIO * lambda_min(R)``."""
+    return bool(np.any(np.trace(r, axis1=-2, axis2=-1) > JOSEPH_MAX_RATIO * _min_eig(r)))
+
+
+def _min_eig(r: FloatArray) -> FloatArray:
+    """Smallest eigenvalue of each symmetric ``R`` (..., m, m)."""
+    return np.linalg.eigvalsh(r)[..., 0]
+
+
 def joseph_loses_digits(result: FilterResult) -> bool:
     """Whether any step's ``trace(S) / lambda_min(R)`` exceeds :data:`JOSEPH_MAX_RATIO`."""
-    r_min = np.linalg.eigvalsh(result.measurement_cov)[..., 0]
+    r_min = _min_eig(result.measurement_cov)
     s_trace = np.trace(result.info.innovation_cov, axis1=-2, axis2=-1)
     r_min = r_min if r_min.ndim == s_trace.ndim else r_min[..., None]
     return bool(np.any(s_trace > JOSEPH_MAX_RATIO * r_min))

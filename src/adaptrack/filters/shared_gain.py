@@ -22,14 +22,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._backend import Backend, use_compiled
-from .._linalg import mT, symmetrize
 from .._typing import ArrayLike, FloatArray
-from .._validation import as_float_array, check_symmetric_pd, check_times
+from .._validation import as_float_array
 from ..models.continuous import MotionModel, as_motion_model
 from ..models.discretize import Method, Noise
+from ..smoothers.rts import rts_smooth, smoother_gains
 from ..types import GaussianState, as_gaussian_state
-from .kalman import UpdateForm, _check_form, covariance_recursion
-from .run import _transitions
+from .run import FilterForm, kalman_filter
 
 
 @dataclass(frozen=True, eq=False)
@@ -60,7 +59,7 @@ def shared_gain_filter(
     method: Method = "expm",
     noise: Noise = "white",
     order: int = 2,
-    form: UpdateForm = "joseph",
+    form: FilterForm = "auto",
     measurement_noise_mean: ArrayLike | None = None,
     backend: Backend = "auto",
 ) -> SharedGainResult:
@@ -106,41 +105,32 @@ def shared_gain_filter(
     """
     model = as_motion_model(model)
     initial = as_gaussian_state(initial, "initial")
-    form = _check_form(form)
     n = model.state_dim
     t = as_float_array(times, "times", min_ndim=1)
     if t.ndim != 1 or t.size == 0:
         raise ValueError(f"times must have shape (T,) with T >= 1; got {t.shape}")
-    check_times(t, "times")
-    z = np.asarray(measurements, dtype=np.float64)
+    z = as_float_array(measurements, "measurements", allow_nan=True)
     if z.ndim != 3 or z.shape[1] != t.size:
         raise ValueError(f"measurements must have shape (N, {t.size}, m); got {z.shape}")
     n_tracks, n_steps, m = z.shape
-    h = as_float_array(measurement_matrix, "measurement_matrix", min_ndim=2)
-    if h.shape != (m, n):
-        raise ValueError(f"measurement_matrix must have shape ({m}, {n}); got {h.shape}")
-    r = as_float_array(measurement_cov, "measurement_cov", min_ndim=2)
-    if r.shape != (m, m):
-        raise ValueError(f"measurement_cov must have shape ({m}, {m}); got {r.shape}")
-    check_symmetric_pd(r, "measurement_cov")
     cov0 = _shared_prior_cov(initial, n_tracks, n)
     t_init = np.asarray(initial.time, dtype=np.float64)
     if t_init.size == 0 or np.any(t_init != t_init.flat[0]):
         raise ValueError("initial.time must be one time shared by all tracks")
-    t_init = t_init.flat[0]
-    check_symmetric_pd(cov0, "initial.cov", semidefinite=True)
-    if t_init > t[0]:
-        raise ValueError(
-            f"initial.time must not be after the first measurement time; {t_init} > {t[0]}"
-        )
     present = _shared_mask(mask, n_steps, m)
+    _check_finite(z, present)
     out = _output(out, (n_tracks, n_steps, n))
-    phi, qd, u = _transitions(model, t, t_init, method, noise, order)
     compiled = use_compiled(backend, n_tracks * n_steps)
-    if compiled:
-        pc, fc, kg = _covariances_compiled(phi, qd, u, h, r, present, cov0, form)
-    else:
-        pc, fc, _, kg, _, _ = covariance_recursion(phi, qd, h, r, present, cov0, form)
+    # The covariances and gains do not depend on the measurements: one track of the filter
+    # gives them, validated as kalman_filter validates (and in square-root form where needed).
+    one = kalman_filter(
+        t, np.zeros((n_steps, m)), model, measurement_matrix, measurement_cov,
+        GaussianState(np.zeros(n), cov0, t_init.flat[0]), mask=present, method=method,
+        noise=noise, order=order, form=form, measurement_noise_mean=measurement_noise_mean,
+        backend="numba" if compiled else "numpy",
+    )  # fmt: skip
+    phi, u, h = one.transition, one.control, one.measurement_matrix
+    fc, kg = one.filtered.cov, one.info.gain
     hm = h * present[..., None]
     ikh = np.eye(n) - kg @ hm
     a = ikh @ phi
@@ -158,25 +148,14 @@ def shared_gain_filter(
         forward(a, contiguous(b), contiguous(kg), present, contiguous(z), x0, out)
     else:
         _forward_numpy(a, b, kg, present, z, x0, out)
-    if not np.isfinite(out[:, -1]).all():  # a non-finite input reaches the last state
-        _check_finite(z, present)
+    if not np.isfinite(out[:, -1]).all():  # finite input overflowed
         raise FloatingPointError("the filtered means overflowed; check the scale of the input")
     if not smooth:
         return SharedGainResult(t, out, fc, smoothed=False)
-    c = np.ascontiguousarray(mT(np.linalg.solve(pc[1:], phi[1:] @ fc[:-1])))  # C_0 .. C_T-2
+    c = np.ascontiguousarray(smoother_gains(fc[:-1], one.predicted.cov[1:], phi[1:]))
     d = np.eye(n) - c @ phi[1:]
     e = np.ascontiguousarray(-np.einsum("kij,kj->ki", c, u[1:]))
-    if compiled:
-        from ..smoothers._kernels import rts_kernel
-
-        zeros = np.zeros((1, n_steps, n))
-        c4 = np.ascontiguousarray
-        _, ps = rts_kernel(zeros, fc[None], zeros, pc[None], c4(phi[None]), c4(qd[None]), False)
-        ps = ps[0]
-    else:
-        ps = fc.copy()
-        for k in range(n_steps - 2, -1, -1):
-            ps[k] = symmetrize(fc[k] + c[k] @ (ps[k + 1] - pc[k + 1]) @ c[k].T)
+    ps = rts_smooth(one, backend="numba" if compiled else "numpy").cov
     if compiled:
         from ._codegen import GENERATED_MAX_STATES, backward_kernel
         from ._kernels import affine_backward
@@ -186,41 +165,6 @@ def shared_gain_filter(
     else:
         _backward_numpy(d, c, e, out)
     return SharedGainResult(t, out, ps, smoothed=True)
-
-
-def _covariances_compiled(
-    phi: FloatArray,
-    qd: FloatArray,
-    u: FloatArray,
-    h: FloatArray,
-    r: FloatArray,
-    present: np.ndarray,
-    cov0: FloatArray,
-    form: str,
-) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Predicted/filtered covariances and gains from the compiled filter run on one track."""
-    from ._kernels import run_kernels
-
-    n_steps, n = phi.shape[0], phi.shape[-1]
-    m = h.shape[0]
-    try:
-        res = run_kernels(
-            np.zeros((1, n)),
-            cov0[None],
-            phi[None],
-            qd[None],
-            u[None],
-            np.zeros((1, n_steps, m)),
-            present[None],
-            h,
-            r[None, None],
-            np.zeros(m),
-            form == "joseph",
-        )
-    except ValueError:  # not positive definite: the reference recursion names the step
-        covariance_recursion(phi, qd, h, r, present, cov0, form)
-        raise
-    return res[1][0], res[3][0], res[8][0]
 
 
 def _shared_prior_cov(initial: GaussianState, n_tracks: int, n: int) -> FloatArray:

@@ -140,8 +140,8 @@ def discretize_with_input(
         steps, inv = np.unique(dt_arr, return_inverse=True)
     parts = [
         _discretize_model(model, steps[i : i + _CHUNK], method, noise, order)
-        for i in range(0, steps.size, _CHUNK)
-    ]
+        for i in range(0, max(steps.size, 1), _CHUNK)
+    ]  # an empty dt still gives one (empty) part: arrays of shape dt.shape + (n, n)
 
     def per_step(j: int) -> FloatArray:
         """Gather the table of distinct steps (contiguous: layout decides BLAS rounding)."""

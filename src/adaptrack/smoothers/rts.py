@@ -28,7 +28,7 @@ def _shared(a: FloatArray, batch_ndim: int) -> FloatArray | None:
     return None
 
 
-def _gains(pf: FloatArray, pp_next: FloatArray, phi_next: FloatArray) -> FloatArray:
+def smoother_gains(pf: FloatArray, pp_next: FloatArray, phi_next: FloatArray) -> FloatArray:
     """``C = P_k|k Phi^T P_{k+1|k}^-1``; the pseudo-inverse where ``P_{k+1|k}`` is singular.
 
     A singular prediction (a known component and no process noise) is legitimate: its range
@@ -118,10 +118,10 @@ def rts_smooth(
         i, j = tail + (k,), tail + (k + 1,)
         if shared:
             pf, pp, phi, qd = shared
-            c = _gains(pf[k], pp[k + 1], phi[k + 1])
+            c = smoother_gains(pf[k], pp[k + 1], phi[k + 1])
             sc[k] = _smoothed_cov(pf[k], c, sc[k + 1], pp[k + 1], phi[k + 1], qd[k + 1], joseph)
         else:
-            c = _gains(filt.cov[i], pred.cov[j], result.transition[j])
+            c = smoother_gains(filt.cov[i], pred.cov[j], result.transition[j])
             sc[i] = _smoothed_cov(
                 filt.cov[i],
                 c,

@@ -1,0 +1,625 @@
+"""Fuzzing of the public functions: random valid and broken inputs, outcomes by category.
+
+Every case is a call of one public function (or of two paths that must agree: the NumPy and
+compiled backends, ``shared_gain_filter`` and ``kalman_filter``, ``OnlineFilter`` and
+``kalman_filter``) on inputs drawn from a :class:`Source`. A *valid* case lies in the domain
+the functions are specified for (steps 1e-6 to 1e4 s, measurement covariances of condition
+number up to 1e12, priors from 1e-6 to 1e8, semi-definite priors, missing components); a
+*broken* case is a valid one with one argument spoiled (NaN/inf, wrong shape or type, unsorted
+or duplicate times, an asymmetric or indefinite covariance, an unknown option). Outcomes:
+
+- ``ok``: a valid case returned finite, symmetric PSD results on which all paths agree;
+- ``ok, agreement not checked``: the same, on a problem whose conditioning ratio
+  ``max trace(S) / lambda_min(R)`` exceeds 1e12, the edge of the specified domain (a prior or a
+  gap's process noise 1e12 times the smallest measurement variance): there double precision
+  determines the means to no better than a sigma in any algorithm, so paths are not compared;
+- ``rejected``: a broken case raised ``ValueError``/``TypeError`` from adaptrack's own code
+  with a message naming the spoiled argument;
+- defects: ``deep exception`` (any other exception, or one raised inside numpy/scipy/numba),
+  ``silent non-finite``, ``non-PSD covariance``, ``disagreement``, ``valid rejected``,
+  ``broken accepted``, ``misleading message`` (the message does not name the argument).
+
+The Hypothesis properties in ``tests/stress/test_fuzz.py`` draw cases through the same
+generators (the fast profile); the long profile is this module::
+
+    python -m tests.stress.fuzz --cases 100000
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+import traceback
+from collections import Counter
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+import adaptrack as at
+from adaptrack import coords
+from adaptrack.filters.imm import imm_filter
+from adaptrack.models import ConstantAcceleration, ConstantVelocity, Singer
+
+PACKAGE = str(Path(at.__file__).parent)
+DEFECTS = (
+    "deep exception",
+    "silent non-finite",
+    "non-PSD covariance",
+    "disagreement",
+    "valid rejected",
+    "broken accepted",
+    "misleading message",
+)
+# Agreement of two paths on a valid case. Both run the square-root filter where the problem is
+# ill-conditioned; on the domain's edge (ratio 1e12) each is within ~3e-3 posterior sigma of a
+# 50-digit reference (tests/filters/test_square_root.py), so two of them agree within 1e-2.
+MEAN_TOL_SIGMA = 1e-2
+COV_TOL = 1e-3  # of sigma_i sigma_j
+DOMAIN_RATIO = 1e12  # largest trace(S) / lambda_min(R) of the specified domain
+
+
+class Source:
+    """Random choices of one case: from a NumPy generator, or (subclass) from Hypothesis."""
+
+    def __init__(self, rng: np.random.Generator) -> None:
+        self.rng = rng  # bulk arrays always come from here
+
+    def integer(self, lo: int, hi: int) -> int:
+        """Integer in [lo, hi]."""
+        return int(self.rng.integers(lo, hi + 1))
+
+    def real(self, lo: float, hi: float) -> float:
+        """Real in [lo, hi]."""
+        return float(self.rng.uniform(lo, hi))
+
+    def choice(self, options: Sequence[Any]) -> Any:
+        """One of ``options``."""
+        return options[self.integer(0, len(options) - 1)]
+
+    def log_real(self, lo: float, hi: float) -> float:
+        """Real log-uniform in [lo, hi]."""
+        return float(10.0 ** self.real(np.log10(lo), np.log10(hi)))
+
+
+@dataclass
+class Outputs:
+    """What a call returned: arrays that must be finite, covariances that must be PSD, pairs
+    that must agree ``(label, a, b, sigma)`` with ``sigma`` the scale of the comparison."""
+
+    finite: list[np.ndarray] = field(default_factory=list)
+    covs: list[np.ndarray] = field(default_factory=list)
+    agree: list[tuple[str, np.ndarray, np.ndarray, np.ndarray]] = field(default_factory=list)
+    probabilities: list[np.ndarray] = field(default_factory=list)
+    ratio: float = 0.0  # the problem's max trace(S) / lambda_min(R)
+
+    def state(self, mean: np.ndarray, cov: np.ndarray) -> None:
+        """A Gaussian result: mean finite, covariance finite and PSD."""
+        self.finite += [mean, cov]
+        self.covs.append(cov)
+
+    def conditioning(self, result: Any) -> None:
+        """Record the conditioning ratio of a :class:`~adaptrack.FilterResult`'s problem."""
+        s_trace = np.trace(result.info.innovation_cov, axis1=-2, axis2=-1)
+        r_min = np.linalg.eigvalsh(result.measurement_cov)[..., 0]
+        r_min = r_min if r_min.ndim == s_trace.ndim else r_min[..., None]
+        self.ratio = max(self.ratio, float(np.max(s_trace / r_min)))
+
+    def compare(self, label: str, a: Any, b: Any) -> None:
+        """Two Gaussian results (``.mean``/``.cov``) that must agree in their sigmas."""
+        sigma = np.sqrt(np.clip(np.diagonal(b.cov, axis1=-2, axis2=-1), 0.0, None))
+        self.agree.append((label + " mean", a.mean, b.mean, sigma))
+        self.agree.append((label + " cov", a.cov, b.cov, sigma[..., :, None] * sigma[..., None, :]))
+
+
+@dataclass(frozen=True)
+class Case:
+    """One call: ``run()`` returns :class:`Outputs`; a broken case names the spoiled argument."""
+
+    target: str
+    run: Callable[[], Outputs]
+    broken: str | None = None  # argument the message must name; None for a valid case
+    what: str = ""
+
+
+def outcome(case: Case) -> tuple[str, str]:
+    """Category of ``case`` and a one-line detail."""
+    try:
+        out = case.run()
+    except (ValueError, TypeError) as exc:
+        where = traceback.extract_tb(exc.__traceback__)[-1].filename
+        if not where.startswith(PACKAGE) or "/_vendor" in where:
+            return "deep exception", f"{type(exc).__name__} in {where}: {exc}"
+        if case.broken is None:
+            return "valid rejected", f"{type(exc).__name__}: {exc}"
+        if case.broken not in str(exc):
+            return "misleading message", f"{case.broken} ({case.what}): {exc}"
+        return "rejected", ""
+    except Exception as exc:  # every other exception is the defect counted
+        return "deep exception", f"{type(exc).__name__}: {exc}"
+    if case.broken is not None:
+        return "broken accepted", f"{case.broken}: {case.what}"
+    return check(out)
+
+
+def check(out: Outputs) -> tuple[str, str]:
+    """Category of a valid case's outputs."""
+    for a in out.finite:
+        if not np.all(np.isfinite(a)):
+            return "silent non-finite", f"shape {np.shape(a)}"
+    for c in out.covs:
+        if c.size == 0:
+            continue
+        if np.any(c != np.swapaxes(c, -1, -2)):
+            return "non-PSD covariance", "not symmetric"
+        scale = np.abs(c).max(axis=(-2, -1))
+        low = np.linalg.eigvalsh(c)[..., 0]
+        if np.any(low < -1e-12 * scale):
+            return "non-PSD covariance", f"eigenvalue {low.min():.3g} of scale {scale.max():.3g}"
+    for p in out.probabilities:
+        if np.any(p < 0) or np.any(np.abs(p.sum(-1) - 1.0) > 1e-9):
+            return "disagreement", "mode probabilities are not a distribution"
+    if out.agree and out.ratio > DOMAIN_RATIO:
+        return "ok, agreement not checked", f"ratio {out.ratio:.2g}"
+    for label, a, b, sigma in out.agree:
+        tol = MEAN_TOL_SIGMA if label.endswith("mean") else COV_TOL
+        err = np.abs(a - b) / np.where(sigma > 0, sigma, 1.0)
+        if np.any(err > tol) and np.any(np.abs(a - b) > 1e-12 * np.abs(b).max()):
+            return "disagreement", f"{label}: {err.max():.3g}"
+    return "ok", ""
+
+
+# ---------------------------------------------------------------------------- problems
+
+
+@dataclass(frozen=True)
+class Problem:
+    """A valid linear-Gaussian filtering problem (batch of tracks or one track)."""
+
+    times: np.ndarray
+    z: np.ndarray
+    model: Any
+    h: np.ndarray
+    r: np.ndarray
+    prior: at.GaussianState
+    mask: np.ndarray
+    offset: np.ndarray | None
+
+
+def spd(src: Source, m: int, condition: float, scale: float) -> np.ndarray:
+    """Random symmetric positive definite (m, m) of the given condition number."""
+    q, _ = np.linalg.qr(src.rng.normal(size=(m, m)))
+    eig = scale * np.geomspace(1.0, 1.0 / condition, m) if m > 1 else np.array([scale])
+    a = (q * eig) @ q.T
+    return 0.5 * (a + a.T)
+
+
+def problem(src: Source, *, shared: bool = False, tracks: int | None = None) -> Problem:
+    """A random valid problem; ``shared``: every track on the same times, R, mask and prior cov."""
+    axes = src.integer(1, 2)
+    model = src.choice(
+        [
+            ConstantVelocity(accel_psd=src.log_real(1e-4, 1e2), n_axes=axes),
+            ConstantAcceleration(jerk_psd=src.log_real(1e-4, 1e2), n_axes=axes),
+            Singer(
+                time_constant_s=src.log_real(0.1, 100.0),
+                accel_std_mps2=src.log_real(1e-2, 30.0),
+                n_axes=axes,
+            ),
+        ]
+    )
+    n, m = model.state_dim, axes
+    n_tracks = src.integer(1, 3) if tracks is None else tracks
+    n_steps = src.integer(1, 25)
+    batch = (n_tracks,)
+    dt_shape = (n_steps,) if shared or src.integer(0, 1) else batch + (n_steps,)
+    lo, hi = sorted((src.log_real(1e-6, 1e4), src.log_real(1e-6, 1e4)))
+    times = np.cumsum(10.0 ** src.rng.uniform(np.log10(lo), np.log10(hi), dt_shape), axis=-1)
+    h = np.zeros((m, n))
+    h[np.arange(m), [model.state_names.index(s) for s in model.state_names[:m]]] = 1.0
+    r = spd(src, m, src.log_real(1.0, 1e12), src.log_real(1e-6, 1e6))
+    p0 = np.diag(10.0 ** src.rng.uniform(-6, 8, n))
+    if src.integer(0, 4) == 0:
+        p0[n - 1, n - 1] = 0.0  # a known component: semi-definite prior
+    mean0 = src.rng.normal(size=batch + (n,)) * 10.0
+    prior = at.GaussianState(mean0, np.broadcast_to(p0, batch + (n, n)), 0.0)
+    truth = src.rng.normal(size=batch + (n_steps, m)) * np.sqrt(np.diag(r)) * 3.0
+    z = truth + 5.0 * np.broadcast_to(times, batch + (n_steps,))[..., None]
+    mask = src.rng.uniform(size=(n_steps, m) if shared else z.shape) > src.real(0.0, 0.5)
+    offset = src.rng.normal(size=m) if src.integer(0, 3) == 0 else None
+    return Problem(times, z, model, h, r, prior, mask, offset)
+
+
+def _filter(p: Problem, **kw: Any) -> Any:
+    return at.kalman_filter(
+        p.times, p.z, p.model, p.h, p.r, p.prior, mask=p.mask,
+        measurement_noise_mean=p.offset, **kw,
+    )  # fmt: skip
+
+
+# ----------------------------------------------------------------- spoiling an argument
+
+SPOILS = ("nan", "inf", "shape", "string", "complex", "none", "empty")
+
+
+def spoil(value: Any, how: str, src: Source) -> Any:
+    """``value`` (array-like) spoiled in one generic way."""
+    a = np.array(value, dtype=float)
+    if how in ("nan", "inf") and a.size:
+        idx = tuple(src.integer(0, s - 1) for s in a.shape)
+        a[idx] = np.nan if how == "nan" else -np.inf
+        return a
+    if how == "shape":
+        return a[..., :-1] if a.ndim and a.shape[-1] > 1 else a[..., None, None]
+    if how == "string":
+        return "1.0"
+    if how == "complex":
+        return a + 1j
+    if how == "none":
+        return None
+    return np.zeros((0,) * max(a.ndim, 1))
+
+
+def spoil_cov(r: np.ndarray, how: str) -> np.ndarray:
+    """A covariance made asymmetric or indefinite."""
+    r = r.copy()
+    if how == "asymmetric" and r.shape[-1] > 1:
+        r[..., 0, 1] += 1e-3 * np.abs(r).max() + 1.0
+        return r
+    return r - 2.0 * np.abs(np.linalg.eigvalsh(r)).max() * np.eye(r.shape[-1])
+
+
+def spoil_times(t: np.ndarray, how: str) -> np.ndarray:
+    """Times made unsorted or duplicated (needs at least two steps)."""
+    t = t.copy()
+    if how == "duplicate":
+        t[..., 1] = t[..., 0]
+    else:
+        t[..., [0, 1]] = t[..., [1, 0]]
+    return t
+
+
+# --------------------------------------------------------------------------- targets
+
+
+def kalman_filter_case(src: Source) -> Case:
+    """``kalman_filter`` on both backends (and the smoother on both), or a spoiled call."""
+    p = problem(src)
+    if src.integer(0, 2):
+
+        def run() -> Outputs:
+            out = Outputs()
+            a, b = (_filter(p, backend=bk) for bk in ("numpy", "numba"))
+            for res in (a, b):
+                out.state(res.filtered.mean, res.filtered.cov)
+                out.state(res.predicted.mean, res.predicted.cov)
+            out.conditioning(a)
+            out.compare("kalman_filter numpy/numba", b.filtered, a.filtered)
+            sa, sb = (at.rts_smooth(a, backend=bk) for bk in ("numpy", "numba"))
+            out.state(sa.mean, sa.cov)
+            out.state(sb.mean, sb.cov)
+            out.compare("rts_smooth numpy/numba", sb, sa)
+            return out
+
+        return Case("kalman_filter", run)
+    return spoiled_filter_case(src, p, "kalman_filter", _filter_call)
+
+
+def _filter_call(p: Problem, **kw: Any) -> Outputs:
+    args = dict(
+        times=p.times, measurements=p.z, model=p.model, measurement_matrix=p.h,
+        measurement_cov=p.r, initial=p.prior, mask=p.mask, measurement_noise_mean=p.offset,
+    )  # fmt: skip
+    args.update(kw)
+    res = at.kalman_filter(**args)
+    out = Outputs()
+    out.state(res.filtered.mean, res.filtered.cov)
+    return out
+
+
+def spoiled_filter_case(src: Source, p: Problem, target: str, call: Callable[..., Outputs]) -> Case:
+    """``call(p, **{argument: spoiled})`` for one argument of the filter API spoiled."""
+    arg = src.choice(
+        ["times", "measurements", "measurement_matrix", "measurement_cov", "initial", "mask",
+         "measurement_noise_mean", "form", "method"]
+    )  # fmt: skip
+    how = src.choice(SPOILS)
+    value: Any
+    if arg == "times":
+        how = src.choice(SPOILS + ("unsorted", "duplicate")) if p.times.shape[-1] > 1 else how
+        value = spoil_times(p.times, how) if how in ("unsorted", "duplicate") else None
+        value = spoil(p.times, how, src) if value is None else value
+    elif arg == "measurements":
+        if how == "nan":  # a NaN where the mask says missing is fine: spoil a present one
+            z, idx = p.z.copy(), np.argwhere(np.broadcast_to(p.mask, p.z.shape))
+            if not len(idx):
+                return Case(target, lambda: call(p), None, "no present measurement")
+            z[tuple(idx[src.integer(0, len(idx) - 1)])] = np.nan
+            value = z
+        else:
+            value = spoil(p.z, how, src)
+    elif arg == "measurement_matrix":
+        value = spoil(p.h, how, src)
+    elif arg == "measurement_cov":
+        how = src.choice(SPOILS + ("asymmetric", "indefinite"))
+        spoilt = how in ("asymmetric", "indefinite")
+        value = spoil_cov(p.r, how) if spoilt else spoil(p.r, how, src)
+        if how == "asymmetric" and p.r.shape[-1] == 1:
+            how, value = "indefinite", spoil_cov(p.r, "indefinite")
+    elif arg == "initial":
+        how = src.choice(("indefinite", "mean shape", "late"))
+        pr = p.prior
+        if how == "indefinite":
+            value = at.GaussianState(pr.mean, spoil_cov(np.asarray(pr.cov), how), pr.time)
+        elif how == "mean shape":
+            value = at.GaussianState(pr.mean[..., :-1], pr.cov[..., :-1, :-1], pr.time)
+            if pr.mean.shape[-1] == 1:
+                value = at.GaussianState(pr.mean[..., None], pr.cov[..., None, :, :], pr.time)
+        else:
+            value = at.GaussianState(pr.mean, pr.cov, float(np.max(p.times)) + 1.0)
+    elif arg == "mask":
+        how = src.choice(("shape", "string", "float"))
+        value = {"shape": np.ones((3, 7, 5), bool), "string": "yes", "float": p.mask + 0.5}[how]
+    elif arg == "measurement_noise_mean":
+        value = spoil(np.zeros(p.h.shape[0]), how, src) if how != "none" else np.zeros(99)
+    else:
+        value = src.choice(("", "Joseph", "exact", 3))
+        how = f"option {value!r}"
+    return Case(target, lambda: call(p, **{arg: value}), arg, how)
+
+
+def shared_gain_case(src: Source) -> Case:
+    """``shared_gain_filter`` equals ``kalman_filter`` and rejects what it rejects."""
+    p = problem(src, shared=True)
+    mask = p.mask
+
+    def call(q: Problem, compare: bool = False, **kw: Any) -> Outputs:
+        args = dict(
+            times=q.times, measurements=q.z, model=q.model, measurement_matrix=q.h,
+            measurement_cov=q.r, initial=q.prior, mask=mask, measurement_noise_mean=q.offset,
+        )  # fmt: skip
+        args.update(kw)
+        res = at.shared_gain_filter(**args)
+        out = Outputs()
+        out.state(res.mean, res.cov)
+        if not compare:
+            return out
+        ref = at.kalman_filter(**args)
+        out.conditioning(ref)
+        shape = ref.filtered.cov.shape
+        got = at.GaussianState(res.mean, np.broadcast_to(res.cov, shape), ref.filtered.time)
+        out.compare("shared_gain_filter/kalman_filter", got, ref.filtered)
+        return out
+
+    if src.integer(0, 2):
+        return Case("shared_gain_filter", lambda: call(p, compare=True))
+    return spoiled_filter_case(src, p, "shared_gain_filter", call)
+
+
+def online_case(src: Source) -> Case:
+    """``OnlineFilter`` fed one track equals ``kalman_filter`` on it; bad updates are rejected."""
+    p = problem(src, tracks=1)
+    t, z, mask = np.broadcast_to(p.times, p.z.shape[:-1])[0], p.z[0], p.mask[0]
+    prior = p.prior[0]
+
+    def make() -> at.OnlineFilter:
+        return at.OnlineFilter(
+            p.model, p.h, p.r, prior, measurement_noise_mean=p.offset, cache_size=4
+        )
+
+    if src.integer(0, 2):
+
+        def run() -> Outputs:
+            f = make()
+            for k in range(t.size):
+                f.update(t[k], z[k], mask=mask[k])
+            out = Outputs()
+            out.state(f.mean, f.cov)
+            ref = at.kalman_filter(
+                t, z, p.model, p.h, p.r, prior, mask=mask, measurement_noise_mean=p.offset
+            )
+            out.conditioning(ref)
+            last = at.GaussianState(ref.filtered.mean[-1], ref.filtered.cov[-1], t[-1])
+            out.compare("OnlineFilter/kalman_filter", f.state, last)
+            return out
+
+        return Case("OnlineFilter", run)
+    arg = src.choice(("time", "measurement", "mask"))
+    how = src.choice(("nan", "past", "string", "shape", "none", "array"))
+    bad: Any = {
+        "nan": np.nan, "past": -1.0, "string": "soon", "shape": np.ones(3), "none": None,
+        "array": np.array([t[0]]),
+    }[how] if arg == "time" else (
+        spoil(z[0], how if how in SPOILS else "inf", src) if arg == "measurement"
+        else {"nan": "yes", "past": np.ones(z.shape[1] + 1, bool)}.get(how, mask[0] + 0.5)
+    )  # fmt: skip
+    if arg == "time" and how == "array":
+        return Case("OnlineFilter", lambda: _online_state(make(), t[0], z[0], mask[0]))
+    args = {"time": t[0], "measurement": z[0], "mask": np.ones_like(mask[0]), arg: bad}
+    return Case("OnlineFilter", lambda: _online_state(make(), **args), arg, how)
+
+
+def _online_state(f: at.OnlineFilter, time: Any, measurement: Any, mask: Any) -> Outputs:
+    out = Outputs()
+    f.update(time, measurement, mask=mask)
+    out.state(f.mean, f.cov)
+    return out
+
+
+def discretize_case(src: Source) -> Case:
+    """``discretize`` over the step domain: finite, PSD, exact methods agree."""
+    p = problem(src)
+    dt = np.concatenate([[0.0], 10.0 ** src.rng.uniform(-6, 4, src.integer(1, 8))])
+    if src.integer(0, 3):
+
+        def run() -> Outputs:
+            out = Outputs()
+            a = at.discretize(p.model, dt, "expm")
+            b = at.discretize(p.model, dt, "auto")
+            for d in (a, b):
+                out.finite += [d.transition]
+                out.state(d.transition[..., 0], d.process_cov)
+            sig = np.sqrt(np.diagonal(a.process_cov, axis1=-2, axis2=-1))
+            out.agree.append(
+                (
+                    "discretize expm/auto Qd",
+                    b.process_cov,
+                    a.process_cov,
+                    sig[..., :, None] * sig[..., None, :],
+                )
+            )
+            return out
+
+        return Case("discretize", run)
+    how = src.choice(SPOILS + ("negative",))
+    bad = -dt - 1.0 if how == "negative" else spoil(dt, how, src)
+    if how in ("shape", "empty"):  # any shape is valid, an empty one too
+        return Case("discretize", lambda: _disc(p.model, bad))
+    return Case("discretize", lambda: _disc(p.model, bad), "dt", how)
+
+
+def _disc(model: Any, dt: Any) -> Outputs:
+    d = at.discretize(model, dt)
+    out = Outputs()
+    out.state(d.transition, d.process_cov)
+    return out
+
+
+def imm_case(src: Source) -> Case:
+    """``imm_filter`` on both backends: agreeing, mode probabilities a distribution."""
+    p = problem(src)
+    axes = p.h.shape[0]
+    models = [
+        ConstantVelocity(accel_psd=src.log_real(1e-3, 1.0), n_axes=axes),
+        ConstantAcceleration(jerk_psd=src.log_real(1e-2, 10.0), n_axes=axes),
+    ]
+    names = models[0].state_names[:axes]
+    hs = {}
+    for model in models:
+        hs[model] = np.zeros((axes, model.state_dim))
+        hs[model][np.arange(axes), [model.state_names.index(s) for s in names]] = 1.0
+    priors = [
+        at.GaussianState(
+            np.zeros(mo.state_dim), np.diag(10.0 ** src.rng.uniform(0, 6, mo.state_dim)), 0.0
+        )
+        for mo in models
+    ]
+    stay = src.real(0.5, 0.999)
+    pi = np.array([[stay, 1 - stay], [1 - stay, stay]])
+    p0 = np.array([0.5, 0.5])
+    z = np.where(p.mask, p.z, np.nan)
+
+    def call(**kw: Any) -> Outputs:
+        args = dict(
+            times=p.times, measurements=z, models=models, measured_states=names,
+            measurement_cov=p.r, initial=priors, transition_probs=pi, initial_probs=p0,
+            mask=p.mask,
+        )  # fmt: skip
+        args.update(kw)
+        out = Outputs()
+        a, b = (imm_filter(**args, backend=bk) for bk in ("numpy", "numba"))
+        for res in (a, b):
+            out.state(res.filtered.mean, res.filtered.cov)
+            out.probabilities.append(res.mode_probabilities)
+        out.compare("imm_filter numpy/numba", b.filtered, a.filtered)
+        for model, prior in zip(models, priors, strict=True):  # each mode's conditioning
+            out.conditioning(at.kalman_filter(
+                p.times, p.z, model, hs[model], p.r, prior, mask=p.mask, backend="numpy"
+            ))  # fmt: skip
+        return out
+
+    if src.integer(0, 2):
+        return Case("imm_filter", call)
+    arg = src.choice(("transition_probs", "initial_probs", "measurement_cov", "times"))
+    how = src.choice(SPOILS + ("not stochastic",))
+    if how == "not stochastic":
+        bad: Any = {"transition_probs": pi * 1.5, "initial_probs": p0 - 1.0}.get(arg)
+        if bad is None:
+            how, bad = "indefinite", spoil_cov(p.r, "indefinite")
+    else:
+        bad = spoil({"transition_probs": pi, "initial_probs": p0, "measurement_cov": p.r,
+                     "times": p.times}[arg], how, src)  # fmt: skip
+    return Case("imm_filter", lambda: call(**{arg: bad}), arg, how)
+
+
+def coords_case(src: Source) -> Case:
+    """Radar polar <-> ENU with covariance: finite, symmetric PSD."""
+    n = src.integer(1, 5)
+    polar = np.column_stack(
+        [
+            10.0 ** src.rng.uniform(-3, 6, n) * (src.rng.uniform(size=n) > 0.1),
+            src.rng.uniform(-np.pi, np.pi, n),
+            src.rng.uniform(-1.5, 1.5, n),
+        ]
+    )
+    cov = np.stack([spd(src, 3, src.log_real(1.0, 1e8), src.log_real(1e-8, 1e2)) for _ in range(n)])
+
+    def run(polar: Any = polar, polar_cov: Any = cov) -> Outputs:
+        out = Outputs()
+        enu = coords.polar_to_enu(polar)
+        c = coords.polar_to_enu_cov(polar, polar_cov)
+        out.state(enu, c)
+        return out
+
+    if src.integer(0, 2):
+        return Case("coords", run)
+    arg = src.choice(("polar", "polar_cov"))
+    how = src.choice(SPOILS + ("asymmetric", "indefinite") if arg == "polar_cov" else SPOILS)
+    value = polar if arg == "polar" else cov
+    bad = spoil_cov(cov, how) if how in ("asymmetric", "indefinite") else spoil(value, how, src)
+    return Case("coords", lambda: run(**{arg: bad}), arg, how)
+
+
+TARGETS: dict[str, Callable[[Source], Case]] = {
+    "kalman_filter": kalman_filter_case,
+    "shared_gain_filter": shared_gain_case,
+    "OnlineFilter": online_case,
+    "discretize": discretize_case,
+    "imm_filter": imm_case,
+    "coords": coords_case,
+}
+
+
+def campaign(n_cases: int, seed: int, progress: bool = False) -> tuple[Counter, dict[str, str]]:
+    """Run ``n_cases`` cases spread over the targets; counts by (target, category), examples."""
+    counts: Counter = Counter()
+    examples: dict[str, str] = {}
+    names = list(TARGETS)
+    start = time.perf_counter()
+    for i in range(n_cases):
+        name = names[i % len(names)]
+        case_seed = (seed, i)
+        case = TARGETS[name](Source(np.random.default_rng(case_seed)))
+        category, detail = outcome(case)
+        counts[(case.target, category)] += 1
+        if category in DEFECTS and (case.target, category) not in examples:
+            examples[(case.target, category)] = f"seed {case_seed}: {detail}"
+        if progress and (i + 1) % 1000 == 0:
+            defects = sum(v for (_, c), v in counts.items() if c in DEFECTS)
+            print(
+                f"{i + 1} cases, {defects} defects, {time.perf_counter() - start:.0f} s", flush=True
+            )
+    return counts, examples
+
+
+def main() -> None:
+    """Command line: run the campaign, print counts by category; exit 1 on any defect."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--cases", type=int, default=100_000)
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args()
+    counts, examples = campaign(args.cases, args.seed, progress=True)
+    print(f"{sum(counts.values())} cases")
+    for category in ("ok", "ok, agreement not checked", "rejected", *DEFECTS):
+        total = sum(v for (_, c), v in counts.items() if c == category)
+        by = ", ".join(f"{t} {v}" for (t, c), v in sorted(counts.items()) if c == category)
+        print(f"{category}: {total}" + (f" ({by})" if by else ""))
+    for key, text in examples.items():
+        print(f"example {key}: {text}")
+    raise SystemExit(1 if any(c in DEFECTS for (_, c) in counts) else 0)
+
+
+if __name__ == "__main__":
+    main()

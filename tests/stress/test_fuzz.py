@@ -1,0 +1,102 @@
+"""Fast profile of the fuzz suite (Hypothesis) and the endurance run at a small size.
+
+The long profile and the 10^7-step endurance run are ``python -m tests.stress.fuzz`` and
+``python -m tests.stress.endurance`` (see their docstrings).
+"""
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import adaptrack as at
+from adaptrack import coords
+from adaptrack.filters.imm import imm_filter
+from adaptrack.models import ConstantAcceleration, ConstantVelocity
+from tests.stress.endurance import endurance
+from tests.stress.fuzz import DEFECTS, TARGETS, Source, outcome
+
+
+class HypothesisSource(Source):
+    """Structural choices drawn by Hypothesis (shrinkable); bulk arrays from a drawn seed."""
+
+    def __init__(self, data: st.DataObject) -> None:
+        self.data = data
+        super().__init__(np.random.default_rng(data.draw(st.integers(0, 2**32 - 1))))
+
+    def integer(self, lo: int, hi: int) -> int:
+        return self.data.draw(st.integers(lo, hi))
+
+    def real(self, lo: float, hi: float) -> float:
+        return self.data.draw(st.floats(lo, hi, allow_nan=False))
+
+
+@pytest.mark.parametrize("target", list(TARGETS))
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(data=st.data())
+def test_no_defect_on_valid_or_broken_input(target, data):
+    category, detail = outcome(TARGETS[target](HypothesisSource(data)))
+    assert category not in DEFECTS, f"{category}: {detail}"
+
+
+def test_endurance_at_a_small_size():
+    """2 x 10^4 steps of the endurance run (dt 1e-6..1e4 s, R of condition 1e12)."""
+    for name, o in endurance(n_tracks=8, n_steps=2500, seed=3).items():
+        assert o.asymmetric == 0 and o.not_psd == 0, name
+        assert o.cov_error <= 1e-6, name
+        assert o.mean_error <= 1e-3, name
+
+
+# Defects the fuzzer found, kept as plain examples.
+
+
+def test_online_filter_names_an_unusable_time():
+    f = at.OnlineFilter(
+        ConstantVelocity(accel_psd=1.0), [[1.0, 0.0]], [[1.0]],
+        at.GaussianState([0.0, 0.0], np.eye(2), 0.0),
+    )  # fmt: skip
+    for bad in ("soon", np.ones(3), None, True):
+        with pytest.raises(TypeError, match="time must be a real"):
+            f.update(bad, [1.0])
+    assert f.update(np.float32(0.5), [1.0]) >= 0.0 and f.time == 0.5
+
+
+def test_polar_covariance_is_validated_and_its_conversion_symmetric():
+    polar = np.array([[1e3, 0.3, 0.1], [5.0, -2.0, 1.2]])
+    rng = np.random.default_rng(0)
+    a = rng.normal(size=(2, 3, 3))
+    cov = a @ np.swapaxes(a, -1, -2)
+    out = coords.polar_to_enu_cov(polar, cov)
+    np.testing.assert_array_equal(out, np.swapaxes(out, -1, -2))
+    with pytest.raises(ValueError, match="polar_cov must be positive semi-definite"):
+        coords.polar_to_enu_cov(polar, cov - 100.0 * np.eye(3))
+    with pytest.raises(ValueError, match=r"polar_cov must have shape \(\.\.\., 3, 3\)"):
+        coords.polar_to_enu_cov(polar, np.eye(2))
+    with pytest.raises(ValueError, match="polar range must be >= 0"):
+        coords.polar_to_enu([-1.0, 0.0, 0.0])
+
+
+def test_imm_mode_probabilities_sum_to_one_with_huge_log_likelihoods():
+    """Measurements 1e4 sigma off: log-likelihoods of -1e8, whose rounding left probability
+    sums off by 5e-9 before renormalisation."""
+    models = [ConstantVelocity(accel_psd=0.01), ConstantAcceleration(jerk_psd=1.0)]
+    priors = [at.GaussianState(np.zeros(mo.state_dim), np.eye(mo.state_dim), 0.0) for mo in models]
+    t = np.arange(1.0, 30.0)
+    z = (1e4 * np.sin(t))[:, None]
+    pi = np.array([[0.95, 0.05], [0.05, 0.95]])
+    for backend in ("numpy", "numba"):
+        res = imm_filter(t, z, models, ["x"], [[1e-6]], priors, pi, [0.5, 0.5], backend=backend)
+        np.testing.assert_allclose(res.mode_probabilities.sum(-1), 1.0, rtol=0, atol=1e-15)
+
+
+def test_discretize_accepts_an_empty_step_array():
+    d = at.discretize(ConstantVelocity(accel_psd=1.0, n_axes=2), np.zeros((0, 3)))
+    assert d.transition.shape == (0, 3, 4, 4) and d.process_cov.shape == (0, 3, 4, 4)
+
+
+def test_measurement_noise_mean_shape_is_named():
+    with pytest.raises(ValueError, match=r"measurement_noise_mean must have shape \(1,\)"):
+        at.kalman_filter(
+            [1.0, 2.0], [[1.0], [2.0]], ConstantVelocity(accel_psd=1.0), [[1.0, 0.0]], [[1.0]],
+            at.GaussianState([0.0, 0.0], np.eye(2), 0.0), measurement_noise_mean=np.zeros(3),
+        )  # fmt: skip
