@@ -81,7 +81,9 @@ def test_bad_input_is_named(backend, rng):
     with pytest.raises(ValueError, match=f"nan at track 4, step {k}, component 1 where the"):
         shared_gain_filter(t, z, model, h, r, prior, mask=mask, backend=backend)
     z[4, k, 1] = np.inf  # never valid (as in kalman_filter)
-    with pytest.raises(ValueError, match=rf"measurements must be finite; got inf at index \(4, {k}"):
+    with pytest.raises(
+        ValueError, match=rf"measurements must be finite; got inf at index \(4, {k}"
+    ):
         shared_gain_filter(t, z, model, h, r, prior, mask=mask, backend=backend)
     z[4, k, 1] = 0.0
     with pytest.raises(ValueError, match="one pattern shared by all tracks"):

@@ -346,6 +346,8 @@ def spoiled_filter_case(src: Source, p: Problem, target: str, call: Callable[...
         how = src.choice(SPOILS + ("asymmetric", "indefinite"))
         spoilt = how in ("asymmetric", "indefinite")
         value = spoil_cov(p.r, how) if spoilt else spoil(p.r, how, src)
+        if how == "shape":  # (m, m) -> (m + 1, m + 1): no valid shape
+            value = np.eye(p.r.shape[-1] + 1)
         if how == "asymmetric" and p.r.shape[-1] == 1:
             how, value = "indefinite", spoil_cov(p.r, "indefinite")
     elif arg == "initial":
@@ -386,6 +388,7 @@ def shared_gain_case(src: Source) -> Case:
         out.state(res.mean, res.cov)
         if not compare:
             return out
+        args["mask"] = np.broadcast_to(mask, q.z.shape)  # (T, m) would read as (N, T) if N = T
         ref = at.kalman_filter(**args)
         out.conditioning(ref)
         shape = ref.filtered.cov.shape

@@ -32,7 +32,15 @@ class HypothesisSource(Source):
 
 
 @pytest.mark.parametrize("target", list(TARGETS))
-@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+# Derandomised: the same cases on every run (the test suite must not be flaky); the long
+# profile explores new ones and reports what remains by category.
+@settings(
+    max_examples=40,
+    deadline=None,
+    derandomize=True,
+    database=None,
+    suppress_health_check=[HealthCheck.too_slow],
+)
 @given(data=st.data())
 def test_no_defect_on_valid_or_broken_input(target, data):
     category, detail = outcome(TARGETS[target](HypothesisSource(data)))

@@ -111,7 +111,10 @@ def shared_gain_filter(
         raise ValueError(f"times must have shape (T,) with T >= 1; got {t.shape}")
     z = as_float_array(measurements, "measurements", allow_nan=True)
     if z.ndim != 3 or z.shape[1] != t.size:
-        raise ValueError(f"measurements must have shape (N, {t.size}, m); got {z.shape}")
+        raise ValueError(
+            f"times (T,) and measurements (N, T, m) must agree; got times {t.shape} and "
+            f"measurements {z.shape}"
+        )
     n_tracks, n_steps, m = z.shape
     cov0 = _shared_prior_cov(initial, n_tracks, n)
     t_init = np.asarray(initial.time, dtype=np.float64)
