@@ -184,6 +184,20 @@ def filter_outputs(n_tr, n_st, n, m):  # type: ignore[no-untyped-def]
     )
 
 
+@numba.njit(cache=True, inline="always")
+def start_track(i, x0, m0, phi, r, u, x, mat):  # type: ignore[no-untyped-def]
+    """Load track ``i``'s prior mean into ``x`` and its matrix (covariance or factor) into ``mat``.
+
+    Returns the rows of ``phi``, ``r``, ``u`` the track uses (a shared first axis has one).
+    """
+    ix = min(i, x0.shape[0] - 1)
+    for a in range(x.shape[0]):
+        x[a] = x0[ix, a]
+        for b in range(x.shape[0]):
+            mat[a, b] = m0[ix, a, b]
+    return min(i, phi.shape[0] - 1), min(i, r.shape[0] - 1), min(i, u.shape[0] - 1)
+
+
 @numba.njit(cache=True, fastmath=False)
 def kalman_kernel(x0, p0, phi, qd, u, z, mask, h, r, off, joseph):  # type: ignore[no-untyped-def]
     """Filter every track of the batch.
@@ -209,12 +223,7 @@ def kalman_kernel(x0, p0, phi, qd, u, z, mask, h, r, off, joseph):  # type: igno
     w = np.empty(m)
     ikh = np.empty((n, n))
     for i in range(n_tr):
-        ix, ip, ir = min(i, x0.shape[0] - 1), min(i, phi.shape[0] - 1), min(i, r.shape[0] - 1)
-        iu = min(i, u.shape[0] - 1)
-        for a in range(n):
-            x[a] = x0[ix, a]
-            for b in range(n):
-                p[a, b] = p0[ix, a, b]
+        ip, ir, iu = start_track(i, x0, p0, phi, r, u, x, p)
         for k in range(n_st):
             kr = min(k, r.shape[1] - 1)
             ok, nis, logdet, nobs = kf_step(

@@ -13,7 +13,7 @@ import numba
 import numpy as np
 
 from .._kernel_linalg import cholesky_into
-from ._kernels import filter_outputs
+from ._kernels import filter_outputs, start_track
 
 _LOG_2PI = math.log(2.0 * math.pi)
 
@@ -187,12 +187,7 @@ def sqrt_kernel(x0, s0, phi, sq, u, z, mask, h, r, off):  # type: ignore[no-unty
     nu = np.empty(m)
     w = np.empty(m)
     for i in range(n_tr):
-        ix, ip, ir = min(i, x0.shape[0] - 1), min(i, phi.shape[0] - 1), min(i, r.shape[0] - 1)
-        iu = min(i, u.shape[0] - 1)
-        for a in range(n):
-            x[a] = x0[ix, a]
-            for b in range(n):
-                fac[a, b] = s0[ix, a, b]
+        ip, ir, iu = start_track(i, x0, s0, phi, r, u, x, fac)
         for k in range(n_st):
             ok, nis, logdet, nobs = sqrt_step(
                 x, fac, phi[ip, k], sq[ip, k], u[iu, k], z[i, k], mask[i, k], h,

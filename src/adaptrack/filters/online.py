@@ -355,14 +355,14 @@ class OnlineFilter:
         if self._sqrt:
             nis, logdet, nobs = self._sqrt_step(phi, qd, u, z, present)
         else:
-            x, p = blk["x"].copy(), blk["p"].copy()
+            saved = (blk["x"].copy(), blk["p"].copy()) if self._auto else None
             ok, nis, logdet, nobs = kf_step(  # the generic compiled step, in the work buffer
                 blk["x"], blk["p"], phi, qd, u, z, present, blk["h"], blk["r"], blk["off"],
                 self._ws[2] != 0.0, blk["xp"], blk["pp"], blk["tmp"], blk["hm"], blk["rm"],
                 blk["hp"], blk["s"], blk["lo"], blk["kt"], blk["nu"], blk["w"], blk["ikh"],
             )  # fmt: skip
-            if self._auto and (not ok or np.trace(blk["s"]) > self._ws[WS_TRACE_LIMIT]):
-                blk["x"][:], blk["p"][:] = x, p
+            if saved and (not ok or np.trace(blk["s"]) > self._ws[WS_TRACE_LIMIT]):
+                blk["x"][:], blk["p"][:] = saved
                 self._to_sqrt()
                 nis, logdet, nobs = self._sqrt_step(phi, qd, u, z, present)
             elif not ok:

@@ -511,10 +511,7 @@ def _run_general(
     batch = z.shape[:-2]
     b = len(batch)
     n_steps, m = z.shape[-2:]
-    tb = np.broadcast_to(t, batch + (n_steps,))
-    phi_b = np.broadcast_to(phi, batch + (n_steps, n, n))
-    qd_b = np.broadcast_to(qd, batch + (n_steps, n, n))
-    u_b = np.broadcast_to(u, batch + (n_steps, n))
+    tb, phi_b, qd_b, u_b = _per_track(batch, t, phi, qd, u)
     out = _Recorder(batch, n_steps, n, m)
     state = _trusted(
         GaussianState,
@@ -535,6 +532,19 @@ def _run_general(
     return out.result(tb, phi_b, qd_b, u_b, mask, h, r_b)
 
 
+def _per_track(
+    batch: tuple[int, ...], t: FloatArray, phi: FloatArray, qd: FloatArray, u: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Broadcast times, transitions, process covariances and controls to ``batch + (T, ...)``."""
+    n_steps, n = t.shape[-1], phi.shape[-1]
+    return (
+        np.broadcast_to(t, batch + (n_steps,)),
+        np.broadcast_to(phi, batch + (n_steps, n, n)),
+        np.broadcast_to(qd, batch + (n_steps, n, n)),
+        np.broadcast_to(u, batch + (n_steps, n)),
+    )
+
+
 def _run_sqrt(
     t: FloatArray,
     z: FloatArray,
@@ -552,10 +562,7 @@ def _run_sqrt(
     batch = z.shape[:-2]
     n_steps, m = z.shape[-2:]
     n = phi.shape[-1]
-    tb = np.broadcast_to(t, batch + (n_steps,))
-    phi_b = np.broadcast_to(phi, batch + (n_steps, n, n))
-    qd_b = np.broadcast_to(qd, batch + (n_steps, n, n))
-    u_b = np.broadcast_to(u, batch + (n_steps, n))
+    tb, phi_b, qd_b, u_b = _per_track(batch, t, phi, qd, u)
     sq = lower_factor(qd)  # (T, n, n) or batch + (T, n, n): factored once, not per track
     sq_b = np.broadcast_to(sq, batch + (n_steps, n, n))
     out = _Recorder(batch, n_steps, n, m)
