@@ -167,9 +167,9 @@ def stonesoup_filter(t: np.ndarray, z: np.ndarray) -> np.ndarray:
     return out
 
 
-def stream_adaptrack(t: np.ndarray, z: np.ndarray) -> np.ndarray:
+def stream_adaptrack(t: np.ndarray, z: np.ndarray, form: str = "auto") -> np.ndarray:
     """``OnlineFilter.update`` once per measurement, from Python."""
-    f = at.OnlineFilter(MODEL, H, R, _prior(t))
+    f = at.OnlineFilter(MODEL, H, R, _prior(t), form=form)  # type: ignore[arg-type]
     out = np.empty((1, t.size, 3))
     times = t.tolist()
     meas = list(z[0])
@@ -223,4 +223,55 @@ def stream_pykalman(t: np.ndarray, z: np.ndarray) -> np.ndarray:
         mean, cov = kf.filter_update(mean, cov, z[0, k])
     out = np.empty((1, t.size, 3))
     out[0, -1] = mean
+    return out
+
+
+# IMM: two constant-velocity modes (quiet, manoeuvring) on the same measurements; the prior
+# mode probabilities are FilterPy's ``mu0 @ pi`` (its first update weighs by them).
+IMM_MODELS = (
+    at.models.ConstantVelocity(accel_psd=0.05),
+    at.models.ConstantVelocity(accel_psd=50.0),
+)
+IMM_PI = np.array([[0.97, 0.03], [0.05, 0.95]])
+IMM_MU0 = np.array([0.6, 0.4])
+IMM_P0 = np.diag([1.0, 100.0])
+
+
+def adaptrack_imm(t: np.ndarray, z: np.ndarray, form: str = "sqrt") -> np.ndarray:
+    """``imm_filter`` over the batch; combined means (N, T, 2)."""
+    from adaptrack.filters.imm import imm_filter
+
+    priors = [at.GaussianState(np.zeros(2), IMM_P0, t[0])] * 2
+    res = imm_filter(
+        t,
+        z,
+        IMM_MODELS,
+        ("x",),
+        R,
+        priors,
+        IMM_PI,
+        IMM_MU0 @ IMM_PI,
+        form=form,  # type: ignore[arg-type]
+    )
+    return res.filtered.mean
+
+
+def filterpy_imm(t: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """FilterPy's ``IMMEstimator``, one track at a time."""
+    from filterpy.kalman import IMMEstimator, KalmanFilter
+
+    out = np.empty(z.shape[:-1] + (2,))
+    for i in range(z.shape[0]):
+        filters = []
+        for model in IMM_MODELS:
+            kf = KalmanFilter(dim_x=2, dim_z=1)
+            kf.F, kf.Q = at.discretize(model, DT)
+            kf.H, kf.R, kf.x, kf.P = np.array([[1.0, 0.0]]), R, np.zeros(2), IMM_P0.copy()
+            filters.append(kf)
+        imm = IMMEstimator(filters, IMM_MU0.copy(), IMM_PI.copy())
+        for k in range(z.shape[1]):
+            if k:
+                imm.predict()
+            imm.update(z[i, k])
+            out[i, k] = imm.x
     return out

@@ -7,7 +7,10 @@ Workloads (full sizes; ``--quick`` shrinks them to a smoke test):
   batching run a subset of tracks and are reported per track-step);
 * ``rts``/``rts_batch``: fixed-interval smoothing of one long track and of the batch;
 * ``stream``: one online update per call from Python (20,000 measurements), also with
-  jittered timestamps (``stream_jitter``);
+  jittered timestamps (``stream_jitter``); with the Joseph and square-root forms beside the
+  default ``auto``;
+* ``imm``: a two-mode IMM over 1,000 tracks x 1,000 steps, square-root (default) and Joseph
+  forms, against FilterPy's ``IMMEstimator``;
 * ``lx_mc``: the ``lx_default`` level-crossing compliance Monte Carlo;
 * ``memory``: peak traced memory of the batch filter over its input + output arrays.
 
@@ -62,6 +65,7 @@ def run(quick: bool, only: list[str] | None = None, workers: int = 2) -> list[Re
         "batch": lambda: workloads.batch(quick, repeats),
         "rts": lambda: workloads.rts(quick, repeats),
         "stream": lambda: workloads.streaming(quick, repeats),
+        "imm": lambda: workloads.imm(quick, repeats),
         "lx_mc": lambda: workloads.crossing(quick, workers),
         "scene": lambda: workloads.scene(quick),
         "memory": lambda: workloads.memory(quick),

@@ -134,6 +134,11 @@ def batch(quick: bool, repeats: int) -> list[Result]:
                 n_tracks,
                 n_steps,
             ),
+            "adaptrack (per-track covariances, numba, Joseph form)": (
+                lambda t, z: peers.adaptrack_per_track_cov(t, z, "numba", "joseph"),
+                n_tracks,
+                n_steps,
+            ),
             "adaptrack (per-track covariances, numba, square-root form)": (
                 lambda t, z: peers.adaptrack_per_track_cov(t, z, "numba", "sqrt"),
                 n_tracks,
@@ -214,6 +219,12 @@ def streaming(quick: bool, repeats: int) -> list[Result]:
         z,
         {
             "adaptrack": (peers.stream_adaptrack, 1, n),
+            "adaptrack (Joseph form)": (lambda t, z: peers.stream_adaptrack(t, z, "joseph"), 1, n),
+            "adaptrack (square-root form)": (
+                lambda t, z: peers.stream_adaptrack(t, z, "sqrt"),
+                1,
+                n,
+            ),
             "filterpy": (peers.stream_filterpy, 1, n),
             "pykalman": (peers.stream_pykalman, 1, n // 10),
             "stonesoup": (peers.stonesoup_filter, 1, n // 10),
@@ -229,6 +240,29 @@ def streaming(quick: bool, repeats: int) -> list[Result]:
         {"adaptrack": (peers.stream_adaptrack, 1, n)},
         repeats,
         reference=peers.adaptrack_filter(jittered, z),
+    )
+
+
+def imm(quick: bool, repeats: int) -> list[Result]:
+    """Two-mode IMM over 1,000 tracks x 1,000 steps (20 x 100 ``quick``): the square-root
+    form (the default) against the Joseph form, and FilterPy's ``IMMEstimator``."""
+    n_tracks, n_steps = (20, 100) if quick else (1_000, 1_000)
+    subset = 2 if quick else 5
+    t, z = peers.data(n_tracks, n_steps, seed=6)
+    return _compare(
+        "imm",
+        t,
+        z,
+        {
+            "adaptrack": (peers.adaptrack_imm, n_tracks, n_steps),
+            "adaptrack (Joseph form)": (
+                lambda t, z: peers.adaptrack_imm(t, z, "joseph"),
+                n_tracks,
+                n_steps,
+            ),
+            "filterpy": (peers.filterpy_imm, subset, n_steps),
+        },
+        repeats,
     )
 
 

@@ -146,29 +146,38 @@ def to_seed(a):
     return PI @ a @ PI.T if a.ndim == 2 and a.shape == (3, 3) else PI @ a
 
 
-def kalman_mp(transition, process_cov, h, r, z, x0, p0, dps=50):
+def kalman_mp(transition, process_cov, h, r, z, x0, p0, dps=50, mask=None, offset=None):
     """Filtered means and covariances of the linear Kalman filter at ``dps`` digits.
 
     ``transition``, ``process_cov`` (T, n, n) map step k-1 to k (as in a FilterResult), ``z``
-    (T, m), ``h`` (m, n), ``r`` (m, m), prior ``x0``, ``p0``; textbook covariance form
-    ``P = P - K S K^T`` with the inverse of ``S``: at 50 digits its cancellation is harmless.
+    (T, m), ``h`` (m, n), ``r`` (m, m), prior ``x0``, ``p0``; ``mask`` (T, m) marks the present
+    components (the update uses only those rows; none: prediction only), ``offset`` (m,) the
+    measurement noise mean. Textbook covariance form ``P = P - K S K^T`` with the inverse of
+    ``S``: at 50 digits its cancellation is harmless.
     """
 
     def mat(a):
         return mp.matrix(np.asarray(a, dtype=float).tolist())
 
+    z = np.asarray(z, dtype=float)
+    mask = np.ones(z.shape, bool) if mask is None else np.asarray(mask, bool)
+    offset = np.zeros(z.shape[-1]) if offset is None else np.asarray(offset, dtype=float)
+    h, r = np.asarray(h, dtype=float), np.asarray(r, dtype=float)
     with mp.workdps(dps):
-        x, p, hm, rm = mat(np.reshape(x0, (-1, 1))), mat(p0), mat(h), mat(r)
+        x, p = mat(np.reshape(x0, (-1, 1))), mat(p0)
         means, covs = [], []
         for k in range(len(z)):
             f = mat(transition[k])
             x = f * x
             p = f * p * f.T + mat(process_cov[k])
-            s = hm * p * hm.T + rm
-            gain = p * hm.T * mp.inverse(s)
-            x = x + gain * (mat(np.reshape(z[k], (-1, 1))) - hm * x)
-            p = p - gain * s * gain.T
-            p = (p + p.T) / 2
+            on = np.flatnonzero(mask[k])
+            if on.size:
+                hm, rm = mat(h[on]), mat(r[np.ix_(on, on)])
+                s = hm * p * hm.T + rm
+                gain = p * hm.T * mp.inverse(s)
+                x = x + gain * (mat(np.reshape(z[k, on] - offset[on], (-1, 1))) - hm * x)
+                p = p - gain * s * gain.T
+                p = (p + p.T) / 2
             means.append([float(v) for v in x])
             covs.append(to_float(p.tolist()))
     return np.array(means), np.array(covs)

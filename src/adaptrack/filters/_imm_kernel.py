@@ -2,8 +2,10 @@
 
 Models of different sizes are padded to the largest; each model's block is used through
 views of its own size. Per track (tracks in parallel) and step: mixing with the shared-state
-embedding, predict + update with :func:`adaptrack.filters._kernels.kf_step`, mode
-probabilities by log-sum-exp, combination. Agrees with the NumPy reference to rounding.
+embedding, predict + update with :func:`adaptrack.filters._kernels.kf_step` (Joseph or
+standard form) or :func:`adaptrack.filters._sqrt_kernel.sqrt_step` from a factor of the mixed
+covariance (square-root form), mode probabilities by log-sum-exp, combination. Agrees with
+the NumPy reference to rounding.
 """
 
 from __future__ import annotations
@@ -15,6 +17,9 @@ import numpy as np
 from numba import prange
 
 from ._kernels import _LOG_2PI, kf_step
+from ._sqrt_kernel import lower_factor_into, outer_into, sqrt_step
+
+FORMS = ("standard", "joseph", "sqrt")  # the kernel's form codes 0, 1, 2
 
 
 @numba.njit(cache=True, inline="always")
@@ -158,7 +163,7 @@ def imm_kernel(  # type: ignore[no-untyped-def]
     emb_src,
     emb_cnt,
     out_idx,
-    joseph,
+    form,
     comp_mean,
     comp_cov,
     probs,
@@ -171,7 +176,8 @@ def imm_kernel(  # type: ignore[no-untyped-def]
 
     Shapes (M models padded to ``nmax`` states, m measured): ``x0`` (M, N|1, nmax), ``p0``
     (M, N|1, nmax, nmax); ``phi``/``qd`` (M, U, nmax, nmax) and ``u`` (M, U, nmax) for the U
-    distinct step lengths, ``didx`` (N|1, T) the step length of every step;
+    distinct step lengths (``qd`` holds factors of ``Qd`` in square-root form),
+    ``form`` an index into :data:`FORMS`, ``didx`` (N|1, T) the step length of every step;
     ``z``/``mask`` (N, T, m), ``h`` (M, m, nmax), ``r`` (N|1, T|1, m, m), ``emb_*`` the
     (dst, src, count) of the states model i shares with model j, ``out_idx`` (M, n_out).
     ``status[i]`` becomes ``k + 1`` if track ``i`` stops at step ``k`` (S not positive
@@ -209,6 +215,11 @@ def imm_kernel(  # type: ignore[no-untyped-def]
         nu = np.empty(m)
         wv = np.empty(m)
         ikh = np.empty((nmax, nmax))
+        fac = np.empty((nmax, nmax))
+        pre1 = np.empty((nmax, 2 * nmax))
+        pre2 = np.empty((m + nmax, m + nmax))
+        sr = np.empty((m, m))
+        gain = np.empty((nmax, m))
         for j in range(n_models):
             for a in range(nmax):
                 xs[j, a] = x0[j, ix, a]
@@ -230,31 +241,22 @@ def imm_kernel(  # type: ignore[no-untyped-def]
                 nj = sizes[j]
                 xs[j, :nj] = mx[j, :nj]
                 ps[j, :nj, :nj] = mp[j, :nj, :nj]
-                ok, nis, logdet, nobs = kf_step(
-                    xs[j, :nj],
-                    ps[j, :nj, :nj],
-                    phi[j, q, :nj, :nj],
-                    qd[j, q, :nj, :nj],
-                    u[j, q, :nj],
-                    z[i, k],
-                    mask[i, k],
-                    h[j, :, :nj],
-                    r[ir, kr],
-                    off,
-                    joseph,
-                    xp[:nj],
-                    pp[:nj, :nj],
-                    tmp[:nj, :nj],
-                    hm[:, :nj],
-                    rm,
-                    hp[:, :nj],
-                    s,
-                    lo,
-                    kt[:, :nj],
-                    nu,
-                    wv,
-                    ikh[:nj, :nj],
-                )
+                if form == 2:
+                    lower_factor_into(ps[j, :nj, :nj], fac[:nj, :nj], tmp[:nj, :nj])
+                    ok, nis, logdet, nobs = sqrt_step(
+                        xs[j, :nj], fac[:nj, :nj], phi[j, q, :nj, :nj], qd[j, q, :nj, :nj],
+                        u[j, q, :nj], z[i, k], mask[i, k], h[j, :, :nj], r[ir, kr], off,
+                        xp[:nj], pre1[:nj, : 2 * nj], pre2[: m + nj, : m + nj], rm, sr, nu, wv,
+                        gain[:nj],
+                    )  # fmt: skip
+                    outer_into(fac, ps[j], nj)
+                else:
+                    ok, nis, logdet, nobs = kf_step(
+                        xs[j, :nj], ps[j, :nj, :nj], phi[j, q, :nj, :nj], qd[j, q, :nj, :nj],
+                        u[j, q, :nj], z[i, k], mask[i, k], h[j, :, :nj], r[ir, kr], off,
+                        form == 1, xp[:nj], pp[:nj, :nj], tmp[:nj, :nj], hm[:, :nj], rm,
+                        hp[:, :nj], s, lo, kt[:, :nj], nu, wv, ikh[:nj, :nj],
+                    )  # fmt: skip
                 if not ok:
                     status[i] = k + 1
                     break

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 from scipy.special import logsumexp
@@ -25,7 +26,10 @@ from .._validation import as_float_array, check_symmetric_pd, check_times
 from ..models.continuous import MotionModel, as_motion_model
 from ..models.discretize import Method, Noise, discretize_with_input
 from ..types import GaussianState, _trusted
-from .kalman import _check_form, _component_mask, _update, predict
+from .kalman import _component_mask, _update, predict
+from .square_root import covariance, lower_factor, sqrt_predict, sqrt_update
+
+IMMForm = Literal["joseph", "standard", "sqrt"]
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -73,7 +77,7 @@ def imm_filter(
     mask: ArrayLike | None = None,
     method: Method = "expm",
     noise: Noise = "white",
-    form: str = "joseph",
+    form: IMMForm = "sqrt",
     backend: Backend = "auto",
 ) -> IMMResult:
     """Run an IMM estimator over one track or a batch of tracks.
@@ -99,7 +103,12 @@ def imm_filter(
     mask : array_like of bool, shape (..., T) or (..., T, m), optional
         True where a measurement (component) is present.
     method, noise : discretisation options.
-    form : {"joseph", "standard"}
+    form : {"sqrt", "joseph", "standard"}
+        Covariance update of every model: ``"sqrt"`` (default) carries each model's predict and
+        update in square-root form (a factor of the mixed covariance, QR of the pre-arrays, as
+        :func:`~adaptrack.kalman_filter` with ``form="sqrt"``): PSD by construction and
+        accurate on ill-conditioned problems (measurement covariances of condition 1e12, long
+        gaps), where the Joseph form ends sigmas off.
     backend : {"auto", "numpy", "numba"}
         The NumPy reference or the compiled kernel (same numbers to rounding); ``"auto"``
         compiles from 20,000 track-steps on.
@@ -157,7 +166,8 @@ def imm_filter(
     if np.any(np.isnan(z) & mk):
         idx = tuple(int(v) for v in np.argwhere(np.isnan(z) & mk)[0])
         raise ValueError(f"measurements is NaN at index {idx} where it is marked present")
-    form = _check_form(form)
+    if form not in ("sqrt", "joseph", "standard"):
+        raise ValueError(f"form must be 'sqrt', 'joseph' or 'standard'; got {form!r}")
     tb = np.broadcast_to(t, batch + (n_steps,))
     t_prev = np.concatenate(
         [np.broadcast_to(initial[0].time, batch)[..., None], tb[..., :-1]], axis=-1
@@ -170,6 +180,7 @@ def imm_filter(
             tb, dt, z, mk, models, measured, r, initial, pi, mu0, method, noise, form
         )
     disc = [discretize_with_input(mdl, dt, method, noise=noise) for mdl in models]
+    noise_factors = [lower_factor(d[1]) if form == "sqrt" else None for d in disc]
     hs = [
         np.eye(mdl.state_dim)[[nm.index(s) for s in measured]]
         for mdl, nm in zip(models, names, strict=True)
@@ -206,9 +217,18 @@ def imm_filter(
             phi, qd, u = (
                 a[..., k, :, :] if a.ndim == dt.ndim + 2 else a[..., k, :] for a in disc[j]
             )
-            prior = predict(mixed[j], phi, qd, time=tb[..., k], control=u)
             rk = r if r.ndim == 2 else r[..., k, :, :]
-            states[j], info = _update(prior, z[..., k, :], hs[j], rk, mk[..., k, :], form)
+            zk, mask_k = z[..., k, :], mk[..., k, :]
+            if form == "sqrt":
+                sq = noise_factors[j][..., k, :, :]  # type: ignore[index]
+                xp, sp = sqrt_predict(mixed[j].mean, lower_factor(mixed[j].cov), phi, sq, u)
+                mean, factor, info = sqrt_update(xp, sp, zk, hs[j], rk, mask_k, None)
+                states[j] = _trusted(
+                    GaussianState, mean=mean, cov=covariance(factor), time=tb[..., k]
+                )
+            else:
+                prior = predict(mixed[j], phi, qd, time=tb[..., k], control=u)
+                states[j], info = _update(prior, zk, hs[j], rk, mask_k, form)
             lls.append(info.log_likelihood)
             comp_mean[j][..., k, :], comp_cov[j][..., k, :, :] = states[j].mean, states[j].cov
         ll = np.stack(lls, axis=-1)
@@ -253,7 +273,7 @@ def _imm_compiled(
     form: str,
 ) -> IMMResult:
     """Run :func:`imm_filter` in the compiled kernel (:mod:`adaptrack.filters._imm_kernel`)."""
-    from ._imm_kernel import imm_kernel
+    from ._imm_kernel import FORMS, imm_kernel
 
     batch, (n_steps, m) = z.shape[:-2], z.shape[-2:]
     n_tr = int(np.prod(batch, dtype=int))
@@ -278,6 +298,8 @@ def _imm_compiled(
         phi[j, :, :nj, :nj], qd[j, :, :nj, :nj], u[j, :, :nj] = discretize_with_input(
             mdl, uniq, method, noise=noise
         )
+        if form == "sqrt":
+            qd[j, :, :nj, :nj] = lower_factor(qd[j, :, :nj, :nj])
         h[j, np.arange(m), [names[j].index(s_) for s_ in measured]] = 1.0
         x0[j, :, :nj] = np.broadcast_to(initial[j].mean, batch + (nj,)).reshape(-1, nj)
         p0[j, :, :nj, :nj] = np.broadcast_to(initial[j].cov, batch + (nj, nj)).reshape(-1, nj, nj)
@@ -315,7 +337,7 @@ def _imm_compiled(
         emb_src,
         emb_cnt,
         out_idx,
-        form == "joseph",
+        FORMS.index(form),
         comp_mean,
         comp_cov,
         probs,

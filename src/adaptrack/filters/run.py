@@ -151,13 +151,8 @@ def kalman_filter(
     if n_steps == 0:
         raise ValueError("measurements must hold at least one time step; got T = 0")
     check_times(t, "times")
-    h = as_float_array(measurement_matrix, "measurement_matrix", min_ndim=2)
     m = z.shape[-1]
-    if h.shape != (m, n):
-        raise ValueError(
-            f"measurement_matrix must have shape ({m}, {n}) to match measurements "
-            f"(m = {m}) and model (n = {n}); got {h.shape}"
-        )
+    h = measurement_matrix_for(measurement_matrix, m, n)
     r = as_float_array(measurement_cov, "measurement_cov", min_ndim=2)
     r_per_step = r.shape == batch + (n_steps, m, m) and r.shape != (m, m)
     if r.shape not in ((m, m), batch + (m, m), batch + (n_steps, m, m)):
@@ -243,6 +238,17 @@ def kalman_filter(
 # P+ and the gain carry a relative error of about eps * lambda_max(S) / lambda_min(R); the
 # mean's error in posterior sigmas grows as the 3/2 power of that ratio. Above 1e8 (8 digits
 # of 16 lost, means off by ~1e-4 sigma) the square-root form is used instead.
+def measurement_matrix_for(measurement_matrix: ArrayLike, m: int, n: int) -> FloatArray:
+    """``measurement_matrix`` as a float (m, n) array, or a ValueError naming both sizes."""
+    h = as_float_array(measurement_matrix, "measurement_matrix", min_ndim=2)
+    if h.shape != (m, n):
+        raise ValueError(
+            f"measurement_matrix must have shape ({m}, {n}) to match measurements "
+            f"(m = {m}) and model (n = {n}); got {h.shape}"
+        )
+    return h
+
+
 JOSEPH_MAX_RATIO = 1e8
 
 

@@ -28,7 +28,7 @@ from ..models.continuous import MotionModel, as_motion_model
 from ..models.discretize import Method, Noise
 from ..smoothers.rts import rts_smooth, smoother_gains
 from ..types import GaussianState, as_gaussian_state
-from .run import FilterForm, kalman_filter
+from .run import FilterForm, kalman_filter, measurement_matrix_for
 
 
 @dataclass(frozen=True, eq=False)
@@ -120,6 +120,7 @@ def shared_gain_filter(
     t_init = np.asarray(initial.time, dtype=np.float64)
     if t_init.size == 0 or np.any(t_init != t_init.flat[0]):
         raise ValueError("initial.time must be one time shared by all tracks")
+    measurement_matrix_for(measurement_matrix, m, n)  # before the mask: it names m's source
     present = _shared_mask(mask, n_steps, m)
     _check_finite(z, present)
     out = _output(out, (n_tracks, n_steps, n))
