@@ -101,6 +101,23 @@ def check_positive_scalar(value: Any, name: str, *, allow_zero: bool = False) ->
     return v
 
 
+def broadcast_shape(**shapes: tuple[int, ...]) -> tuple[int, ...]:
+    """Return the common shape of named array shapes; a ValueError names every one."""
+    try:
+        return np.broadcast_shapes(*shapes.values())
+    except ValueError:
+        listed = ", ".join(f"{name} {shape}" for name, shape in shapes.items())
+        raise ValueError(f"{listed} must broadcast to one shape") from None
+
+
+def broadcast_as(a: np.ndarray, shape: tuple[int, ...], name: str) -> np.ndarray:
+    """Return ``a`` broadcast to ``shape``; a ValueError names ``name`` and both shapes."""
+    try:
+        return np.broadcast_to(a, shape)
+    except ValueError:
+        raise ValueError(f"{name} must broadcast to shape {shape}; got {np.shape(a)}") from None
+
+
 def check_symmetric_pd(
     cov: np.ndarray, name: str, *, semidefinite: bool = False, rtol: float = 1e-9
 ) -> None:

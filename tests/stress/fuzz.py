@@ -46,8 +46,10 @@ import numpy as np
 
 import adaptrack as at
 from adaptrack import coords
+from adaptrack.filters.adaptive import innovation_adaptive_filter
 from adaptrack.filters.imm import imm_filter
 from adaptrack.models import ConstantAcceleration, ConstantVelocity, Singer
+from adaptrack.smoothers.batch_ls import fit_polynomial
 
 PACKAGE = str(Path(at.__file__).parent)
 DEFECTS = (
@@ -623,6 +625,188 @@ def coords_case(src: Source) -> Case:
     return Case("coords", lambda: run(**{arg: bad}), arg, how)
 
 
+def geodetic_case(src: Source) -> Case:
+    """Geodetic <-> ECEF <-> ENU: finite, round trips within the documented accuracy."""
+    n = src.integer(1, 5)
+    lat = src.rng.uniform(-np.pi / 2, np.pi / 2, n)
+    lat[src.rng.uniform(size=n) < 0.1] = np.pi / 2  # a pole
+    lon = src.rng.uniform(-np.pi, np.pi, n)
+    height = src.choice([1.0, -1.0]) * 10.0 ** src.rng.uniform(-3, 4, n)
+    height[src.rng.uniform(size=n) < 0.2] = 10.0 ** src.rng.uniform(4, 8)  # orbits
+    site = (src.real(-1.5, 1.5), src.real(-np.pi, np.pi), src.real(-100.0, 5e3))
+    enu = src.rng.normal(size=(n, 3)) * 10.0 ** src.real(-3, 5)
+    cov = np.stack([spd(src, 3, src.log_real(1.0, 1e8), src.log_real(1e-8, 1e4)) for _ in range(n)])
+
+    def run(lat: Any = lat, lon: Any = lon, height: Any = height, enu: Any = enu,
+            cov: Any = cov) -> Outputs:  # fmt: skip
+        out = Outputs()
+        ecef = coords.geodetic_to_ecef(lat, lon, height)
+        back = coords.ecef_to_geodetic(ecef)
+        there = coords.enu_to_ecef(enu, *site)
+        again = coords.ecef_to_enu(there, *site)
+        rotated = coords.rotate_cov(cov, coords.enu_to_ecef_rotation(*site[:2]))
+        out.state(ecef, rotated)
+        lat, lon, height = np.broadcast_arrays(lat, lon, height)  # as the functions did
+        out.finite += [*back, there, again]
+        # documented accuracy: 1e-12 rad and 1e-6 m (sigma = 100 x, the floor is 1e-2 sigma)
+        away = np.abs(lat) < np.pi / 2 - 1e-9  # longitude is undefined at a pole
+        tiny, lon_tiny = np.full(lat.shape, 1e-10), np.full(away.sum(), 1e-10)
+        out.agree.append(("latitude round trip mean", back[0], lat, tiny))
+        out.agree.append(("longitude round trip mean", back[1][away], lon[away], lon_tiny))
+        out.agree.append(("height round trip mean", back[2], height, 1e4 * tiny))
+        scale = 1e-6 + 1e-13 * np.abs(enu)  # 1e-8 m: rounding of ECEF positions ~6.4e6 m
+        out.agree.append(("ENU round trip mean", again, enu, scale))
+        return out
+
+    if src.integer(0, 2):
+        return Case("geodetic", run)
+    arg = src.choice(("lat", "lon", "height", "enu", "cov"))
+    how = src.choice(SPOILS + ("degrees",) if arg == "lat" else SPOILS)
+    value = {"lat": lat, "lon": lon, "height": height, "enu": enu, "cov": cov}[arg]
+    bad = np.degrees(lat) + 100.0 if how == "degrees" else spoil(value, how, src)
+    if how == "shape" and arg == "cov":
+        bad = cov[..., :2, :2]
+    if arg in ("lat", "lon", "height") and how in ("shape", "empty"):
+        try:  # e.g. (1,) or (0,) against (1,): broadcasts, a valid call
+            np.broadcast_shapes(np.shape(bad), lat.shape)
+            return Case("geodetic", lambda: run(**{arg: bad}))
+        except ValueError:
+            pass
+    return Case("geodetic", lambda: run(**{arg: bad}), arg, how)
+
+
+def adaptive_case(src: Source) -> Case:
+    """``innovation_adaptive_filter`` on both backends; bad arguments rejected by name."""
+    n_tracks, n_steps, d = src.integer(1, 3), src.integer(3, 150), src.integer(1, 3)
+    step = src.log_real(1e-3, 10.0)
+    t = src.real(0.0, 100.0) + step * np.arange(n_steps)
+    var = src.log_real(1e-4, 1e4)
+    accel_var = src.log_real(1e-4, 1e2)
+    z = src.rng.normal(size=(n_tracks, n_steps, d)) * np.sqrt(var) + 5.0 * t[:, None]
+    mask = src.rng.uniform(size=(n_tracks, n_steps)) > src.real(0.0, 0.3)
+    mask[:, :2] = True  # two-point initialisation
+    options = dict(
+        identification=src.choice(("published", "mehra")),
+        averaging=src.choice(("ewma", "window")),
+        memory=src.integer(5, 60),
+        warmup=src.integer(2, 60),
+        difference_order=src.integer(2, 4),
+    )
+
+    def call(times: Any = t, measurements: Any = z, measurement_var: Any = var,
+             dwna_accel_var: Any = accel_var, mask: Any = mask, backend: str = "numpy",
+             ) -> Any:  # fmt: skip
+        return innovation_adaptive_filter(
+            times, measurements, measurement_var=measurement_var,
+            dwna_accel_var=dwna_accel_var, mask=mask, backend=backend, **options,
+        )  # fmt: skip
+
+    def run(**kw: Any) -> Outputs:
+        out = Outputs()
+        a, b = (call(**kw, backend=bk).filtered for bk in ("numpy", "numba"))
+        for res in (a, b):  # velocity (and its covariance) is undefined at the first epoch
+            out.state(res.mean[..., 1:, :], res.cov[..., 1:, :, :])
+        first, rest = (lambda g: g[..., :1, :d]), (lambda g: g[..., 1:, :])
+        out.finite += [first(a.mean), first(b.mean)]
+        tail = [at.GaussianState(rest(g.mean), g.cov[..., 1:, :, :], 0.0) for g in (a, b)]
+        out.compare("innovation_adaptive_filter numpy/numba", tail[1], tail[0])
+        rng = np.random.default_rng(2)
+        for _ in range(2):
+            moved = call(measurements=_change(z, rng)).filtered
+            moved_tail = at.GaussianState(rest(moved.mean), moved.cov[..., 1:, :, :], 0.0)
+            out.sensitivity("innovation_adaptive_filter numpy/numba", moved_tail, tail[0])
+        return out
+
+    if src.integer(0, 2):
+        return Case("innovation_adaptive_filter", run)
+    arg = src.choice(("times", "measurements", "measurement_var", "dwna_accel_var", "mask"))
+    how = src.choice(SPOILS + ("negative",) if arg.endswith("var") else SPOILS)
+    value = {"times": t, "measurements": z, "measurement_var": var,
+             "dwna_accel_var": accel_var, "mask": mask}[arg]  # fmt: skip
+    if how == "negative":
+        bad: Any = -value
+    elif arg == "times" and how == "shape":
+        bad = t[:-1]
+    elif arg == "measurements" and how == "shape":
+        bad = z[..., None]
+    elif arg == "measurements" and how == "nan":  # NaN is missing where the mask says so
+        bad = z.copy()
+        bad[..., src.integer(0, 1), :] = np.nan
+    elif arg == "mask":
+        bad = {"nan": mask.astype(float), "shape": mask[..., :-1]}.get(how, "yes")
+    else:
+        bad = spoil(value, how, src)
+    if arg.endswith("var") and how == "shape":  # a (d,) variance per axis is valid
+        bad = np.full(d + 1, value)
+    return Case("innovation_adaptive_filter", lambda: _valid_call(call, **{arg: bad}), arg, how)
+
+
+def _valid_call(call: Callable[..., Any], **kw: Any) -> Outputs:
+    res = call(**kw).filtered
+    out = Outputs()
+    out.state(res.mean[..., 1:, :], res.cov[..., 1:, :, :])
+    return out
+
+
+def batch_ls_case(src: Source) -> Case:
+    """``fit_polynomial``: monomial and Legendre bases agree; bad nodes rejected by name."""
+    degree = src.integer(0, 4)
+    n_pos = src.integer(degree + 1, 12)
+    n_other = src.integer(0, 8)
+    k = n_pos + n_other
+    span = src.log_real(1e-2, 1e4)
+    times = np.concatenate(
+        [np.sort(src.rng.uniform(0, span, n_pos)), src.rng.uniform(0, span, n_other)]
+    )
+    orders = np.concatenate([np.zeros(n_pos, int), src.rng.integers(1, 3, n_other)])
+    coef = src.rng.normal(size=(degree + 1, 3)) * 10.0 ** src.real(0.0, 4.0)
+    u = times / span - 0.5  # positions of up to ~10 km over the span
+    values = np.stack([sum(coef[j] * u[i] ** j for j in range(degree + 1)) for i in range(k)])
+    covs = np.stack(
+        [spd(src, 3, src.log_real(1.0, 1e6), src.log_real(1e-6, 1e4)) for _ in range(k)]
+    )
+    values = values + src.rng.normal(size=values.shape) * np.sqrt(
+        np.diagonal(covs, axis1=1, axis2=2)
+    )
+    joint = bool(src.integer(0, 1))
+    t_eval = src.rng.uniform(0, span, 3)
+
+    def fit(times: Any = times, orders: Any = orders, values: Any = values, covs: Any = covs,
+            basis: str = "monomial") -> Any:  # fmt: skip
+        return fit_polynomial(times, orders, values, covs, degree=degree, joint=joint, basis=basis)
+
+    def run() -> Outputs:
+        out = Outputs()
+        a, b = (fit(basis=basis).evaluate(t_eval) for basis in ("legendre", "monomial"))
+        out.state(a.mean, a.cov)
+        out.state(b.mean, b.cov)
+        out.compare("fit_polynomial legendre/monomial", b, a)
+        rng = np.random.default_rng(3)
+        for _ in range(2):
+            moved = fit(
+                values=_change(values, rng), covs=_change(covs, rng, True), basis="legendre"
+            )
+            out.sensitivity("fit_polynomial legendre/monomial", moved.evaluate(t_eval), a)
+        return out
+
+    if src.integer(0, 2):
+        return Case("batch_ls", run)
+    arg = src.choice(("times", "orders", "values", "covs"))
+    how = src.choice(SPOILS + (("asymmetric", "indefinite") if arg == "covs" else ()))
+    value = {"times": times, "orders": orders, "values": values, "covs": covs}[arg]
+    bad = spoil_cov(covs, how) if how in ("asymmetric", "indefinite") else spoil(value, how, src)
+    if arg == "orders" and how in ("nan", "inf"):
+        how, bad = "out of range", np.concatenate([orders[:-1], [7]])
+    return Case("batch_ls", lambda: _fit_state(fit(**{arg: bad}), t_eval), arg, how)
+
+
+def _fit_state(fit: Any, t_eval: np.ndarray) -> Outputs:
+    out = Outputs()
+    g = fit.evaluate(t_eval)
+    out.state(g.mean, g.cov)
+    return out
+
+
 TARGETS: dict[str, Callable[[Source], Case]] = {
     "kalman_filter": kalman_filter_case,
     "shared_gain_filter": shared_gain_case,
@@ -630,6 +814,9 @@ TARGETS: dict[str, Callable[[Source], Case]] = {
     "discretize": discretize_case,
     "imm_filter": imm_case,
     "coords": coords_case,
+    "geodetic": geodetic_case,
+    "innovation_adaptive_filter": adaptive_case,
+    "batch_ls": batch_ls_case,
 }
 
 

@@ -8,9 +8,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._linalg import mT
+from .._linalg import mT, symmetrize
 from .._typing import ArrayLike, FloatArray
-from .._validation import as_float_array
+from .._validation import as_float_array, broadcast_shape, check_symmetric_pd
 
 WGS84_A = 6378137.0
 WGS84_F = 1.0 / 298.257223563
@@ -38,6 +38,8 @@ def geodetic_to_ecef(lat: ArrayLike, lon: ArrayLike, height: ArrayLike) -> Float
     la = as_float_array(lat, "lat")
     lo = as_float_array(lon, "lon")
     h = as_float_array(height, "height")
+    shape = broadcast_shape(lat=la.shape, lon=lo.shape, height=h.shape)
+    la, lo, h = (np.broadcast_to(a, shape) for a in (la, lo, h))
     _check_latitude(la, "lat")
     n = WGS84_A / np.sqrt(1.0 - WGS84_E2 * np.sin(la) ** 2)
     return np.stack(
@@ -80,6 +82,7 @@ def enu_to_ecef_rotation(lat: ArrayLike, lon: ArrayLike) -> FloatArray:
     """Rotation (..., 3, 3) whose columns are the east, north, up unit vectors in ECEF."""
     la = as_float_array(lat, "lat")
     lo = as_float_array(lon, "lon")
+    broadcast_shape(lat=la.shape, lon=lo.shape)
     _check_latitude(la, "lat")
     sl, cl, so, co = np.sin(la), np.cos(la), np.sin(lo), np.cos(lo)
     zero = np.zeros_like(sl * so)
@@ -95,23 +98,51 @@ def enu_to_ecef_rotation(lat: ArrayLike, lon: ArrayLike) -> FloatArray:
 
 def enu_to_ecef(enu: ArrayLike, lat0: float, lon0: float, h0: float) -> FloatArray:
     """ECEF positions (..., 3) of ENU positions (..., 3) relative to a site (lat0, lon0, h0)."""
-    e = as_float_array(enu, "enu", min_ndim=1)
-    rot = enu_to_ecef_rotation(lat0, lon0)
+    e = _vectors(enu, "enu")
+    rot = enu_to_ecef_rotation(*_site(lat0, lon0, h0)[:2])
     return geodetic_to_ecef(lat0, lon0, h0) + e @ rot.T
 
 
 def ecef_to_enu(ecef: ArrayLike, lat0: float, lon0: float, h0: float) -> FloatArray:
     """ENU positions (..., 3) relative to a site of ECEF positions (..., 3)."""
-    p = as_float_array(ecef, "ecef", min_ndim=1)
-    rot = enu_to_ecef_rotation(lat0, lon0)
+    p = _vectors(ecef, "ecef")
+    rot = enu_to_ecef_rotation(*_site(lat0, lon0, h0)[:2])
     return (p - geodetic_to_ecef(lat0, lon0, h0)) @ rot
 
 
+def _vectors(value: ArrayLike, name: str) -> FloatArray:
+    v = as_float_array(value, name, min_ndim=1)
+    if v.shape[-1] != 3:
+        raise ValueError(f"{name} must have shape (..., 3); got {v.shape}")
+    return v
+
+
+def _site(lat0: float, lon0: float, h0: float) -> tuple[float, float, float]:
+    """Return the site's (lat0 [rad], lon0 [rad], h0 [m]) as finite scalars."""
+    out = []
+    for name, value in (("lat0", lat0), ("lon0", lon0), ("h0", h0)):
+        a = as_float_array(value, name)
+        if a.ndim:
+            raise ValueError(f"{name} must be a scalar; got shape {a.shape}")
+        out.append(float(a))
+    _check_latitude(np.asarray(out[0]), "lat0")
+    return out[0], out[1], out[2]
+
+
 def rotate_cov(cov: ArrayLike, rotation: ArrayLike) -> FloatArray:
-    """``R P R^T`` for covariances (..., n, n), e.g. ENU -> ECEF with the site rotation."""
+    """Return ``R P R^T`` (exactly symmetric) of covariances (..., n, n), rotations (..., k, n).
+
+    E.g. ENU -> ECEF with the site rotation.
+    """
     p = as_float_array(cov, "cov", min_ndim=2)
     r = as_float_array(rotation, "rotation", min_ndim=2)
-    return r @ p @ mT(r)
+    check_symmetric_pd(p, "cov", semidefinite=True)
+    if r.shape[-1] != p.shape[-1]:
+        raise ValueError(
+            f"rotation (..., k, {p.shape[-1]}) must match cov {p.shape}; got {r.shape}"
+        )
+    broadcast_shape(cov=p.shape[:-2], rotation=r.shape[:-2])
+    return symmetrize(r @ p @ mT(r))
 
 
 __all__ = [

@@ -11,7 +11,7 @@ import numpy as np
 
 from .._linalg import mT, symmetrize
 from .._typing import ArrayLike, FloatArray
-from .._validation import as_float_array, check_symmetric_pd
+from .._validation import as_float_array, broadcast_shape, check_symmetric_pd
 
 
 def wrap_to_pi(angle: ArrayLike) -> FloatArray:
@@ -176,12 +176,7 @@ def polar_to_enu_cov(polar: ArrayLike, polar_cov: ArrayLike) -> FloatArray:
     if c.shape[-2:] != (3, 3):
         raise ValueError(f"polar_cov must have shape (..., 3, 3); got {c.shape}")
     check_symmetric_pd(c, "polar_cov", semidefinite=True)
-    try:
-        batch = np.broadcast_shapes(a.shape[:-1], c.shape[:-2])
-    except ValueError:
-        raise ValueError(
-            f"polar {a.shape} and polar_cov {c.shape} must have broadcastable batch shapes"
-        ) from None
+    batch = broadcast_shape(polar=a.shape[:-1], polar_cov=c.shape[:-2])
     r, e, b = a[..., 0:1], a[..., 1], a[..., 2]
     d = _unit_derivatives(e, b)
     j = np.broadcast_to(np.stack([d["u"], r * d["ue"], r * d["ub"]], -1), batch + (3, 3))

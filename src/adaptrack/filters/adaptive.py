@@ -28,7 +28,7 @@ import numpy as np
 
 from .._backend import Backend, use_compiled
 from .._typing import ArrayLike, BoolArray, FloatArray
-from .._validation import as_float_array, check_positive_scalar, check_times
+from .._validation import as_float_array, broadcast_as, check_positive_scalar, check_times
 from ..types import GaussianState, _trusted
 
 Identification = Literal["published", "mehra"]
@@ -159,7 +159,7 @@ def innovation_adaptive_filter(
     mk = np.ones(batch + (n_steps,), dtype=bool) if mask is None else np.asarray(mask)
     if mk.dtype != np.bool_:
         raise TypeError(f"mask must be boolean (True = measured); got dtype {mk.dtype}")
-    mk = np.broadcast_to(mk, batch + (n_steps,))
+    mk = broadcast_as(mk, batch + (n_steps,), "mask")
     if not np.all(mk[..., :2]):
         raise ValueError(
             "the first two epochs must be measured (two-point initialisation, spec C.3)"
@@ -167,7 +167,7 @@ def innovation_adaptive_filter(
     if np.any(np.isnan(z) & mk[..., None]):
         idx = tuple(int(i) for i in np.argwhere(np.isnan(z) & mk[..., None])[0])
         raise ValueError(f"measurements is NaN at index {idx} where mask says it is measured")
-    r0 = np.broadcast_to(as_float_array(measurement_var, "measurement_var"), (d,))
+    r0 = broadcast_as(as_float_array(measurement_var, "measurement_var"), (d,), "measurement_var")
     if np.any(r0 <= 0):
         raise ValueError(f"measurement_var must be > 0; got {r0}")
     q0 = _nominal_q(dwna_accel_var, nominal_process_cov, step, d)
@@ -227,7 +227,7 @@ def _nominal_q(
             "nominal model Q0 is required, spec C.3)"
         )
     if dwna is not None:
-        var = np.broadcast_to(as_float_array(dwna, "dwna_accel_var"), (d,))
+        var = broadcast_as(as_float_array(dwna, "dwna_accel_var"), (d,), "dwna_accel_var")
         if np.any(var < 0):
             raise ValueError(f"dwna_accel_var must be >= 0; got {var}")
         base = np.array([[step**4 / 4, step**3 / 2], [step**3 / 2, step**2]])
