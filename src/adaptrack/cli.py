@@ -6,6 +6,7 @@ import dataclasses
 import json
 import math
 import os
+import sys
 from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
 from pathlib import Path
@@ -17,6 +18,7 @@ from rich.console import Console
 from rich.progress import Progress
 from rich.table import Table
 
+from ._cli_errors import err_console
 from ._cli_errors import fail as _fail
 from .analysis.evaluation import Evaluation, evaluate_scenario
 from .analysis.flights import FlightRow, evaluate_flight, smooth_kalman, smooth_lsq
@@ -50,7 +52,13 @@ from .crossing.selection import (
 from .crossing.site import Site, load_site, site_from_mapping
 from .crossing.trackers import RoadTracker, Tracker
 from .io.navigation import read_navigation_measurements
-from .io.tables import DataFormatError, read_flight_csv, read_table, write_table_atomic
+from .io.tables import (
+    DataFormatError,
+    read_flight_csv,
+    read_table,
+    write_table_atomic,
+    write_text_atomic,
+)
 from .models.continuous import ConstantAcceleration, Singer
 from .parallel import TaskPool, task_pool
 from .service import commands as service_commands
@@ -101,7 +109,7 @@ def demo(
     runs: int = typer.Option(
         10, "--runs", min=2, help="Test runs per class and case (the compliance verdict)."
     ),
-    seed: int = typer.Option(0, "--seed", help="Random seed."),
+    seed: int = typer.Option(0, "--seed", min=0, help="Random seed."),
     out: Path = typer.Option(
         Path("out"), "--out", help="Directory for summary.json, tuned.toml and report.html."
     ),
@@ -183,7 +191,7 @@ def demo(
     if mixed is not None:
         console.print(_mixed_traffic_table(mixed))
     _write_json(out / "summary.json", summary)
-    _write_text(out / "tuned.toml", tuning.to_toml())
+    write_text_atomic(out / "tuned.toml", tuning.to_toml())
     report_data = build_report(
         test,
         st,
@@ -194,7 +202,7 @@ def demo(
         mixed_traffic=mixed,
         mixed_traffic_note=mixed_note,
     )
-    _write_text(out / "report.html", render_html(report_data))
+    write_text_atomic(out / "report.html", render_html(report_data))
     console.print(
         f"wrote {out / 'summary.json'}, {out / 'tuned.toml'} and {out / 'report.html'} "
         f"(test Monte Carlo {test.elapsed_s:.1f} s)"
@@ -339,7 +347,7 @@ def report(
         mixed_traffic=mixed,
         mixed_traffic_note=mixed_note,
     )
-    _write_text(out, render_html(report_data))
+    write_text_atomic(out, render_html(report_data))
     Console().print(f"wrote {out}")
 
 
@@ -349,7 +357,7 @@ def simulate(
     out: Path = typer.Option(..., "--out", help="Detections table (CSV or Parquet)."),
     truth: Path | None = typer.Option(None, "--truth", help="Also write the true kinematics."),
     runs: int = typer.Option(1, "--runs", min=1, help="Vehicles per class and case."),
-    seed: int = typer.Option(0, "--seed", help="Random seed."),
+    seed: int = typer.Option(0, "--seed", min=0, help="Random seed."),
     scene: bool = typer.Option(
         False, "--scene", help="Mixed traffic of the site's [scene]: detections without ids."
     ),
@@ -410,7 +418,9 @@ def simulate(
 def tune(
     site: str = typer.Argument("lx_default", help="Built-in site name or a site .toml."),
     out: Path = typer.Option(..., "--out", help="Tuned configuration (TOML)."),
-    seed: int = typer.Option(0, "--seed", help="Random seed of the training and validation runs."),
+    seed: int = typer.Option(
+        0, "--seed", min=0, help="Random seed of the training and validation runs."
+    ),
     training_runs: int = TRAINING_RUNS,
     validation_runs: int = VALIDATION_RUNS,
     criterion: str = CRITERION,
@@ -434,7 +444,7 @@ def tune(
             pool=pool,
             progress=lambda m: progress.update(task, advance=1, description=m),
         )
-    _write_text(out, tuning.to_toml())
+    write_text_atomic(out, tuning.to_toml())
     console = Console()
     console.print(_candidates_table(tuning))
     console.print(f"deployed: {tuning.reason} Wrote {out}")
@@ -574,17 +584,9 @@ def _pool(workers: int | None, scheduler: str | None) -> Iterator[TaskPool]:
         yield pool
 
 
-def _write_text(path: Path, text: str) -> None:
-    """Write text atomically (temporary file, then rename): nothing half-written."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text)
-    tmp.replace(path)
-
-
 def _write_json(path: Path, payload: object) -> None:
     """Write JSON atomically."""
-    _write_text(path, json.dumps(payload, indent=2))
+    write_text_atomic(path, json.dumps(payload, indent=2))
 
 
 @app.command()
@@ -594,7 +596,7 @@ def evaluate(
     ),
     files: list[Path] = typer.Argument(None, help="Flight CSV files (with 'flights')."),
     runs: int = typer.Option(100, "--runs", min=1, help="Evaluation runs."),
-    seed: int = typer.Option(0, "--seed", help="Random seed."),
+    seed: int = typer.Option(0, "--seed", min=0, help="Random seed."),
     train_runs: int = typer.Option(50, "--train-runs", min=1, help="Tuning runs."),
     profile_points: int = typer.Option(
         41, "--profile-points", min=3, help="Grid points of the M1 profile J(lambda)."
@@ -798,3 +800,35 @@ def _evaluation_table(result: Evaluation, published: dict[str, list[float]] | No
 
 
 __all__ = ["app"]
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Run the command line (the ``adaptrack`` script); every failure is one ``error:`` line.
+
+    Exit status: 0 done, 1 bad input or a failed run (the command's message), 2 a usage error
+    (unknown option, bad value, missing argument), 3 an internal error (a bug: its traceback
+    with ``ADAPTRACK_DEBUG=1``), 130 interrupted (no output file is left half-written).
+    """
+    args = sys.argv[1:] if argv is None else list(argv)
+    try:
+        code = app(args=args or ["--help"], prog_name="adaptrack", standalone_mode=False)
+    except typer.TyperException as exc:  # usage errors (status 2) carry their command
+        ctx = getattr(exc, "ctx", None)
+        see = f" (see '{ctx.command_path} --help')" if ctx is not None else ""
+        err_console.print(f"error: {exc.format_message()}{see}", markup=False, highlight=False)
+        code = exc.exit_code
+    except (typer.Abort, KeyboardInterrupt):
+        code = 130
+    except Exception as exc:
+        if os.environ.get("ADAPTRACK_DEBUG"):
+            raise
+        err_console.print(
+            f"error: internal error ({type(exc).__name__}: {exc}); rerun with ADAPTRACK_DEBUG=1 "
+            "for the traceback and please report it",
+            markup=False,
+            highlight=False,
+        )
+        code = 3
+    if code == 130:  # typer turns Ctrl-C into a silent exit status 130
+        err_console.print("error: interrupted", markup=False, highlight=False)
+    raise SystemExit(code if isinstance(code, int) else 0)

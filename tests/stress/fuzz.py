@@ -21,8 +21,8 @@ level, so two correct paths may differ by as much as the answer moves under such
 on an ill-conditioned problem (a measurement covariance of condition 1e12 whose large
 innovations are weighted by its tiny eigenvalue) that is a sigma or more: a 60-digit reference
 moves by 0.3 to 6.6 posterior sigma when ``R`` changes by one ulp. Every agreement check
-therefore measures it: the reference path runs again on inputs (measurements, ``R``, priors)
-changed elementwise by ``ROUNDING`` relative, and two paths must agree within
+therefore measures it: the reference path runs again on inputs (times, measurements, ``R``,
+priors) changed elementwise by ``ROUNDING`` relative, and two paths must agree within
 ``MEAN_TOL_SIGMA`` (``COV_TOL``) plus ``SPREAD_FACTOR`` times the largest change seen.
 
 The Hypothesis properties in ``tests/stress/test_fuzz.py`` draw cases through the same
@@ -254,11 +254,12 @@ def problem(src: Source, *, shared: bool = False, tracks: int | None = None) -> 
 
 
 def perturbed(p: Problem) -> list[Problem]:
-    """Two copies of ``p`` with measurements, ``R`` and prior changed by ``ROUNDING`` relative."""
+    """Two copies of ``p`` with times, measurements, ``R`` and prior changed by ``ROUNDING``."""
     rng = np.random.default_rng(0)
     return [
         replace(
             p,
+            times=_change(p.times, rng),  # absolute times: steps known to ~eps * t
             z=_change(p.z, rng),
             r=_change(p.r, rng, symmetric=True),
             prior=at.GaussianState(
@@ -439,7 +440,7 @@ def shared_gain_case(src: Source) -> Case:
         got = at.GaussianState(res.mean, np.broadcast_to(res.cov, shape), ref.filtered.time)
         out.compare("shared_gain_filter/kalman_filter", got, ref.filtered)
         for c in perturbed(q):
-            args.update(measurements=c.z, measurement_cov=c.r, initial=c.prior)
+            args.update(times=c.times, measurements=c.z, measurement_cov=c.r, initial=c.prior)
             moved = at.kalman_filter(**args).filtered
             out.sensitivity("shared_gain_filter/kalman_filter", moved, ref.filtered)
         return out
@@ -578,7 +579,7 @@ def imm_case(src: Source) -> Case:
                 at.GaussianState(*(_change(v, rng, v.ndim == 2) for v in (st.mean, st.cov)), 0.0)
                 for st in priors
             ]
-            args.update(measurements=q.z, measurement_cov=q.r, initial=moved_priors)
+            args.update(times=q.times, measurements=q.z, measurement_cov=q.r, initial=moved_priors)
             moved = imm_filter(**args, backend="numpy").filtered
             out.sensitivity("imm_filter numpy/numba", moved, a.filtered)
         return out

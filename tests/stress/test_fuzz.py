@@ -13,6 +13,8 @@ import adaptrack as at
 from adaptrack import coords
 from adaptrack.filters.imm import imm_filter
 from adaptrack.models import ConstantAcceleration, ConstantVelocity
+from tests.stress.cli_fuzz import DEFECTS as CLI_DEFECTS
+from tests.stress.cli_fuzz import campaign as cli_campaign
 from tests.stress.endurance import endurance
 from tests.stress.fuzz import DEFECTS, TARGETS, Source, outcome
 
@@ -108,3 +110,32 @@ def test_measurement_noise_mean_shape_is_named():
             [1.0, 2.0], [[1.0], [2.0]], ConstantVelocity(accel_psd=1.0), [[1.0, 0.0]], [[1.0]],
             at.GaussianState([0.0, 0.0], np.eye(2), 0.0), measurement_noise_mean=np.zeros(3),
         )  # fmt: skip
+
+
+def test_command_line_fuzz_fast_profile():
+    """24 spoiled command lines (tables, site TOML, options; runs stopped by Ctrl-C after 4 s):
+    each is done with complete outputs, rejected in one line, or interrupted leaving none."""
+    counts, examples = cli_campaign(24, seed=5, budget_s=4.0)
+    assert not any(c in CLI_DEFECTS for (_, c) in counts), examples
+    categories = {c for (_, c) in counts}
+    assert {"rejected", "interrupted"} <= categories, counts
+
+
+def test_ctrl_c_leaves_no_output_file(tmp_path):
+    """A real SIGINT to the installed command mid-run: status 130, one line, no file."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "adaptrack", "simulate", "--scene", "--duration", "3600",
+         "--out", "det.csv"],
+        cwd=tmp_path, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    time.sleep(6.0)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130
+    assert err.strip().splitlines()[-1] == "error: interrupted"
+    assert list(tmp_path.iterdir()) == []

@@ -24,6 +24,8 @@ from pathlib import Path
 from types import ModuleType
 from typing import Any
 
+from .._files import write_atomic
+
 LANES = 4
 Term = Callable[[int, int, int], str]  # (row, column, summation index) -> one product
 Extra = Callable[[int, int], str]
@@ -156,10 +158,7 @@ def load(name: str, source: str) -> ModuleType:
     digest = hashlib.sha1(source.encode()).hexdigest()[:12]
     path = _kernel_dir() / f"{name}_{digest}.py"
     if not path.exists():
-        fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
-        with os.fdopen(fd, "w") as f:
-            f.write(source)
-        os.replace(tmp, path)
+        write_atomic(path, lambda tmp: Path(tmp).write_text(source))
     spec = importlib.util.spec_from_file_location(f"_adaptrack_kernel_{path.stem}", path)
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)

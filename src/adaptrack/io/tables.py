@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+from .._files import write_atomic
 from .._typing import FloatArray
 
 
@@ -31,20 +30,16 @@ def read_table(path: str | Path) -> pd.DataFrame:
 
 
 def write_table_atomic(frame: pd.DataFrame, path: str | Path) -> None:
-    """Write CSV or Parquet via a temporary file and a rename: nothing half-written."""
-    p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=p.name + ".", suffix=".tmp", dir=p.parent)
-    os.close(fd)
-    try:
-        if p.suffix.lower() in (".parquet", ".pq"):
-            frame.to_parquet(tmp, index=False)
-        else:
-            frame.to_csv(tmp, index=False, float_format="%.10g")
-        os.replace(tmp, p)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
+    """Write CSV or Parquet (by suffix) atomically."""
+    if Path(path).suffix.lower() in (".parquet", ".pq"):
+        write_atomic(path, lambda tmp: frame.to_parquet(tmp, index=False))
+    else:
+        write_atomic(path, lambda tmp: frame.to_csv(tmp, index=False, float_format="%.10g"))
+
+
+def write_text_atomic(path: str | Path, text: str) -> None:
+    """Write a text file (UTF-8) atomically."""
+    write_atomic(path, lambda tmp: Path(tmp).write_text(text, encoding="utf-8"))
 
 
 def require_columns(frame: pd.DataFrame, columns: list[str], path: Path) -> None:

@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 import orjson
 
+from .._files import write_atomic
 from .._typing import FloatArray
 from ..crossing.scene_tracker import STATUS_NAMES, SceneTracker, SceneTrackerConfig
 from ..crossing.site import Site
@@ -132,12 +133,15 @@ class LiveTracker:
     # -- state ----------------------------------------------------------------------------
     def save(self, path: Path) -> None:
         """Snapshot the whole state to ``path`` atomically (temporary file, then rename)."""
-        tmp = path.with_name(path.name + ".tmp")
-        with open(tmp, "wb") as f:
-            pickle.dump({"version": STATE_VERSION, "site": self.site.name, "live": self}, f)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
+        state = {"version": STATE_VERSION, "site": self.site.name, "live": self}
+
+        def dump(tmp: str) -> None:
+            with open(tmp, "wb") as f:
+                pickle.dump(state, f)
+                f.flush()
+                os.fsync(f.fileno())
+
+        write_atomic(path, dump)
 
 
 def track_lines(columns: dict[str, np.ndarray]) -> str:
