@@ -59,20 +59,30 @@ def adaptrack_rts(t: np.ndarray, z: np.ndarray) -> np.ndarray:
     return at.rts_smooth(at.kalman_filter(t, z, MODEL, H, R, _prior(t))).mean
 
 
+def _filterpy_means(make, z: np.ndarray, dim: int) -> np.ndarray:  # type: ignore[no-untyped-def]
+    """Means (N, T, dim) of a FilterPy filter ``make()`` run on every track in turn."""
+    out = np.empty(z.shape[:-1] + (dim,))
+    for i in range(z.shape[0]):
+        f = make()
+        for k in range(z.shape[1]):
+            if k:
+                f.predict()
+            f.update(z[i, k])
+            out[i, k] = f.x
+    return out
+
+
 def filterpy_filter(t: np.ndarray, z: np.ndarray) -> np.ndarray:
     from filterpy.kalman import KalmanFilter
 
     phi, qd = at.discretize(MODEL, DT)
-    out = np.empty(z.shape[:-1] + (3,))
-    for i in range(z.shape[0]):
+
+    def make() -> KalmanFilter:
         kf = KalmanFilter(dim_x=3, dim_z=1)
         kf.x, kf.P, kf.F, kf.Q, kf.H, kf.R = np.zeros(3), P0.copy(), phi, qd, H, R
-        for k in range(z.shape[1]):
-            if k:
-                kf.predict()
-            kf.update(z[i, k])
-            out[i, k] = kf.x
-    return out
+        return kf
+
+    return _filterpy_means(make, z, 3)
 
 
 def filterpy_rts(t: np.ndarray, z: np.ndarray) -> np.ndarray:
@@ -260,18 +270,13 @@ def filterpy_imm(t: np.ndarray, z: np.ndarray) -> np.ndarray:
     """FilterPy's ``IMMEstimator``, one track at a time."""
     from filterpy.kalman import IMMEstimator, KalmanFilter
 
-    out = np.empty(z.shape[:-1] + (2,))
-    for i in range(z.shape[0]):
+    def make() -> IMMEstimator:
         filters = []
         for model in IMM_MODELS:
             kf = KalmanFilter(dim_x=2, dim_z=1)
             kf.F, kf.Q = at.discretize(model, DT)
             kf.H, kf.R, kf.x, kf.P = np.array([[1.0, 0.0]]), R, np.zeros(2), IMM_P0.copy()
             filters.append(kf)
-        imm = IMMEstimator(filters, IMM_MU0.copy(), IMM_PI.copy())
-        for k in range(z.shape[1]):
-            if k:
-                imm.predict()
-            imm.update(z[i, k])
-            out[i, k] = imm.x
-    return out
+        return IMMEstimator(filters, IMM_MU0.copy(), IMM_PI.copy())
+
+    return _filterpy_means(make, z, 2)

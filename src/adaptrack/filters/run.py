@@ -418,13 +418,9 @@ def _run(p: _Problem) -> FilterResult:
             model, np.broadcast_to(t, batch + (n_steps,)), t_init, method, noise, order
         )
     off = None if offset is None else as_float_array(offset, "measurement_noise_mean", min_ndim=1)
-    if form == "sqrt":
-        return _run_sqrt(t, z, h, r, p.r_per_step, initial, mask, phi, qd, u, off)
-    if times_shared and _covariance_shared(t, initial, r, mask):
+    if form != "sqrt" and times_shared and _covariance_shared(t, initial, r, mask):
         return _run_shared(t, z, h, r, initial, mask, phi, qd, u, form, off)
-    return _run_general(
-        t, z, h, r, p.r_per_step, initial, mask, phi, qd, u, form, off, model.state_dim
-    )
+    return _run_per_track(t, z, h, r, p.r_per_step, initial, mask, phi, qd, u, form, off)
 
 
 def _alloc(batch: tuple[int, ...], n_steps: int, *tail: int) -> FloatArray:
@@ -499,7 +495,7 @@ class _Recorder:
         )
 
 
-def _run_general(
+def _run_per_track(
     t: FloatArray,
     z: FloatArray,
     h: FloatArray,
@@ -512,28 +508,36 @@ def _run_general(
     u: FloatArray,
     form: str,
     off: FloatArray | None,
-    n: int,
 ) -> FilterResult:
+    """Run the filter with a covariance recursion per track (Joseph/standard or square root).
+
+    Square-root form: :mod:`adaptrack.filters.square_root`, the factors of ``Qd`` taken once.
+    """
     batch = z.shape[:-2]
-    b = len(batch)
     n_steps, m = z.shape[-2:]
+    n = phi.shape[-1]
     tb, phi_b, qd_b, u_b = _per_track(batch, t, phi, qd, u)
+    sqrt = form == "sqrt"
+    sq_b = np.broadcast_to(lower_factor(qd), batch + (n_steps, n, n)) if sqrt else qd_b
     out = _Recorder(batch, n_steps, n, m)
-    state = _trusted(
-        GaussianState,
-        mean=np.broadcast_to(initial.mean, batch + (n,)),
-        cov=np.broadcast_to(initial.cov, batch + (n, n)),
-        time=np.broadcast_to(initial.time, batch),
-    )
+    x = np.broadcast_to(initial.mean, batch + (n,))
+    carried = np.broadcast_to(lower_factor(initial.cov) if sqrt else initial.cov, batch + (n, n))
     for k in range(n_steps):
-        sv = (slice(None),) * b + (k,)
-        prior = predict(state, phi_b[sv], qd_b[sv], time=tb[sv], control=u_b[sv])
+        sv = (slice(None),) * len(batch) + (k,)
         rk = r[sv] if r_per_step else r
+        if sqrt:
+            xp, sp = sqrt_predict(x, carried, phi_b[sv], sq_b[sv], u_b[sv])
+            x, carried, info = sqrt_update(xp, sp, z[sv], h, rk, mask[sv], off)
+            out.store(sv, xp, covariance(sp), x, covariance(carried), info)
+            continue
+        state = _trusted(GaussianState, mean=x, cov=carried, time=tb[sv])
+        prior = predict(state, phi_b[sv], qd_b[sv], time=tb[sv], control=u_b[sv])
         try:
-            state, info = _update(prior, z[sv], h, rk, mask[sv], form, off)
+            post, info = _update(prior, z[sv], h, rk, mask[sv], form, off)
         except np.linalg.LinAlgError:
             _raise_not_pd("innovation covariance", k, _bad_tracks(prior.cov, h, rk, mask[sv]))
-        out.store(sv, prior.mean, prior.cov, state.mean, state.cov, info)
+        x, carried = post.mean, post.cov
+        out.store(sv, prior.mean, prior.cov, x, carried, info)
     r_b = np.broadcast_to(r, batch + ((n_steps,) if r_per_step else ()) + (m, m))
     return out.result(tb, phi_b, qd_b, u_b, mask, h, r_b)
 
@@ -549,39 +553,6 @@ def _per_track(
         np.broadcast_to(qd, batch + (n_steps, n, n)),
         np.broadcast_to(u, batch + (n_steps, n)),
     )
-
-
-def _run_sqrt(
-    t: FloatArray,
-    z: FloatArray,
-    h: FloatArray,
-    r: FloatArray,
-    r_per_step: bool,
-    initial: GaussianState,
-    mask: BoolArray,
-    phi: FloatArray,
-    qd: FloatArray,
-    u: FloatArray,
-    off: FloatArray | None,
-) -> FilterResult:
-    """Run the square-root filter (:mod:`adaptrack.filters.square_root`), all tracks at once."""
-    batch = z.shape[:-2]
-    n_steps, m = z.shape[-2:]
-    n = phi.shape[-1]
-    tb, phi_b, qd_b, u_b = _per_track(batch, t, phi, qd, u)
-    sq = lower_factor(qd)  # (T, n, n) or batch + (T, n, n): factored once, not per track
-    sq_b = np.broadcast_to(sq, batch + (n_steps, n, n))
-    out = _Recorder(batch, n_steps, n, m)
-    x = np.broadcast_to(initial.mean, batch + (n,))
-    factor = np.broadcast_to(lower_factor(initial.cov), batch + (n, n))
-    for k in range(n_steps):
-        sv = (slice(None),) * len(batch) + (k,)
-        xp, sp = sqrt_predict(x, factor, phi_b[sv], sq_b[sv], u_b[sv])
-        rk = r[sv] if r_per_step else r
-        x, factor, info = sqrt_update(xp, sp, z[sv], h, rk, mask[sv], off)
-        out.store(sv, xp, covariance(sp), x, covariance(factor), info)
-    r_b = np.broadcast_to(r, batch + ((n_steps,) if r_per_step else ()) + (m, m))
-    return out.result(tb, phi_b, qd_b, u_b, mask, h, r_b)
 
 
 def _bad_tracks(cov: FloatArray, h: FloatArray, r: FloatArray, mask: BoolArray) -> list[int] | None:
