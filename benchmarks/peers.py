@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 import adaptrack as at
+from adaptrack.smoothers.rts import SmootherForm
 
 DT = 0.05
 MODEL = at.models.Singer(time_constant_s=5.0, accel_std_mps2=2.0)
@@ -54,9 +55,9 @@ def adaptrack_fleet(
     return at.shared_gain_filter(t, z, MODEL, H, R, _prior(t), out=out, smooth=smooth).mean
 
 
-def adaptrack_rts(t: np.ndarray, z: np.ndarray) -> np.ndarray:
-    """``kalman_filter`` then ``rts_smooth`` (full results)."""
-    return at.rts_smooth(at.kalman_filter(t, z, MODEL, H, R, _prior(t))).mean
+def adaptrack_rts(t: np.ndarray, z: np.ndarray, form: SmootherForm = "auto") -> np.ndarray:
+    """``kalman_filter`` then ``rts_smooth`` in ``form`` (full results)."""
+    return at.rts_smooth(at.kalman_filter(t, z, MODEL, H, R, _prior(t)), form=form).mean
 
 
 def _filterpy_means(make, z: np.ndarray, dim: int) -> np.ndarray:  # type: ignore[no-untyped-def]

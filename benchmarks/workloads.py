@@ -178,6 +178,11 @@ def rts(quick: bool, repeats: int) -> list[Result]:
         z,
         {
             "adaptrack": (peers.adaptrack_rts, 1, n),
+            "adaptrack (square-root smoother)": (
+                lambda t, z: peers.adaptrack_rts(t, z, form="sqrt"),
+                1,
+                n,
+            ),
             "adaptrack (fleet path)": (
                 lambda t, z: peers.adaptrack_fleet(t, z, smooth=True),
                 1,

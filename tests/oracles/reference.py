@@ -146,14 +146,17 @@ def to_seed(a):
     return PI @ a @ PI.T if a.ndim == 2 and a.shape == (3, 3) else PI @ a
 
 
-def kalman_mp(transition, process_cov, h, r, z, x0, p0, dps=50, mask=None, offset=None):
-    """Filtered means and covariances of the linear Kalman filter at ``dps`` digits.
+def kalman_mp(
+    transition, process_cov, h, r, z, x0, p0, dps=50, mask=None, offset=None, smooth=False
+):
+    """Filtered (``smooth``: RTS-smoothed) means and covariances at ``dps`` digits.
 
     ``transition``, ``process_cov`` (T, n, n) map step k-1 to k (as in a FilterResult), ``z``
     (T, m), ``h`` (m, n), ``r`` (m, m), prior ``x0``, ``p0``; ``mask`` (T, m) marks the present
     components (the update uses only those rows; none: prediction only), ``offset`` (m,) the
     measurement noise mean. Textbook covariance form ``P = P - K S K^T`` with the inverse of
-    ``S``: at 50 digits its cancellation is harmless.
+    ``S``: at 50 digits its cancellation is harmless; likewise the smoother's difference form
+    ``P_k|T = P_k|k + C (P_k+1|T - P_k+1|k) C^T`` with ``C = P_k|k Phi^T P_k+1|k^-1``.
     """
 
     def mat(a):
@@ -165,11 +168,12 @@ def kalman_mp(transition, process_cov, h, r, z, x0, p0, dps=50, mask=None, offse
     h, r = np.asarray(h, dtype=float), np.asarray(r, dtype=float)
     with mp.workdps(dps):
         x, p = mat(np.reshape(x0, (-1, 1))), mat(p0)
-        means, covs = [], []
+        filtered, predicted = [], []
         for k in range(len(z)):
             f = mat(transition[k])
             x = f * x
             p = f * p * f.T + mat(process_cov[k])
+            predicted.append((x, p))
             on = np.flatnonzero(mask[k])
             if on.size:
                 hm, rm = mat(h[on]), mat(r[np.ix_(on, on)])
@@ -178,6 +182,13 @@ def kalman_mp(transition, process_cov, h, r, z, x0, p0, dps=50, mask=None, offse
                 x = x + gain * (mat(np.reshape(z[k, on] - offset[on], (-1, 1))) - hm * x)
                 p = p - gain * s * gain.T
                 p = (p + p.T) / 2
-            means.append([float(v) for v in x])
-            covs.append(to_float(p.tolist()))
+            filtered.append((x, p))
+        if smooth:
+            for k in range(len(z) - 2, -1, -1):
+                (xf, pf), (xp, pp) = filtered[k], predicted[k + 1]
+                c = pf * mat(transition[k + 1]).T * mp.inverse(pp)
+                xs, ps = filtered[k + 1]
+                filtered[k] = (xf + c * (xs - xp), pf + c * (ps - pp) * c.T)
+        means = [[float(v) for v in x] for x, _ in filtered]
+        covs = [to_float(((p + p.T) / 2).tolist()) for _, p in filtered]
     return np.array(means), np.array(covs)

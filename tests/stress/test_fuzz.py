@@ -4,6 +4,8 @@ The long profile and the 10^7-step endurance run are ``python -m tests.stress.fu
 ``python -m tests.stress.endurance`` (see their docstrings).
 """
 
+import time
+
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -119,6 +121,42 @@ def test_command_line_fuzz_fast_profile():
     assert not any(c in CLI_DEFECTS for (_, c) in counts), examples
     categories = {c for (_, c) in counts}
     assert {"rejected", "interrupted"} <= categories, counts
+
+
+def test_a_simulated_ctrl_c_swallowed_by_a_finaliser_is_pressed_again(tmp_path):
+    """Python ignores an exception raised in a weak-reference callback (numba's type cache has
+    one); the fuzz harness then presses Ctrl-C again instead of letting the case run on."""
+    import gc
+    import weakref
+
+    from tests.stress.cli_fuzz import Invocation, run_case
+
+    class Obj:
+        pass
+
+    def slow_finaliser(_):
+        time.sleep(0.5)  # the first alarm fires in here and is ignored
+
+    held = [Obj()]
+    keep = weakref.ref(held[0], slow_finaliser)
+
+    def fake_main(argv):
+        held.clear()  # runs slow_finaliser while the 0.1 s alarm comes due
+        gc.collect()
+        time.sleep(5.0)  # without a second press the case would sleep its 5 s out
+
+    import tests.stress.cli_fuzz as harness
+
+    start = time.perf_counter()
+    original = harness.main
+    harness.main = fake_main
+    try:
+        category, _ = run_case(Invocation(["x"], (), "none"), tmp_path, 0.1)
+    finally:
+        harness.main = original
+    assert keep() is None
+    assert category == "traceback"  # _Stop escaped fake_main: the harness reports it
+    assert time.perf_counter() - start < 2.0
 
 
 def test_ctrl_c_leaves_no_output_file(tmp_path):

@@ -4,6 +4,17 @@ Uses only the stored predicted/filtered moments and transitions (models are neve
 ``C_k = P_k|k Phi_{k+1}^T P_{k+1|k}^-1``,
 ``x_k|T = x_k|k + C_k (x_{k+1|T} - x_{k+1|k})``,
 ``P_k|T = P_k|k + C_k (P_{k+1|T} - P_{k+1|k}) C_k^T``.
+
+The square-root form carries a factor ``S_k|T`` (Sarkka, *Bayesian Filtering and Smoothing*,
+2013, sec. 8.2 form): with ``S_f S_f^T = P_k|k`` and ``S_q S_q^T = Qd``::
+
+    [ Phi S_f  S_q ]                [ X11  0   ]    X11 X11^T = P_k+1|k
+    [ S_f      0   ]  triangularise [ X21  X22 ]    C = X21 X11^-1 (pseudo-inverse if singular)
+
+    S_k|T = tria([X22, X21 - C X11, C S_k+1|T])
+
+(``X21 - C X11`` is zero unless the prediction is singular), so ``P_k|T`` is PSD by
+construction and no difference of covariances is formed.
 """
 
 from __future__ import annotations
@@ -16,9 +27,11 @@ from .._backend import SHARED_MIN_TRACKS, Backend, use_compiled
 from .._linalg import matvec, mT, symmetrize
 from .._typing import FloatArray
 from ..filters.run import joseph_loses_digits
+from ..filters.square_root import covariance, lower_factor, triangularize
 from ..types import FilterResult, GaussianState, _trusted
 
-SmootherForm = Literal["auto", "standard", "joseph"]
+SmootherForm = Literal["auto", "standard", "joseph", "sqrt"]
+FORMS = ("standard", "joseph", "sqrt")  # the compiled kernel's form codes 0, 1, 2
 
 
 def _shared(a: FloatArray, batch_ndim: int) -> FloatArray | None:
@@ -60,6 +73,41 @@ def _smoothed_cov(
     return symmetrize(a @ pf @ mT(a) + c @ (qd_next + sc_next) @ mT(c))
 
 
+def gain_from_factors(x11: FloatArray, x21: FloatArray) -> FloatArray:
+    """``C = X21 X11^-1`` of lower-triangular ``X11``; ``X21 pinv(X11)`` where it is singular.
+
+    Singular means an exactly zero diagonal entry (a known component with no process noise);
+    ``X21 pinv(X11) = P_k|k Phi^T pinv(P_k+1|k)`` there, the smoother gain of that case.
+    """
+    singular = np.any(np.diagonal(x11, axis1=-2, axis2=-1) == 0.0, axis=-1)
+    eye = np.eye(x11.shape[-1])
+    safe = np.where(singular[..., None, None], eye, x11)
+    c = mT(np.linalg.solve(mT(safe), mT(x21)))
+    if np.any(singular):
+        c = np.where(singular[..., None, None], x21 @ np.linalg.pinv(x11), c)
+    return c
+
+
+def sqrt_smoother_step(
+    sf: FloatArray, sq: FloatArray, phi: FloatArray, ss_next: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Gain ``C_k`` and smoothed factor ``S_k|T``.
+
+    From the lower factors ``sf`` of ``P_k|k``, ``sq`` of ``Qd`` and ``ss_next`` of ``P_k+1|T``.
+    """
+    n = sf.shape[-1]
+    batch = np.broadcast_shapes(sf.shape[:-2], sq.shape[:-2], phi.shape[:-2])
+    pre = np.zeros(batch + (2 * n, 2 * n))
+    pre[..., :n, :n] = phi @ sf
+    pre[..., :n, n:] = sq
+    pre[..., n:, :n] = sf
+    post = triangularize(pre)
+    x11, x21, x22 = post[..., :n, :n], post[..., n:, :n], post[..., n:, n:]
+    c = gain_from_factors(x11, x21)
+    s = triangularize(np.concatenate([x22, x21 - c @ x11, c @ ss_next], axis=-1))
+    return c, s
+
+
 def rts_smooth(
     result: FilterResult, *, form: SmootherForm = "auto", backend: Backend = "auto"
 ) -> GaussianState:
@@ -69,11 +117,14 @@ def rts_smooth(
     ----------
     result : FilterResult
         Output of :func:`adaptrack.kalman_filter`, shapes (..., T, n).
-    form : {"auto", "standard", "joseph"}
-        Covariance recursion: the textbook difference form, or the Joseph form, a sum of
+    form : {"auto", "standard", "joseph", "sqrt"}
+        Covariance recursion: the textbook difference form; the Joseph form, a sum of
         positive semi-definite terms that stays PSD where the difference cancels (after long
-        gaps or very precise measurements); ``"auto"``: Joseph where the filter's own problem
-        is ill-conditioned (the criterion of :func:`adaptrack.kalman_filter`'s ``"auto"``).
+        gaps or very precise measurements); or the square-root form, which carries factors of
+        the covariances and solves for the gain with a factor of ``P_k+1|k`` (half the
+        condition number). ``"auto"``: square-root where the filter's own problem is
+        ill-conditioned (the criterion of :func:`adaptrack.kalman_filter`'s ``"auto"``), else
+        the difference form.
     backend : {"auto", "numpy", "numba"}
         NumPy reference or the compiled kernel (same results to rounding); ``"auto"`` uses the
         kernel from 20,000 track-steps on unless 64 or more tracks share their covariances.
@@ -96,9 +147,10 @@ def rts_smooth(
     """
     if not isinstance(result, FilterResult):
         raise TypeError(f"result must be a FilterResult; got {type(result).__name__}")
-    if form not in ("auto", "standard", "joseph"):
-        raise ValueError(f"form must be 'auto', 'standard' or 'joseph'; got {form!r}")
-    joseph = form == "joseph" or (form == "auto" and joseph_loses_digits(result))
+    if form not in ("auto",) + FORMS:
+        raise ValueError(f"form must be 'auto', 'standard', 'joseph' or 'sqrt'; got {form!r}")
+    if form == "auto":
+        form = "sqrt" if joseph_loses_digits(result) else "standard"
     pred, filt = result.predicted, result.filtered
     b = pred.mean.ndim - 2
     n_steps = pred.mean.shape[-2]
@@ -110,28 +162,26 @@ def rts_smooth(
     if use_compiled(backend, filt.mean.size // filt.dim) and (
         backend == "numba" or not (shared and n_tracks >= SHARED_MIN_TRACKS)
     ):
-        return _rts_compiled(result, joseph)
-    sm = np.array(filt.mean)
-    sc = np.array(shared[0]) if shared else np.array(filt.cov)
+        return _rts_compiled(result, form)
+    pf, pp, phi, qd = shared or (filt.cov, pred.cov, result.transition, result.process_cov)
+    cov_tail = () if shared else (slice(None),) * b
     tail = (slice(None),) * b
+    sm = np.array(filt.mean)
+    sc = np.array(pf)
+    if form == "sqrt":
+        sf, sq = lower_factor(pf), lower_factor(qd)
+        ss = sf[cov_tail + (-1,)]
     for k in range(n_steps - 2, -1, -1):
-        i, j = tail + (k,), tail + (k + 1,)
-        if shared:
-            pf, pp, phi, qd = shared
-            c = smoother_gains(pf[k], pp[k + 1], phi[k + 1])
-            sc[k] = _smoothed_cov(pf[k], c, sc[k + 1], pp[k + 1], phi[k + 1], qd[k + 1], joseph)
+        i, j = cov_tail + (k,), cov_tail + (k + 1,)
+        if form == "sqrt":
+            c, ss = sqrt_smoother_step(sf[i], sq[j], phi[j], ss)
+            sc[i] = covariance(ss)
         else:
-            c = smoother_gains(filt.cov[i], pred.cov[j], result.transition[j])
-            sc[i] = _smoothed_cov(
-                filt.cov[i],
-                c,
-                sc[j],
-                pred.cov[j],
-                result.transition[j],
-                result.process_cov[j],
-                joseph,
-            )
-        sm[i] = filt.mean[i] + matvec(c, sm[j] - pred.mean[j])
+            c = smoother_gains(pf[i], pp[j], phi[j])
+            sc[i] = _smoothed_cov(pf[i], c, sc[j], pp[j], phi[j], qd[j], form == "joseph")
+        sm[tail + (k,)] = filt.mean[tail + (k,)] + matvec(
+            c, sm[tail + (k + 1,)] - pred.mean[tail + (k + 1,)]
+        )
     cov = np.broadcast_to(sc, filt.cov.shape) if shared else sc
     sm.flags.writeable = False
     if cov.flags.writeable:
@@ -139,8 +189,8 @@ def rts_smooth(
     return _trusted(GaussianState, mean=sm, cov=cov, time=filt.time)
 
 
-def _rts_compiled(result: FilterResult, joseph: bool) -> GaussianState:
-    """Run the RTS recursion through the compiled kernel."""
+def _rts_compiled(result: FilterResult, form: str) -> GaussianState:
+    """Run the RTS recursion through the compiled kernel (``qd`` as factors in square-root form)."""
     from ._kernels import rts_kernel
 
     pred, filt = result.predicted, result.filtered
@@ -148,6 +198,7 @@ def _rts_compiled(result: FilterResult, joseph: bool) -> GaussianState:
     n_steps = filt.mean.shape[-2]
     lead = filt.mean.shape[:-2]
     flat = (-1, n_steps)
+    qd = lower_factor(result.process_cov) if form == "sqrt" else result.process_cov
     c = np.ascontiguousarray
     sm, sc = rts_kernel(
         c(filt.mean.reshape(flat + (n,))),
@@ -155,8 +206,8 @@ def _rts_compiled(result: FilterResult, joseph: bool) -> GaussianState:
         c(pred.mean.reshape(flat + (n,))),
         c(pred.cov.reshape(flat + (n, n))),
         c(result.transition.reshape(flat + (n, n))),
-        c(result.process_cov.reshape(flat + (n, n))),
-        joseph,
+        c(qd.reshape(flat + (n, n))),
+        FORMS.index(form),
     )
     sm = sm.reshape(lead + (n_steps, n))
     sc = sc.reshape(lead + (n_steps, n, n))
