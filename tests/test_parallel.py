@@ -4,7 +4,7 @@ import operator
 
 import pytest
 
-from adaptrack.parallel import TaskPool, task_pool
+from adaptrack.parallel import TaskPool, WorkerLost, task_pool
 
 
 def _fail_on_three(x: int) -> int:
@@ -55,3 +55,52 @@ def test_an_existing_scheduler_by_address(dask_pool):
     with task_pool(scheduler=address) as pool:
         assert pool.n_workers == 2
         assert pool.map(operator.mul, [(2, 3), (4, 5)]) == [6, 20]
+
+
+def _die_once(marker: str, x: int) -> int:
+    """Kill the worker process the first time (no marker file yet), then square ``x``."""
+    import os
+    from pathlib import Path
+
+    if x == 2 and not Path(marker).exists():
+        Path(marker).touch()
+        os._exit(1)
+    return x * x
+
+
+def _always_die(x: int) -> int:
+    import os
+
+    if x == 1:
+        os._exit(1)
+    return x
+
+
+@pytest.mark.distributed
+def test_a_task_whose_worker_dies_runs_again_and_the_results_are_complete(tmp_path):
+    marker = str(tmp_path / "died")
+    with task_pool(workers=2) as pool:
+        assert pool.map(_die_once, [(marker, i) for i in range(6)]) == [i * i for i in range(6)]
+    assert (tmp_path / "died").exists()  # the worker did die once
+
+
+@pytest.mark.distributed
+def test_a_task_that_kills_every_worker_stops_the_run_with_a_clear_error():
+    with (
+        task_pool(workers=2) as pool,
+        pytest.raises(WorkerLost, match=r"task 1 of 4 \(_always_die\) killed"),
+    ):
+        pool.map(_always_die, [(i,) for i in range(4)])
+
+
+def test_the_command_line_reports_a_lost_worker_in_one_line(capsys):
+    import typer
+
+    from adaptrack.cli import _pool
+
+    with pytest.raises(typer.Exit) as exit_info, _pool(1, None):
+        raise WorkerLost("task 1 of 4 (fn) killed its worker process every time it ran")
+    assert exit_info.value.exit_code == 1
+    assert capsys.readouterr().err.strip().splitlines() == [
+        "error: task 1 of 4 (fn) killed its worker process every time it ran"
+    ]

@@ -60,7 +60,7 @@ from .io.tables import (
     write_text_atomic,
 )
 from .models.continuous import ConstantAcceleration, Singer
-from .parallel import TaskPool, task_pool
+from .parallel import TaskPool, WorkerLost, task_pool
 from .service import commands as service_commands
 from .simulation.scenario import load_scenario
 
@@ -581,7 +581,10 @@ def _pool(workers: int | None, scheduler: str | None) -> Iterator[TaskPool]:
     except OSError as exc:
         _fail(f"cannot start the task pool ({exc})")
     with stack:
-        yield pool
+        try:
+            yield pool
+        except WorkerLost as exc:
+            _fail(str(exc))
 
 
 def _write_json(path: Path, payload: object) -> None:

@@ -20,6 +20,14 @@ from typing import Any, TypeVar
 R = TypeVar("R")
 
 
+class WorkerLost(RuntimeError):
+    """A task's worker process died every time the task ran.
+
+    Out of memory, a crash in compiled code, a kill: the run stops with this error instead of
+    waiting for the task.
+    """
+
+
 class TaskPool:
     """Runs independent tasks; ``client`` is a ``distributed.Client`` or None (in-process)."""
 
@@ -47,7 +55,10 @@ class TaskPool:
     ) -> list[R]:
         """Return ``[fn(*args) for args in tasks]``; ``progress(i)`` as task ``i`` finishes.
 
-        A failing task raises its own exception here (the remaining tasks are cancelled).
+        A failing task raises its own exception here (the remaining tasks are cancelled). A
+        task whose worker process dies is run again on a live worker (the Nanny restarts the
+        dead one); after Dask's ``allowed-failures`` deaths (3 by default) :class:`WorkerLost`
+        names it.
         """
         if self.client is None:
             out = []
@@ -56,7 +67,7 @@ class TaskPool:
                 if progress:
                     progress(i)
             return out
-        from distributed import as_completed
+        from distributed import KilledWorker, as_completed
 
         futures = [self.client.submit(_one_kernel_thread, fn, *args, pure=False) for args in tasks]
         index = {f.key: i for i, f in enumerate(futures)}
@@ -64,7 +75,13 @@ class TaskPool:
         try:
             for fut in as_completed(futures):
                 i = index[fut.key]
-                results[i] = fut.result()
+                try:
+                    results[i] = fut.result()
+                except KilledWorker as exc:
+                    raise WorkerLost(
+                        f"task {i} of {len(futures)} ({getattr(fn, '__name__', fn)}) killed "
+                        f"its worker process every time it ran ({exc}); the run stops"
+                    ) from exc
                 if progress:
                     progress(i)
         finally:
@@ -121,4 +138,4 @@ def task_pool(workers: int = 1, scheduler: str | None = None) -> Iterator[TaskPo
         yield TaskPool(client)
 
 
-__all__ = ["TaskPool", "task_pool"]
+__all__ = ["TaskPool", "WorkerLost", "task_pool"]
