@@ -592,6 +592,8 @@ def imm_case(src: Source) -> Case:
         bad: Any = {"transition_probs": pi * 1.5, "initial_probs": p0 - 1.0}.get(arg)
         if bad is None:
             how, bad = "indefinite", spoil_cov(p.r, "indefinite")
+    elif how == "shape" and arg == "measurement_cov":  # (1, 1, 1, 1) is a valid per-step R
+        bad = np.eye(p.r.shape[-1] + 1)
     else:
         bad = spoil({"transition_probs": pi, "initial_probs": p0, "measurement_cov": p.r,
                      "times": p.times}[arg], how, src)  # fmt: skip
