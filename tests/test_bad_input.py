@@ -185,6 +185,22 @@ def test_innovation_covariance_not_pd_names_batch_index():
         at.update(state, np.zeros((2, 1)), H, R)
 
 
+def test_the_square_root_forms_name_an_indefinite_prior_instead_of_factoring_it():
+    covs = np.stack([np.eye(3), np.diag([1.0, -4.0, 1.0])])  # unobserved negative variance
+    state = at.GaussianState(np.zeros((2, 3)), covs, 0.0)
+    with pytest.raises(ValueError, match=r"state.cov must be positive semi-definite; not at "):
+        at.update(state, np.zeros((2, 1)), H, R, form="sqrt")
+    with pytest.raises(ValueError, match=r"state.cov must be positive semi-definite; not at "):
+        at.kalman_step(state, np.zeros((2, 1)), M, H, R, time=1.0, form="sqrt")
+
+
+def test_update_names_a_measurement_cov_that_is_not_positive_definite():
+    with pytest.raises(ValueError, match="measurement_cov must be positive definite"):
+        at.update(prior(), [1.0], H, [[-1.0]])
+    with pytest.raises(ValueError, match="measurement_cov must be symmetric"):
+        at.update(prior(), [1.0, 2.0], np.vstack([H, H]), [[1.0, 0.5], [0.0, 1.0]])
+
+
 # --- update / kalman_step ------------------------------------------------------------------
 def test_update_shapes():
     with pytest.raises(ValueError, match=r"measurement must have shape \(\.\.\., 1\)"):

@@ -102,3 +102,63 @@ def test_lower_factor_reproduces_singular_and_badly_scaled_covariances(model):
     safe = np.where(scale > 0, scale, 1.0)
     err = np.abs(covariance(f) - qd) / (safe[:, :, None] * safe[:, None, :])
     assert err.max() < 1e-12
+
+
+def _steps(t, z, model, h, r, prior, form):
+    state, means = prior, []
+    for k in range(t.size):
+        state, _ = at.kalman_step(state, z[k], model, h, r, time=t[k], form=form)
+        means.append(state.mean)
+    return np.array(means), state
+
+
+def test_kalman_step_square_root_form_matches_the_50_digit_reference():
+    """The step function's square-root form on the ill-conditioned problem: its covariances'
+    correlation matrices stay below condition 1e12, so the covariance it carries from step to
+    step holds the answer (the Joseph form is 4 sigma off)."""
+    t, z, model, h, r, prior = ill_conditioned_problem()
+    res = at.kalman_filter(t, z, model, h, r, prior, form="sqrt", backend="numpy")
+    mean, cov = kalman_mp(res.transition, res.process_cov, h, r, z, prior.mean, prior.cov)
+    sigma = np.sqrt(np.diagonal(cov, axis1=-2, axis2=-1))
+    for form, limit in (("sqrt", 1e-2), ("auto", 1e-2)):
+        means, last = _steps(t, z, model, h, r, prior, form)
+        assert np.max(np.abs(means - mean) / sigma) < limit, form
+        assert np.all(np.linalg.eigvalsh(last.cov) > 0.0)
+    joseph, _ = _steps(t, z, model, h, r, prior, "joseph")
+    assert np.max(np.abs(joseph - mean) / sigma) > 1.0  # the case the forms exist for
+
+
+def test_update_forms_agree_on_a_well_conditioned_step_and_auto_is_joseph_there():
+    prior = at.GaussianState([1.0, 2.0, 0.5], np.diag([4.0, 1.0, 0.25]), 0.0)
+    h, r = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]), np.diag([0.5, 0.2])
+    z = np.array([1.7, 1.4])
+    posts = {f: at.update(prior, z, h, r, form=f) for f in ("auto", "joseph", "standard", "sqrt")}
+    for f in ("standard", "sqrt"):
+        np.testing.assert_allclose(posts[f][0].mean, posts["joseph"][0].mean, rtol=1e-12)
+        np.testing.assert_allclose(posts[f][0].cov, posts["joseph"][0].cov, rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose(posts[f][1].nis, posts["joseph"][1].nis, rtol=1e-12)
+    np.testing.assert_array_equal(posts["auto"][0].mean, posts["joseph"][0].mean)
+    np.testing.assert_array_equal(posts["auto"][0].cov, posts["joseph"][0].cov)
+
+
+def test_a_covariance_carried_between_steps_limits_the_step_function():
+    """The documented limit of a covariance-in, covariance-out step: the square-root algorithm
+    that carries its factor is exact where refactoring S S^T every step (what the step
+    function must do) is sigmas off. Fuzz case (1, 207): correlation condition 1.2e13."""
+    from adaptrack.filters.square_root import covariance, sqrt_predict, sqrt_update
+    from tests.stress.fuzz import Source, _filter, problem
+
+    p = problem(Source(np.random.default_rng((1, 207))))
+    res = _filter(p, form="sqrt", backend="numpy")
+    mask = np.broadcast_to(p.mask, p.z.shape)
+    sigma = np.sqrt(np.diagonal(res.filtered.cov[:, -1], axis1=-2, axis2=-1))
+    errors = []
+    for refactor in (False, True):
+        x, f = p.prior.mean, lower_factor(np.asarray(p.prior.cov))
+        for k in range(p.z.shape[-2]):
+            noise = lower_factor(res.process_cov[:, k])
+            x, f = sqrt_predict(x, f, res.transition[:, k], noise, np.zeros_like(x))
+            x, f, _ = sqrt_update(x, f, p.z[:, k], p.h, p.r, mask[:, k], p.offset)
+            f = lower_factor(covariance(f)) if refactor else f
+        errors.append(np.max(np.abs(x - res.filtered.mean[:, -1]) / sigma))
+    assert errors[0] == 0.0 and errors[1] > 1.0

@@ -177,3 +177,27 @@ def test_ctrl_c_leaves_no_output_file(tmp_path):
     assert proc.returncode == 130
     assert err.strip().splitlines()[-1] == "error: interrupted"
     assert list(tmp_path.iterdir()) == []
+
+
+def test_dead_reckoning_names_an_indefinite_prior_and_a_non_numeric_scale():
+    """Fuzz cases (1, 355) and (1, 34): a LinAlgError from inside NumPy, and '1' taken as 1."""
+    model = at.models.Singer(time_constant_s=5.0, accel_std_mps2=1.0)
+    t, y = np.arange(1.0, 5.0), np.full(4, 10.0)
+    good = at.GaussianState([10.0, 0.0], np.eye(2), 1.0)
+    bad = at.GaussianState([10.0, 0.0], np.diag([1.0, -3.0]), 1.0)
+    with pytest.raises(ValueError, match="initial.cov must be positive semi-definite"):
+        at.dead_reckoning_filter(t, y, model, 0.1, bad)
+    for scale in ("1", None, np.ones(2), 0.0):
+        with pytest.raises((TypeError, ValueError), match="speed_scale must be"):
+            at.dead_reckoning_filter(t, y, model, 0.1, good, speed_scale=scale)
+    at.dead_reckoning_filter(t, y, model, 0.1, good, speed_scale=-1.0)  # a sign is valid
+
+
+def test_kalman_step_names_a_measurement_cov_that_is_not_positive_definite():
+    """Fuzz case (1, 153): the step function took an asymmetric R."""
+    with pytest.raises(ValueError, match="measurement_cov must be symmetric"):
+        at.kalman_step(
+            at.GaussianState(np.zeros(4), np.eye(4), 0.0), [1.0, 2.0],
+            ConstantVelocity(accel_psd=1.0, n_axes=2), np.eye(2, 4), [[1.0, 0.3], [0.0, 1.0]],
+            time=1.0,
+        )  # fmt: skip

@@ -12,7 +12,8 @@ import numpy as np
 from .._linalg import symmetrize
 from .._typing import ArrayLike, FloatArray
 from .._validation import as_float_array, check_symmetric_pd, check_times
-from ..filters.kalman import _component_mask, _covariance_update, _gain, _masked_model
+from ..filters._measurement import masked_model
+from ..filters.kalman import _component_mask, _covariance_update, _gain
 from ..models.continuous import MotionModel, as_motion_model
 from ..models.discretize import discretize
 
@@ -64,7 +65,7 @@ def pcrlb_linear(
     out = np.empty((t.size, n, n))
     for k in range(t.size):
         p = symmetrize(phi[k] @ p @ phi[k].T + qd[k])
-        hm, rm = _masked_model(h, r, None if mk[k].all() else mk[k])
+        hm, rm = masked_model(h, r, None if mk[k].all() else mk[k])
         gain, _, _ = _gain(p, hm, rm)
         out[k] = p = _covariance_update(p, gain, hm, rm, "joseph")
     return out

@@ -17,7 +17,12 @@ import numpy as np
 
 from .._linalg import mT, symmetrize
 from .._typing import ArrayLike, FloatArray
-from .._validation import as_float_array, check_positive_scalar, check_times
+from .._validation import (
+    as_float_array,
+    check_positive_scalar,
+    check_symmetric_pd,
+    check_times,
+)
 from ..models.continuous import Singer
 from ..models.discretize import Method, discretize_with_input
 from ..types import GaussianState, StepInfo, _trusted, as_gaussian_state
@@ -90,15 +95,17 @@ def dead_reckoning_filter(
     initial = as_gaussian_state(initial, "initial")
     if initial.dim != 2:
         raise ValueError(f"initial must be over [v, w] (2 states); got {initial.dim} states")
+    check_symmetric_pd(initial.cov, "initial.cov", semidefinite=True)
     t = as_float_array(times, "times", min_ndim=1)
     y = as_float_array(speeds, "speeds", min_ndim=1)
     if y.shape != t.shape and t.shape != y.shape[-1:]:
         raise ValueError(f"speeds must have shape {t.shape} to match times; got {y.shape}")
     check_times(t, "times")
     var = check_positive_scalar(speed_var, "speed_var")
-    c2 = float(speed_scale)
-    if c2 == 0.0 or not np.isfinite(c2):
-        raise ValueError(f"speed_scale must be finite and non-zero; got {speed_scale}")
+    scale = as_float_array(speed_scale, "speed_scale")
+    if scale.ndim != 0 or scale == 0.0:
+        raise ValueError(f"speed_scale must be a non-zero real number; got {speed_scale!r}")
+    c2 = float(scale)
     var_r0 = check_positive_scalar(
         initial_distance_var_m2, "initial_distance_var_m2", allow_zero=True
     )

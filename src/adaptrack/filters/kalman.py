@@ -18,13 +18,21 @@ import numpy as np
 
 from .._linalg import matvec, mT, symmetrize
 from .._typing import ArrayLike, BoolArray, FloatArray
-from .._validation import as_float_array, check_finite
+from .._validation import as_float_array, check_finite, check_symmetric_pd
 from ..models.continuous import MotionModel, as_motion_model
 from ..models.discretize import Method, Noise, discretize_with_input
 from ..types import GaussianState, StepInfo, _trusted, as_gaussian_state
+from ._measurement import LOG_2PI, masked_model
+from .square_root import covariance, lower_factor, sqrt_predict, sqrt_update
 
-UpdateForm = Literal["joseph", "standard"]
-_LOG_2PI = float(np.log(2.0 * np.pi))
+UpdateForm = Literal["auto", "joseph", "standard", "sqrt"]
+
+JOSEPH_MAX_RATIO = 1e8
+"""Beyond this ``trace(S) / lambda_min(R)`` the ``"auto"`` forms take the square root.
+
+The Joseph form builds ``I - K H`` by cancellation and loses about ``log10`` of that ratio in
+digits (means about its 3/2 power in posterior sigmas): at 1e8, half of double precision.
+"""
 
 
 class CovarianceError(ValueError):
@@ -65,19 +73,6 @@ def predict(
     cov = symmetrize(transition @ state.cov @ mT(transition) + process_cov)
     time_arr = np.broadcast_to(np.asarray(time, dtype=np.float64), mean.shape[:-1])
     return _trusted(GaussianState, mean=mean, cov=cov, time=time_arr)
-
-
-def _masked_model(
-    h: FloatArray, r: FloatArray, mask: BoolArray | None
-) -> tuple[FloatArray, FloatArray]:
-    """Zero the rows of H and decouple the entries of R of missing components."""
-    if mask is None:
-        return h, r
-    m = mask.astype(np.float64)
-    hm = h * m[..., :, None]
-    both = m[..., :, None] * m[..., None, :]
-    rm = r * both + np.eye(r.shape[-1]) * (1.0 - m)[..., None, :]
-    return hm, rm
 
 
 def _gain(
@@ -131,7 +126,7 @@ def covariance_recursion(
     for k in range(n_steps):
         p = phi[k] @ cov @ phi[k].T + qd[k]
         pc[k] = p = 0.5 * (p + p.T)
-        hm, rm = _masked_model(h, r, None if bool(mask[k].all()) else mask[k])
+        hm, rm = masked_model(h, r, None if bool(mask[k].all()) else mask[k])
         try:
             kg, s, ld = _gain(p, hm, rm)
         except np.linalg.LinAlgError:
@@ -144,11 +139,21 @@ def covariance_recursion(
     return pc, fc, s_a, k_a, logdet, hm_a
 
 
+def exceeds_joseph_limit(innovation_cov: FloatArray, r: FloatArray) -> bool:
+    """Whether some ``trace(S)`` exceeds :data:`JOSEPH_MAX_RATIO` times ``lambda_min(R)``.
+
+    ``innovation_cov`` (..., m, m) and ``r`` (..., m, m) broadcast over their batch axes.
+    """
+    r_min = np.linalg.eigvalsh(r)[..., 0]
+    s_trace = np.trace(innovation_cov, axis1=-2, axis2=-1)
+    return bool(np.any(s_trace > JOSEPH_MAX_RATIO * r_min))
+
+
 def _innovation_stats(
     nu: FloatArray, s: FloatArray, logdet: FloatArray, n_obs: FloatArray
 ) -> tuple[FloatArray, FloatArray]:
     nis = np.einsum("...i,...i->...", nu, np.linalg.solve(s, nu[..., None])[..., 0])
-    loglik = np.where(n_obs > 0, -0.5 * (logdet + nis + n_obs * _LOG_2PI), 0.0)
+    loglik = np.where(n_obs > 0, -0.5 * (logdet + nis + n_obs * LOG_2PI), 0.0)
     return nis, loglik
 
 
@@ -159,7 +164,7 @@ def update(
     measurement_cov: ArrayLike,
     *,
     mask: ArrayLike | None = None,
-    form: UpdateForm = "joseph",
+    form: UpdateForm = "auto",
     measurement_noise_mean: ArrayLike | None = None,
 ) -> tuple[GaussianState, StepInfo]:
     """Condition a Gaussian state on a linear measurement ``z = H x + v``.
@@ -176,8 +181,12 @@ def update(
         ``R`` (for a noise ``D eta`` pass ``D S_eta D^T``), symmetric positive definite.
     mask : array_like of bool, shape (..., m) or (...), optional
         True where a component was measured (default: all).
-    form : {"joseph", "standard"}
-        Covariance update form.
+    form : {"auto", "joseph", "standard", "sqrt"}
+        Covariance update: Joseph, the textbook ``(I - K H) P``, or the square-root (array)
+        form from a factor of the prior covariance (PSD by construction). ``"auto"``: Joseph
+        unless ``trace(S)`` exceeds :data:`JOSEPH_MAX_RATIO` times the smallest eigenvalue of
+        ``R`` or ``S`` is not positive definite, then the square root (the criterion of
+        :func:`adaptrack.kalman_filter`).
     measurement_noise_mean : array_like, shape (m,), optional
         Known mean of the measurement noise, removed from the innovation.
 
@@ -187,13 +196,32 @@ def update(
         The posterior and the innovation statistics computed from the prior.
     """
     state = as_gaussian_state(state, "state")
+    z, h, r, mk, offset = _measurement_inputs(
+        state.dim, measurement, measurement_matrix, measurement_cov, mask, measurement_noise_mean
+    )
+    form = _check_form(form)
+    done = None if form == "sqrt" else _plain_update(state, z, h, r, mk, form, offset)
+    if done is not None:
+        return done
+    check_symmetric_pd(state.cov, "state.cov", semidefinite=True)
+    return _sqrt_posterior(state.mean, lower_factor(state.cov), state.time, z, h, r, mk, offset)
+
+
+def _measurement_inputs(
+    dim: int,
+    measurement: ArrayLike,
+    measurement_matrix: ArrayLike,
+    measurement_cov: ArrayLike,
+    mask: ArrayLike | None,
+    measurement_noise_mean: ArrayLike | None,
+) -> tuple[FloatArray, FloatArray, FloatArray, BoolArray, FloatArray | None]:
+    """Validate one step's measurement arguments against a state of ``dim`` components."""
     z = as_float_array(measurement, "measurement", min_ndim=1, allow_nan=True)
     h = as_float_array(measurement_matrix, "measurement_matrix", min_ndim=2)
     r = as_float_array(measurement_cov, "measurement_cov", min_ndim=2)
-    if h.shape[-1] != state.dim:
+    if h.shape[-1] != dim:
         raise ValueError(
-            f"measurement_matrix must have shape (..., m, {state.dim}) to match "
-            f"the state; got {h.shape}"
+            f"measurement_matrix must have shape (..., m, {dim}) to match the state; got {h.shape}"
         )
     m = h.shape[-2]
     if z.shape[-1] != m:
@@ -202,6 +230,7 @@ def update(
         )
     if r.shape[-2:] != (m, m):
         raise ValueError(f"measurement_cov must have shape (..., {m}, {m}); got {r.shape}")
+    check_symmetric_pd(r, "measurement_cov")
     mk = _component_mask(mask, z.shape, "mask")
     if np.any(np.isnan(z) & mk):
         idx = tuple(int(i) for i in np.argwhere(np.isnan(z) & mk)[0])
@@ -209,17 +238,54 @@ def update(
     offset = None
     if measurement_noise_mean is not None:
         offset = as_float_array(measurement_noise_mean, "measurement_noise_mean", min_ndim=1)
-    form = _check_form(form)
+        if offset.shape != (m,):
+            raise ValueError(f"measurement_noise_mean must have shape ({m},); got {offset.shape}")
+    return z, h, r, mk, offset
+
+
+def _plain_update(
+    prior: GaussianState,
+    z: FloatArray,
+    h: FloatArray,
+    r: FloatArray,
+    mask: BoolArray,
+    form: UpdateForm,
+    offset: FloatArray | None,
+) -> tuple[GaussianState, StepInfo] | None:
+    """Joseph or standard update; None where ``"auto"`` wants the square-root form instead."""
     try:
-        return _update(state, z, h, r, mk, form, offset)
+        post, info = _update(prior, z, h, r, mask, "joseph" if form == "auto" else form, offset)
     except np.linalg.LinAlgError:
-        s_mat = h @ state.cov @ np.swapaxes(h, -1, -2) + r
-        bad = np.linalg.eigvalsh(symmetrize(s_mat)).min(axis=-1) <= 0
+        eig = np.linalg.eigvalsh(symmetrize(h @ prior.cov @ mT(h) + r))
+        indefinite = eig[..., 0] < -1e-9 * np.abs(eig).max(axis=-1)
+        if form == "auto" and not np.any(indefinite):
+            return None  # lost to rounding: the square root keeps it
+        bad = indefinite if form == "auto" else eig[..., 0] <= 0
         idx = tuple(int(i) for i in np.argwhere(bad)[0]) if bad.ndim else ()
         raise CovarianceError(
             f"innovation covariance is not positive definite at batch index "
             f"{idx}; is state.cov positive semi-definite?"
         ) from None
+    if form == "auto" and exceeds_joseph_limit(info.innovation_cov, r):
+        return None
+    return post, info
+
+
+def _sqrt_posterior(
+    mean: FloatArray,
+    factor: FloatArray,
+    time: ArrayLike,
+    z: FloatArray,
+    h: FloatArray,
+    r: FloatArray,
+    mask: BoolArray,
+    offset: FloatArray | None,
+) -> tuple[GaussianState, StepInfo]:
+    """Square-root update of a prior given by its mean and covariance factor."""
+    new_mean, new_factor, info = sqrt_update(mean, factor, z, h, r, mask, offset)
+    time_arr = np.broadcast_to(np.asarray(time, dtype=np.float64), new_mean.shape[:-1])
+    cov = np.broadcast_to(covariance(new_factor), new_mean.shape + new_mean.shape[-1:])
+    return _trusted(GaussianState, mean=new_mean, cov=cov, time=time_arr), info
 
 
 def _update(
@@ -233,7 +299,7 @@ def _update(
 ) -> tuple[GaussianState, StepInfo]:
     """Trusted update kernel (inputs validated by the caller)."""
     full = bool(mask.all())
-    hm, rm = _masked_model(h, r, None if full else mask)
+    hm, rm = masked_model(h, r, None if full else mask)
     zm = np.where(mask, z, 0.0)
     if offset is not None:
         zm = zm - np.where(mask, offset, 0.0)
@@ -258,9 +324,11 @@ def _update(
 
 
 def _check_form(form: str) -> UpdateForm:
-    if form not in ("joseph", "standard"):
-        raise ValueError(f"form must be 'joseph' or 'standard'; got {form!r}")
-    return "joseph" if form == "joseph" else "standard"
+    forms: tuple[UpdateForm, ...] = ("auto", "joseph", "standard", "sqrt")
+    for f in forms:
+        if form == f:
+            return f
+    raise ValueError(f"form must be 'auto', 'joseph', 'standard' or 'sqrt'; got {form!r}")
 
 
 def _component_mask(mask: ArrayLike | None, shape: tuple[int, ...], name: str) -> BoolArray:
@@ -293,7 +361,7 @@ def kalman_step(
     method: Method = "expm",
     noise: Noise = "white",
     order: int = 2,
-    form: UpdateForm = "joseph",
+    form: UpdateForm = "auto",
 ) -> tuple[GaussianState, StepInfo]:
     """One online step: predict ``state`` to ``time`` with ``model``, then update.
 
@@ -316,7 +384,9 @@ def kalman_step(
     mask : array_like of bool, optional
         As in :func:`update`.
     method, noise, order : see :func:`adaptrack.discretize`.
-    form : {"joseph", "standard"}
+    form : {"auto", "joseph", "standard", "sqrt"}
+        As in :func:`update`; the square-root form predicts and updates a factor of the
+        covariance (``tria([Phi S, S_q])``, then the update's pre-array).
 
     Returns
     -------
@@ -324,6 +394,10 @@ def kalman_step(
     """
     state = as_gaussian_state(state, "state")
     model = as_motion_model(model)
+    z, h, r, mk, _ = _measurement_inputs(
+        state.dim, measurement, measurement_matrix, measurement_cov, mask, None
+    )
+    form = _check_form(form)
     t = as_float_array(time, "time")
     check_finite(t, "time")
     dt = np.broadcast_to(t, state.batch_shape) - state.time
@@ -331,8 +405,23 @@ def kalman_step(
         idx = tuple(int(i) for i in np.argwhere(dt < 0)[0]) if dt.ndim else ()
         raise ValueError(f"time must not precede state.time; dt = {dt[idx]} at batch index {idx}")
     phi, qd, u = discretize_with_input(model, dt, method, noise=noise, order=order)
-    prior = predict(state, phi, qd, time=np.broadcast_to(t, state.batch_shape), control=u)
-    return update(prior, measurement, measurement_matrix, measurement_cov, mask=mask, form=form)
+    times = np.broadcast_to(t, state.batch_shape)
+    if form != "sqrt":
+        prior = predict(state, phi, qd, time=times, control=u)
+        done = _plain_update(prior, z, h, r, mk, form, None)
+        if done is not None:
+            return done
+    check_symmetric_pd(state.cov, "state.cov", semidefinite=True)
+    control = np.zeros(state.dim) if u is None else u
+    mean, factor = sqrt_predict(state.mean, lower_factor(state.cov), phi, lower_factor(qd), control)
+    return _sqrt_posterior(mean, factor, times, z, h, r, mk, None)
 
 
-__all__ = ["CovarianceError", "kalman_step", "predict", "update"]
+__all__ = [
+    "JOSEPH_MAX_RATIO",
+    "CovarianceError",
+    "exceeds_joseph_limit",
+    "kalman_step",
+    "predict",
+    "update",
+]

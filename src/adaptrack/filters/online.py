@@ -37,8 +37,8 @@ from ._codegen import (
 )
 from ._kernels import _LOG_2PI, kf_step, series_bank_row
 from ._sqrt_kernel import lower_factor_into, outer_into, sqrt_step
-from .kalman import CovarianceError
-from .run import JOSEPH_MAX_RATIO, FilterForm
+from .kalman import JOSEPH_MAX_RATIO, CovarianceError
+from .run import FilterForm
 from .square_root import lower_factor
 
 # header: n, m, Joseph form (0/1), nis, log-likelihood, observed components, time, next bank

@@ -25,13 +25,15 @@ from .._validation import (
 from ..models.continuous import MotionModel, as_motion_model
 from ..models.discretize import Method, Noise, discretize_with_input
 from ..types import FilterResult, GaussianState, StepInfo, _trusted, as_gaussian_state
+from ._measurement import masked_model
 from .kalman import (
+    JOSEPH_MAX_RATIO,
     CovarianceError,
     _component_mask,
     _innovation_stats,
-    _masked_model,
     _update,
     covariance_recursion,
+    exceeds_joseph_limit,
     predict,
 )
 from .square_root import covariance, lower_factor, sqrt_predict, sqrt_update
@@ -223,7 +225,7 @@ def kalman_filter(
     )
     if form != "auto":
         return _solve(problem, compiled)
-    if _ill_conditioned(r):  # S >= R: every step would exceed the Joseph limit
+    if exceeds_joseph_limit(r, r):  # S >= R: every step would exceed the Joseph limit
         return _solve(replace(problem, form="sqrt"), compiled)
     try:
         result = _solve(problem, compiled)
@@ -247,14 +249,6 @@ def measurement_matrix_for(measurement_matrix: ArrayLike, m: int, n: int) -> Flo
             f"(m = {m}) and model (n = {n}); got {h.shape}"
         )
     return h
-
-
-JOSEPH_MAX_RATIO = 1e8
-
-
-def _ill_conditioned(r: FloatArray) -> bool:
-    """Whether some ``R`` (..., m, m) has ``trace(R) > JOSEPH_MAX_RATIO * lambda_min(R)``."""
-    return bool(np.any(np.trace(r, axis1=-2, axis2=-1) > JOSEPH_MAX_RATIO * _min_eig(r)))
 
 
 def _min_eig(r: FloatArray) -> FloatArray:
@@ -558,7 +552,7 @@ def _per_track(
 def _bad_tracks(cov: FloatArray, h: FloatArray, r: FloatArray, mask: BoolArray) -> list[int] | None:
     if cov.ndim < 3:
         return None
-    hm, rm = _masked_model(h, r, mask)
+    hm, rm = masked_model(h, r, mask)
     s = hm @ cov @ np.swapaxes(hm, -1, -2) + rm
     return [int(i) for i in np.flatnonzero(np.linalg.eigvalsh(s).min(axis=-1) <= 0)]
 

@@ -20,7 +20,7 @@ import numpy as np
 from .._linalg import matvec, mT, psd_sqrt, symmetrize
 from .._typing import BoolArray, FloatArray
 from ..types import StepInfo, _trusted
-from .kalman import _LOG_2PI, _masked_model
+from ._measurement import LOG_2PI, masked_model
 
 
 def lower_factor(a: FloatArray) -> FloatArray:
@@ -77,7 +77,7 @@ def sqrt_update(
     """
     n = factor.shape[-1]
     m = z.shape[-1]
-    hm, rm = _masked_model(h, r, mask)
+    hm, rm = masked_model(h, r, mask)
     batch = np.broadcast_shapes(factor.shape[:-2], rm.shape[:-2], hm.shape[:-2])
     pre = np.zeros(batch + (m + n, m + n))
     pre[..., :m, :m] = np.linalg.cholesky(rm)
@@ -93,7 +93,7 @@ def sqrt_update(
     nis = np.sum(w * w, axis=-1)
     logdet = 2.0 * np.sum(np.log(np.abs(np.diagonal(ss, axis1=-2, axis2=-1))), axis=-1)
     n_obs = np.broadcast_to(np.sum(mask, axis=-1).astype(np.float64), nis.shape)
-    ll = np.where(n_obs > 0, -0.5 * (logdet + nis + n_obs * _LOG_2PI), 0.0)
+    ll = np.where(n_obs > 0, -0.5 * (logdet + nis + n_obs * LOG_2PI), 0.0)
     info = _trusted(
         StepInfo,
         innovation=nu,
