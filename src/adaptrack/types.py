@@ -20,7 +20,7 @@ def _trusted(cls: type, **values: Any) -> Any:
     """Build a frozen dataclass without validation (private kernels trust their inputs)."""
     obj: Any = object.__new__(cls)
     for f in fields(cls):
-        object.__setattr__(obj, f.name, values[f.name])
+        object.__setattr__(obj, f.name, values[f.name] if f.name in values else f.default)
     return obj
 
 
@@ -36,6 +36,13 @@ class GaussianState:
         State covariance.
     time : array_like, shape (...) or broadcastable to it
         Time of the belief [s since the run epoch].
+    factor : array_like, shape (..., n, n), optional
+        A factor ``S`` with ``S S^T = cov``. The square-root forms of
+        :func:`adaptrack.kalman_step` and :func:`adaptrack.update` return it and continue from
+        it, so a sequence of steps does not lose the digits that rounding ``cov`` to double
+        precision between steps would (an ill-conditioned problem). Checked against ``cov``
+        (a state made with a changed ``cov`` and the old factor is refused: pass
+        ``factor=None``).
 
     Examples
     --------
@@ -47,6 +54,7 @@ class GaussianState:
     mean: FloatArray
     cov: FloatArray
     time: FloatArray
+    factor: FloatArray | None = None
 
     def __post_init__(self) -> None:
         mean = as_float_array(self.mean, "mean", min_ndim=1)
@@ -62,6 +70,11 @@ class GaussianState:
             ) from None
         for name, value in (("mean", mean), ("cov", cov), ("time", time)):
             object.__setattr__(self, name, frozen(value))
+        if self.factor is not None:
+            factor = as_float_array(self.factor, "factor", min_ndim=2)
+            check_shape(factor, cov.shape, "factor", against="cov")
+            _check_factor(factor, cov)
+            object.__setattr__(self, "factor", frozen(factor))
 
     @property
     def dim(self) -> int:
@@ -91,6 +104,24 @@ class GaussianState:
             mean=frozen(self.mean[index]),
             cov=frozen(self.cov[index]),
             time=frozen(self.time[index]),
+            factor=None if self.factor is None else frozen(self.factor[index]),
+        )
+
+
+FACTOR_RTOL = 1e-9  # of sigma_i sigma_j: a factor that reproduces cov to rounding
+
+
+def _check_factor(factor: FloatArray, cov: FloatArray) -> None:
+    """Raise ValueError unless ``factor factor^T`` equals ``cov`` to :data:`FACTOR_RTOL`."""
+    d = np.sqrt(np.clip(np.diagonal(cov, axis1=-2, axis2=-1), 0.0, None))
+    scale = d[..., :, None] * d[..., None, :]
+    off = np.abs(factor @ np.swapaxes(factor, -1, -2) - cov)
+    bad = off > FACTOR_RTOL * scale + np.finfo(float).tiny
+    if np.any(bad):
+        idx = tuple(int(i) for i in np.argwhere(bad)[0])
+        raise ValueError(
+            f"factor does not reproduce cov (factor factor^T differs at index {idx}); "
+            "a state with a new cov needs factor=None"
         )
 
 

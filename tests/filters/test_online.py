@@ -68,6 +68,28 @@ def test_clock_round_off_shares_one_discretisation(rng):
     assert np.isfinite(f._bank[:, 0]).sum() == 1  # one step length cached
 
 
+@pytest.mark.parametrize("block", [False, True])
+def test_microsecond_steps_that_differ_by_less_than_a_nanosecond_are_not_shared(block):
+    """Fuzz case (11, 2402): steps of 1.37-1.40 us, some 0.1-1 ns apart, shared one
+    discretisation under a fixed 1 ns tolerance (0.07 % of the step): the stream ended 0.017
+    posterior sigma off the sequence filter. The tolerance is now the time stamp's rounding."""
+    rng = np.random.default_rng(3)
+    model = ConstantAcceleration(jerk_psd=1.0)
+    t = 1e-3 + np.cumsum(rng.uniform(1.37e-6, 1.40e-6, 40))
+    z = (300.0 * t + rng.normal(size=40) * 1e-4)[:, None]
+    h, r = np.array([[1.0, 0.0, 0.0]]), np.array([[1e-8]])
+    prior = at.GaussianState([0.0, 300.0, 0.0], np.diag([1e-2, 7e4, 3e7]), 1e-3)
+    ref = at.kalman_filter(t, z, model, h, r, prior).filtered
+    f = OnlineFilter(model, h, r, prior)
+    if block:
+        f.update_many(t, z)
+    else:
+        for k in range(t.size):
+            f.update(t[k], z[k])
+    sigma = np.sqrt(np.diag(ref.cov[-1]))
+    assert np.max(np.abs(f.mean - ref.mean[-1]) / sigma) < 1e-6
+
+
 def test_bad_input_raises_and_leaves_the_filter_unchanged(rng):
     model, m = CASES[2]
     t, z, h, r, prior = _stream(model, m, rng)

@@ -5,6 +5,8 @@ very transitions and process covariances the filter used, so only the filter's o
 is measured.
 """
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -141,24 +143,47 @@ def test_update_forms_agree_on_a_well_conditioned_step_and_auto_is_joseph_there(
     np.testing.assert_array_equal(posts["auto"][0].cov, posts["joseph"][0].cov)
 
 
-def test_a_covariance_carried_between_steps_limits_the_step_function():
-    """The documented limit of a covariance-in, covariance-out step: the square-root algorithm
-    that carries its factor is exact where refactoring S S^T every step (what the step
-    function must do) is sigmas off. Fuzz case (1, 207): correlation condition 1.2e13."""
+def test_the_step_function_carries_the_factor_and_equals_the_batch_filter():
+    """Fuzz case (1, 207): covariances whose correlation matrices reach condition 1.2e13.
+    Refactoring ``S S^T`` every step (a covariance carried between calls) is 5 sigma off the
+    batch square-root filter; the state's ``factor`` carries ``S`` instead: equal to it."""
     from adaptrack.filters.square_root import covariance, sqrt_predict, sqrt_update
     from tests.stress.fuzz import Source, _filter, problem
 
     p = problem(Source(np.random.default_rng((1, 207))))
     res = _filter(p, form="sqrt", backend="numpy")
     mask = np.broadcast_to(p.mask, p.z.shape)
+    times = np.broadcast_to(p.times, p.z.shape[:-1])
     sigma = np.sqrt(np.diagonal(res.filtered.cov[:, -1], axis1=-2, axis2=-1))
-    errors = []
-    for refactor in (False, True):
-        x, f = p.prior.mean, lower_factor(np.asarray(p.prior.cov))
-        for k in range(p.z.shape[-2]):
-            noise = lower_factor(res.process_cov[:, k])
-            x, f = sqrt_predict(x, f, res.transition[:, k], noise, np.zeros_like(x))
-            x, f, _ = sqrt_update(x, f, p.z[:, k], p.h, p.r, mask[:, k], p.offset)
-            f = lower_factor(covariance(f)) if refactor else f
-        errors.append(np.max(np.abs(x - res.filtered.mean[:, -1]) / sigma))
-    assert errors[0] == 0.0 and errors[1] > 1.0
+    x, f = p.prior.mean, lower_factor(np.asarray(p.prior.cov))
+    for k in range(p.z.shape[-2]):
+        noise = lower_factor(res.process_cov[:, k])
+        x, f = sqrt_predict(x, f, res.transition[:, k], noise, np.zeros_like(x))
+        x, f, _ = sqrt_update(x, f, p.z[:, k], p.h, p.r, mask[:, k], p.offset)
+        f = lower_factor(covariance(f))  # what a covariance-only state forces
+    assert np.max(np.abs(x - res.filtered.mean[:, -1]) / sigma) > 1.0
+    state = p.prior
+    for k in range(p.z.shape[-2]):
+        state, _ = at.kalman_step(
+            state, p.z[:, k], p.model, p.h, p.r, time=times[:, k], mask=mask[:, k], form="sqrt"
+        )
+        assert state.factor is not None
+    assert np.max(np.abs(state.mean - res.filtered.mean[:, -1]) / sigma) <= 1e-12
+    np.testing.assert_array_equal(state.cov, res.filtered.cov[:, -1])
+
+
+def test_a_state_factor_is_checked_against_its_covariance():
+    cov = np.array([[4.0, 1.0], [1.0, 2.0]])
+    state = at.GaussianState([0.0, 0.0], cov, 0.0, factor=np.linalg.cholesky(cov))
+    two = at.GaussianState(
+        np.zeros((2, 2)), np.stack([cov, cov]), 0.0, np.stack([state.factor] * 2)
+    )
+    np.testing.assert_array_equal(two[1].factor, state.factor)
+    with pytest.raises(ValueError, match="factor does not reproduce cov"):
+        dataclasses.replace(state, cov=np.eye(2))
+    dataclasses.replace(state, cov=np.eye(2), factor=None)  # the way to change it
+    # "auto" continues a square-root sequence; "joseph" drops the factor
+    h, r = np.array([[1.0, 0.0]]), np.array([[0.5]])
+    assert at.update(state, [1.0], h, r)[0].factor is not None
+    assert at.update(state, [1.0], h, r, form="joseph")[0].factor is None
+    assert at.update(dataclasses.replace(state, factor=None), [1.0], h, r)[0].factor is None

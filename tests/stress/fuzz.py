@@ -70,13 +70,13 @@ COV_TOL = 1e-3  # of sigma_i sigma_j
 # few n * eps (n <= 6 states); two draws, and a factor for the directions they miss.
 ROUNDING = 8 * np.finfo(float).eps
 SPREAD_FACTOR = 10.0
-# A step function that takes and returns a covariance (``kalman_step``) rounds it to double
-# precision every step; a covariance whose correlation matrix has condition kappa keeps about
-# 16 - log10(kappa) digits in its smallest direction. Beyond 1e12 (4 digits; the limit the
-# filters' agreement is defined to elsewhere) its agreement with a filter that carries a
-# factor is not defined: such cases count as "ok, covariance form". Seen: at kappa 1.2e13 the
-# square-root algorithm refactoring S S^T every step is 5 sigma off, carrying S exact.
-COVARIANCE_FORM_MAX_CONDITION = 1e12
+# Where inputs changed at the rounding level move the reference by more than one posterior
+# sigma, double precision does not determine the answer (e.g. a 978 s gap of a constant-
+# acceleration model under a prior of 1.6e5 m^2/s^4 and an R of condition 1e12: the largest
+# trace(S) is 1e29 times the smallest measurement variance; both backends are 30-450 sigma
+# off a 60-digit reference). Two paths cannot be compared there: the case counts as
+# "ok, undetermined" (finite, symmetric and PSD are still required).
+UNDETERMINED_SIGMA = 1.0
 
 
 class Source:
@@ -112,7 +112,6 @@ class Outputs:
     agree: list[tuple[str, np.ndarray, np.ndarray, np.ndarray]] = field(default_factory=list)
     probabilities: list[np.ndarray] = field(default_factory=list)
     spread: dict[str, float] = field(default_factory=dict)  # sensitivity per agreement label
-    unchecked: str = ""  # why the agreement is not defined for this case (see COVARIANCE_FORM)
 
     def state(self, mean: np.ndarray, cov: np.ndarray) -> None:
         """A Gaussian result: mean finite, covariance finite and PSD."""
@@ -191,8 +190,12 @@ def check(out: Outputs) -> tuple[str, str]:
     for p in out.probabilities:
         if np.any(p < 0) or np.any(np.abs(p.sum(-1) - 1.0) > 1e-9):
             return "disagreement", "mode probabilities are not a distribution"
-    if out.unchecked:
-        return "ok, covariance form", out.unchecked
+    undetermined = [
+        label for label, _, _, _ in out.agree if out.spread.get(label, 0.0) > UNDETERMINED_SIGMA
+    ]
+    if undetermined:
+        spread = max(out.spread[label] for label in undetermined)
+        return "ok, undetermined", f"{undetermined[0]}: rounding sensitivity {spread:.3g}"
     for label, a, b, sigma in out.agree:
         floor = MEAN_TOL_SIGMA if label.endswith("mean") else COV_TOL
         spread = out.spread.get(label, 0.0)
@@ -844,13 +847,9 @@ def kalman_step_case(src: Source) -> Case:
             out = Outputs()
             end = steps(p)
             out.state(end.mean, end.cov)
-            res = _filter(p)
-            ref = res.filtered
+            ref = _filter(p).filtered
             last = at.GaussianState(ref.mean[:, -1], ref.cov[:, -1], times[:, -1])
             out.compare("kalman_step/kalman_filter", end, last)
-            kappa = max(_correlation_condition(c) for c in (res.predicted.cov, ref.cov))
-            if kappa > COVARIANCE_FORM_MAX_CONDITION:
-                out.unchecked = f"correlation condition {kappa:.2g}"
             for q in perturbed(p):
                 c = _filter(q).filtered
                 moved = at.GaussianState(c.mean[:, -1], c.cov[:, -1], times[:, -1])
@@ -903,13 +902,6 @@ def kalman_step_case(src: Source) -> Case:
         return out
 
     return Case("kalman_step", spoiled, name, how)
-
-
-def _correlation_condition(cov: np.ndarray) -> float:
-    """Largest condition number of the correlation matrices of ``cov`` (..., n, n)."""
-    d = np.sqrt(np.diagonal(cov, axis1=-2, axis2=-1))
-    d = np.where(d > 0.0, d, 1.0)
-    return float(np.max(np.linalg.cond(cov / (d[..., :, None] * d[..., None, :]))))
 
 
 def dead_reckoning_case(src: Source) -> Case:
@@ -990,6 +982,8 @@ def dead_reckoning_case(src: Source) -> Case:
     elif arg == "method":
         how = "option"
         bad = src.choice(("", "Euler", 3))
+    elif how == "shape" and arg == "speeds":  # (N, 1, 1, 1) is a valid batch of one step
+        bad = np.ones((n_tracks, n_steps + 1))
     else:
         bad = spoil(args[arg], how, src)
     name = "initial" if (arg, how) == ("initial", "late") else arg
@@ -1080,7 +1074,7 @@ def main() -> None:
     args = parser.parse_args()
     counts, examples = campaign(args.cases, args.seed, progress=True)
     print(f"{sum(counts.values())} cases")
-    for category in ("ok", "ok, covariance form", "rejected", *DEFECTS):
+    for category in ("ok", "ok, undetermined", "rejected", *DEFECTS):
         total = sum(v for (_, c), v in counts.items() if c == category)
         by = ", ".join(f"{t} {v}" for (t, c), v in sorted(counts.items()) if c == category)
         print(f"{category}: {total}" + (f" ({by})" if by else ""))

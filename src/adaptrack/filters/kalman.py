@@ -183,10 +183,11 @@ def update(
         True where a component was measured (default: all).
     form : {"auto", "joseph", "standard", "sqrt"}
         Covariance update: Joseph, the textbook ``(I - K H) P``, or the square-root (array)
-        form from a factor of the prior covariance (PSD by construction). ``"auto"``: Joseph
-        unless ``trace(S)`` exceeds :data:`JOSEPH_MAX_RATIO` times the smallest eigenvalue of
-        ``R`` or ``S`` is not positive definite, then the square root (the criterion of
-        :func:`adaptrack.kalman_filter`).
+        form from ``state.factor`` or a factor of ``state.cov`` (PSD by construction; the
+        posterior carries its factor). ``"auto"``: the square root for a state that carries a
+        factor, else Joseph unless ``trace(S)`` exceeds :data:`JOSEPH_MAX_RATIO` times the
+        smallest eigenvalue of ``R`` or ``S`` is not positive definite, then the square root
+        (the criterion of :func:`adaptrack.kalman_filter`).
     measurement_noise_mean : array_like, shape (m,), optional
         Known mean of the measurement noise, removed from the innovation.
 
@@ -200,11 +201,28 @@ def update(
         state.dim, measurement, measurement_matrix, measurement_cov, mask, measurement_noise_mean
     )
     form = _check_form(form)
-    done = None if form == "sqrt" else _plain_update(state, z, h, r, mk, form, offset)
-    if done is not None:
-        return done
+    if not _square_root(form, state):
+        done = _plain_update(state, z, h, r, mk, form, offset)
+        if done is not None:
+            return done
+    return _sqrt_posterior(state.mean, _factor_of(state), state.time, z, h, r, mk, offset)
+
+
+def _square_root(form: UpdateForm, state: GaussianState) -> bool:
+    """Whether a step takes the square-root form from the start.
+
+    Asked for, or ``"auto"`` on a state that carries a factor (a square-root sequence
+    continues as one).
+    """
+    return form == "sqrt" or (form == "auto" and state.factor is not None)
+
+
+def _factor_of(state: GaussianState) -> FloatArray:
+    """Return the state's factor, or one of its covariance (checked positive semi-definite)."""
+    if state.factor is not None:
+        return state.factor
     check_symmetric_pd(state.cov, "state.cov", semidefinite=True)
-    return _sqrt_posterior(state.mean, lower_factor(state.cov), state.time, z, h, r, mk, offset)
+    return lower_factor(state.cov)
 
 
 def _measurement_inputs(
@@ -281,11 +299,17 @@ def _sqrt_posterior(
     mask: BoolArray,
     offset: FloatArray | None,
 ) -> tuple[GaussianState, StepInfo]:
-    """Square-root update of a prior given by its mean and covariance factor."""
+    """Square-root update of a prior given by its mean and covariance factor.
+
+    The posterior carries its factor.
+    """
     new_mean, new_factor, info = sqrt_update(mean, factor, z, h, r, mask, offset)
     time_arr = np.broadcast_to(np.asarray(time, dtype=np.float64), new_mean.shape[:-1])
-    cov = np.broadcast_to(covariance(new_factor), new_mean.shape + new_mean.shape[-1:])
-    return _trusted(GaussianState, mean=new_mean, cov=cov, time=time_arr), info
+    shape = new_mean.shape + new_mean.shape[-1:]
+    cov = np.broadcast_to(covariance(new_factor), shape)
+    new_factor = np.broadcast_to(new_factor, shape)
+    post = _trusted(GaussianState, mean=new_mean, cov=cov, time=time_arr, factor=new_factor)
+    return post, info
 
 
 def _update(
@@ -386,7 +410,8 @@ def kalman_step(
     method, noise, order : see :func:`adaptrack.discretize`.
     form : {"auto", "joseph", "standard", "sqrt"}
         As in :func:`update`; the square-root form predicts and updates a factor of the
-        covariance (``tria([Phi S, S_q])``, then the update's pre-array).
+        covariance (``tria([Phi S, S_q])``, then the update's pre-array) and returns it in
+        the state, so the next step continues from it.
 
     Returns
     -------
@@ -406,14 +431,13 @@ def kalman_step(
         raise ValueError(f"time must not precede state.time; dt = {dt[idx]} at batch index {idx}")
     phi, qd, u = discretize_with_input(model, dt, method, noise=noise, order=order)
     times = np.broadcast_to(t, state.batch_shape)
-    if form != "sqrt":
+    if not _square_root(form, state):
         prior = predict(state, phi, qd, time=times, control=u)
         done = _plain_update(prior, z, h, r, mk, form, None)
         if done is not None:
             return done
-    check_symmetric_pd(state.cov, "state.cov", semidefinite=True)
     control = np.zeros(state.dim) if u is None else u
-    mean, factor = sqrt_predict(state.mean, lower_factor(state.cov), phi, lower_factor(qd), control)
+    mean, factor = sqrt_predict(state.mean, _factor_of(state), phi, lower_factor(qd), control)
     return _sqrt_posterior(mean, factor, times, z, h, r, mk, None)
 
 

@@ -6,7 +6,8 @@ preallocated buffer and runs the same predict + Joseph update as the batch kerne
 numbers of :func:`adaptrack.kalman_filter` to rounding. Like it, the default ``form="auto"``
 continues in square-root form (:func:`adaptrack.filters._sqrt_kernel.sqrt_step`) from the first
 step where the Joseph form would lose digits. Transitions are cached by step length
-(steps within 1 ns of a cached one share it: clock round-off, e.g. ``0.15 - 0.1 != 0.05``). For
+(steps equal to a cached one within 4 units in the last place of the time stamp share it: clock
+round-off, e.g. ``0.15 - 0.1 != 0.05``). For
 the exact methods a new step length is discretised inside the compiled step from a series table
 (:mod:`adaptrack.models.series_table`), so a jittered stream costs about a microsecond per
 update too; other methods discretise it in NumPy.
@@ -27,8 +28,8 @@ from ..models.discretize import Method, Noise, discretize_with_input
 from ..models.series_table import SeriesTable, model_series_table
 from ..types import GaussianState, as_gaussian_state
 from ._codegen import (
-    DT_TOLERANCE_S,
     GENERATED_MAX_STATES,
+    STEP_MATCH_REL,
     WS_H_MAX,
     WS_NEXT_ROW,
     WS_TRACE_LIMIT,
@@ -243,9 +244,9 @@ class OnlineFilter:
         pos, shape = self._layout[name]
         return self._ws[pos : pos + math.prod(shape)].reshape(shape)
 
-    def _row(self, dt: float) -> int:
-        """Row of the transition bank holding step ``dt`` (discretised on first use)."""
-        hit = np.flatnonzero(np.abs(self._bank[:, 0] - dt) <= DT_TOLERANCE_S)
+    def _row(self, dt: float, t: float) -> int:
+        """Bank row holding step ``dt`` to time ``t`` (discretised on first use)."""
+        hit = np.flatnonzero(np.abs(self._bank[:, 0] - dt) <= STEP_MATCH_REL * abs(t))
         if hit.size:
             return int(hit[0])
         row = int(self._ws[WS_NEXT_ROW])
@@ -325,7 +326,7 @@ class OnlineFilter:
             if status == 6 or (status == 2 and self._auto):  # the rest in square-root form
                 self._to_sqrt()
             elif status == 3:  # a new step length: discretise, go on
-                self._row(t[k] - self._ws[_TIME])
+                self._row(t[k] - self._ws[_TIME], t[k])
             else:
                 raise CovarianceError(
                     f"innovation covariance is not positive definite at row {k} "
@@ -349,7 +350,7 @@ class OnlineFilter:
         if not np.isfinite(z[present]).all():
             self._raise(1, t, z)
         n = self.model.state_dim
-        phi, qd, u = np.split(self._bank[self._row(dt), 1:], [n * n, 2 * n * n])
+        phi, qd, u = np.split(self._bank[self._row(dt, t), 1:], [n * n, 2 * n * n])
         phi, qd = phi.reshape(n, n), qd.reshape(n, n)
         blk = self._blocks
         if self._sqrt:
