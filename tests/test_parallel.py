@@ -88,7 +88,7 @@ def test_a_task_whose_worker_dies_runs_again_and_the_results_are_complete(tmp_pa
 def test_a_task_that_kills_every_worker_stops_the_run_with_a_clear_error():
     with (
         task_pool(workers=2) as pool,
-        pytest.raises(WorkerLost, match=r"task 1 of 4 \(_always_die\) killed"),
+        pytest.raises(WorkerLost, match=r"task \d of 4 \(_always_die\): worker processes died"),
     ):
         pool.map(_always_die, [(i,) for i in range(4)])
 
@@ -99,8 +99,8 @@ def test_the_command_line_reports_a_lost_worker_in_one_line(capsys):
     from adaptrack.cli import _pool
 
     with pytest.raises(typer.Exit) as exit_info, _pool(1, None):
-        raise WorkerLost("task 1 of 4 (fn) killed its worker process every time it ran")
+        raise WorkerLost("task 1 of 4 (fn): worker processes died every time it ran")
     assert exit_info.value.exit_code == 1
     assert capsys.readouterr().err.strip().splitlines() == [
-        "error: task 1 of 4 (fn) killed its worker process every time it ran"
+        "error: task 1 of 4 (fn): worker processes died every time it ran"
     ]

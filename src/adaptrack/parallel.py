@@ -21,7 +21,7 @@ R = TypeVar("R")
 
 
 class WorkerLost(RuntimeError):
-    """A task's worker process died every time the task ran.
+    """A task's worker processes died every time the task ran (on them).
 
     Out of memory, a crash in compiled code, a kill: the run stops with this error instead of
     waiting for the task.
@@ -79,8 +79,8 @@ class TaskPool:
                     results[i] = fut.result()
                 except KilledWorker as exc:
                     raise WorkerLost(
-                        f"task {i} of {len(futures)} ({getattr(fn, '__name__', fn)}) killed "
-                        f"its worker process every time it ran ({exc}); the run stops"
+                        f"task {i} of {len(futures)} ({getattr(fn, '__name__', fn)}): worker "
+                        f"processes died every time it ran ({exc}); the run stops"
                     ) from exc
                 if progress:
                     progress(i)
