@@ -192,3 +192,84 @@ def kalman_mp(
         means = [[float(v) for v in x] for x, _ in filtered]
         covs = [to_float(((p + p.T) / 2).tolist()) for _, p in filtered]
     return np.array(means), np.array(covs)
+
+
+def imm_mp(transitions, process_covs, hs, names, r, z, mask, priors, pi, mu0, dps=60):
+    """Combined means (T, n_out) of an IMM at ``dps`` digits; its mixing as documented in
+    :mod:`adaptrack.filters.imm` (states matched by name; a state that component i lacks is
+    taken from model j's own estimate, uncorrelated).
+
+    ``transitions[j]``, ``process_covs[j]`` (T, n_j, n_j) map step k-1 to k (step 0 is
+    update-only: pass identities and zeros); ``hs[j]`` (m, n_j); ``names[j]`` state names;
+    ``r`` (m, m); ``z`` (T, m); ``mask`` (T, m); ``priors[j]`` (mean, cov); ``pi`` (M, M)
+    with ``pi[i, j] = P(j | i)``; ``mu0`` (M,). Textbook (covariance) form at ``dps`` digits.
+    """
+
+    def mat(a):
+        return mp.matrix(np.asarray(a, dtype=float).tolist())
+
+    n_models = len(hs)
+    out = [s for s in names[0] if all(s in nm for nm in names)]
+    with mp.workdps(dps):
+        xs = [mat(np.reshape(p[0], (-1, 1))) for p in priors]
+        ps = [mat(p[1]) for p in priors]
+        mu = [mp.mpf(float(v)) for v in mu0]
+        means = []
+        for k in range(len(z)):
+            if k:
+                c = [sum(mp.mpf(float(pi[i, j])) * mu[i] for i in range(n_models))
+                     for j in range(n_models)]  # fmt: skip
+                mixed = []
+                for j in range(n_models):
+                    nj = len(names[j])
+                    w = [mp.mpf(float(pi[i, j])) * mu[i] / c[j] if c[j] > 0 else mp.mpf(0)
+                         for i in range(n_models)]  # fmt: skip
+                    emb = []
+                    for i in range(n_models):
+                        x = xs[j].copy()
+                        p = ps[j].copy()
+                        shared = [a for a in range(nj) if names[j][a] in names[i]]
+                        src = [names[i].index(names[j][a]) for a in shared]
+                        for a in range(nj):
+                            if a in shared:
+                                continue
+                            for b in shared:
+                                p[a, b] = p[b, a] = 0
+                        for a, sa in zip(shared, src, strict=True):
+                            x[a] = xs[i][sa]
+                            for b, sb in zip(shared, src, strict=True):
+                                p[a, b] = ps[i][sa, sb]
+                        emb.append((x, p))
+                    x0 = sum((w[i] * emb[i][0] for i in range(n_models)), mp.zeros(nj, 1))
+                    p0 = mp.zeros(nj, nj)
+                    for i in range(n_models):
+                        d = emb[i][0] - x0
+                        p0 += w[i] * (emb[i][1] + d * d.T)
+                    mixed.append((x0, p0))
+                c_k = c
+            else:
+                mixed = list(zip(xs, ps, strict=True))
+                c_k = mu
+            lik = []
+            for j in range(n_models):
+                f = mat(transitions[j][k])
+                x = f * mixed[j][0]
+                p = f * mixed[j][1] * f.T + mat(process_covs[j][k])
+                on = np.flatnonzero(mask[k])
+                if on.size:
+                    hm, rm = mat(hs[j][on]), mat(np.asarray(r)[np.ix_(on, on)])
+                    s = hm * p * hm.T + rm
+                    nu = mat(np.reshape(z[k, on], (-1, 1))) - hm * x
+                    gain = p * hm.T * mp.inverse(s)
+                    x = x + gain * nu
+                    p = p - gain * s * gain.T
+                    q = (nu.T * mp.inverse(s) * nu)[0]
+                    lik.append(mp.exp(-q / 2) / mp.sqrt(mp.det(2 * mp.pi * s)))
+                else:
+                    lik.append(mp.mpf(1))
+                xs[j], ps[j] = x, (p + p.T) / 2
+            tot = sum(lik[j] * c_k[j] for j in range(n_models))
+            mu = [lik[j] * c_k[j] / tot for j in range(n_models)]
+            comb = [sum(mu[j] * xs[j][names[j].index(s)] for j in range(n_models)) for s in out]
+            means.append([float(v) for v in comb])
+    return np.array(means)

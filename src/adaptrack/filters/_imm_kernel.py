@@ -3,9 +3,9 @@
 Models of different sizes are padded to the largest; each model's block is used through
 views of its own size. Per track (tracks in parallel) and step: mixing with the shared-state
 embedding, predict + update with :func:`adaptrack.filters._kernels.kf_step` (Joseph or
-standard form) or :func:`adaptrack.filters._sqrt_kernel.sqrt_step` from a factor of the mixed
-covariance (square-root form), mode probabilities by log-sum-exp, combination. Agrees with
-the NumPy reference to rounding.
+standard form) or :func:`adaptrack.filters._sqrt_kernel.sqrt_step` from the mixed factor
+(square-root form: the models' factors are mixed in factor form, :func:`mix_factor_into`),
+mode probabilities by log-sum-exp, combination. Agrees with the NumPy reference to rounding.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ import numpy as np
 from numba import prange
 
 from ._kernels import _LOG_2PI, kf_step
-from ._sqrt_kernel import lower_factor_into, outer_into, sqrt_step
+from ._sqrt_kernel import lower_factor_into, lower_triangularize, outer_into, sqrt_step
 
 FORMS = ("standard", "joseph", "sqrt")  # the kernel's form codes 0, 1, 2
 
@@ -95,6 +95,46 @@ def mix_into(  # type: ignore[no-untyped-def]
                 v = 0.5 * (mp[j, a, b] + mp[j, b, a])
                 mp[j, a, b] = v
                 mp[j, b, a] = v
+
+
+@numba.njit(cache=True)
+def mix_factor_into(  # type: ignore[no-untyped-def]
+    xs, fs, sizes, w, mx, emb_dst, emb_src, emb_cnt, j, shared, pre, out
+):  # fmt: skip
+    """Write a factor of model ``j``'s mixed covariance, from the factors ``fs``, into ``out``.
+
+    The compiled :func:`adaptrack.filters.imm._mixed_factor`: ``w`` (M, M) the mixing
+    probabilities and ``mx`` the mixed means (both from :func:`mix_into`); the pre-array
+    ``[sqrt(w_ij) E_i, sqrt(w_ij) d_i]`` over the models ``i`` is built in ``pre``
+    (nmax, M (2 nmax + 1)) and triangularised; ``shared`` (nmax,) bool is scratch.
+    """
+    n_models = xs.shape[0]
+    nj = sizes[j]
+    col = 0
+    for i in range(n_models):
+        ni = sizes[i]
+        root = math.sqrt(w[i, j])
+        width = ni + nj + 1
+        for a in range(nj):
+            shared[a] = False
+            for c in range(col, col + width):
+                pre[a, c] = 0.0
+            pre[a, col + ni + nj] = root * (xs[j, a] - mx[j, a])
+        for a in range(emb_cnt[i, j]):
+            da, sa = emb_dst[i, j, a], emb_src[i, j, a]
+            shared[da] = True
+            pre[da, col + ni + nj] = root * (xs[i, sa] - mx[j, da])
+            for c in range(ni):
+                pre[da, col + c] = root * fs[i, sa, c]
+        for a in range(nj):
+            if not shared[a]:
+                for c in range(nj):
+                    pre[a, col + ni + c] = root * fs[j, a, c]
+        col += width
+    lower_triangularize(pre[:nj, :col], nj, col)
+    for a in range(nj):
+        for b in range(nj):
+            out[a, b] = pre[a, b]
 
 
 @numba.njit(cache=True, inline="always")
@@ -216,6 +256,10 @@ def imm_kernel(  # type: ignore[no-untyped-def]
         wv = np.empty(m)
         ikh = np.empty((nmax, nmax))
         fac = np.empty((nmax, nmax))
+        fs = np.zeros((n_models, nmax, nmax))  # square-root form: the models' factors ...
+        mfs = np.zeros((n_models, nmax, nmax))  # ... and their mixed factors
+        pre_mix = np.empty((nmax, n_models * (2 * nmax + 1)))
+        shared = np.empty(nmax, dtype=np.bool_)
         pre1 = np.empty((nmax, 2 * nmax))
         pre2 = np.empty((m + nmax, m + nmax))
         sr = np.empty((m, m))
@@ -237,18 +281,29 @@ def imm_kernel(  # type: ignore[no-untyped-def]
                     xs, ps, sizes, log_mu, log_pi, emb_dst, emb_src, emb_cnt,
                     mx, mp, log_c, log_joint, w, em, ep,
                 )  # fmt: skip
+            if form == 2:  # mixed factors, from the factors of the step before
+                for j in range(n_models):
+                    nj = sizes[j]
+                    if k == 0:
+                        lower_factor_into(ps[j, :nj, :nj], mfs[j, :nj, :nj], tmp[:nj, :nj])
+                    else:
+                        mix_factor_into(
+                            xs, fs, sizes, w, mx, emb_dst, emb_src, emb_cnt, j, shared,
+                            pre_mix, mfs[j],
+                        )  # fmt: skip
             for j in range(n_models):
                 nj = sizes[j]
                 xs[j, :nj] = mx[j, :nj]
                 ps[j, :nj, :nj] = mp[j, :nj, :nj]
                 if form == 2:
-                    lower_factor_into(ps[j, :nj, :nj], fac[:nj, :nj], tmp[:nj, :nj])
+                    fac[:nj, :nj] = mfs[j, :nj, :nj]
                     ok, nis, logdet, nobs = sqrt_step(
                         xs[j, :nj], fac[:nj, :nj], phi[j, q, :nj, :nj], qd[j, q, :nj, :nj],
                         u[j, q, :nj], z[i, k], mask[i, k], h[j, :, :nj], r[ir, kr], off,
                         xp[:nj], pre1[:nj, : 2 * nj], pre2[: m + nj, : m + nj], rm, sr, nu, wv,
                         gain[:nj],
                     )  # fmt: skip
+                    fs[j, :nj, :nj] = fac[:nj, :nj]
                     outer_into(fac, ps[j], nj)
                 else:
                     ok, nis, logdet, nobs = kf_step(

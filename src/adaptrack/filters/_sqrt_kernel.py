@@ -20,7 +20,27 @@ _LOG_2PI = math.log(2.0 * math.pi)
 
 @numba.njit(cache=True, inline="always")
 def lower_triangularize(a, rows, cols):  # type: ignore[no-untyped-def]
-    """In place: ``a[:rows, :cols] -> [L, 0]`` with ``L L^T`` unchanged (Householder, right)."""
+    """In place: ``a[:rows, :cols] -> [L, 0]`` with ``L L^T`` unchanged (Householder, right).
+
+    The columns are first sorted by decreasing norm, as in
+    :func:`adaptrack.filters.square_root.triangularize` (row-wise accuracy on badly scaled
+    pre-arrays).
+    """
+    norms = np.empty(cols)
+    for c in range(cols):
+        acc = 0.0
+        for r in range(rows):
+            acc += a[r, c] * a[r, c]
+        norms[c] = acc
+    for c in range(cols - 1):  # selection: the largest remaining column to position c
+        big = c
+        for k in range(c + 1, cols):
+            if norms[k] > norms[big]:
+                big = k
+        if big != c:
+            norms[c], norms[big] = norms[big], norms[c]
+            for r in range(rows):
+                a[r, c], a[r, big] = a[r, big], a[r, c]
     for i in range(rows):
         tail = 0.0
         for c in range(i + 1, cols):

@@ -27,7 +27,7 @@ from ..models.continuous import MotionModel, as_motion_model
 from ..models.discretize import Method, Noise, discretize_with_input
 from ..types import GaussianState, _trusted
 from .kalman import _component_mask, _update, predict
-from .square_root import covariance, lower_factor, sqrt_predict, sqrt_update
+from .square_root import covariance, lower_factor, sqrt_predict, sqrt_update, triangularize
 
 IMMForm = Literal["joseph", "standard", "sqrt"]
 
@@ -221,11 +221,13 @@ def imm_filter(
             zk, mask_k = z[..., k, :], mk[..., k, :]
             if form == "sqrt":
                 sq = noise_factors[j][..., k, :, :]  # type: ignore[index]
-                xp, sp = sqrt_predict(mixed[j].mean, lower_factor(mixed[j].cov), phi, sq, u)
+                start = mixed[j].factor if k else lower_factor(mixed[j].cov)
+                xp, sp = sqrt_predict(mixed[j].mean, start, phi, sq, u)
                 mean, factor, info = sqrt_update(xp, sp, zk, hs[j], rk, mask_k, None)
                 states[j] = _trusted(
-                    GaussianState, mean=mean, cov=covariance(factor), time=tb[..., k]
-                )
+                    GaussianState, mean=mean, cov=covariance(factor), time=tb[..., k],
+                    factor=factor,
+                )  # fmt: skip
             else:
                 prior = predict(mixed[j], phi, qd, time=tb[..., k], control=u)
                 states[j], info = _update(prior, zk, hs[j], rk, mask_k, form)
@@ -384,7 +386,12 @@ def _mix(
     log_pi: FloatArray,
     emb: list[list[tuple[np.ndarray, np.ndarray]]],
 ) -> tuple[list[GaussianState], FloatArray]:
-    """IMM interaction: mixed initial conditions per model and predicted log weights."""
+    """IMM interaction: mixed initial conditions per model and predicted log weights.
+
+    States that carry covariance factors (the square-root form) are mixed in factor form
+    (:func:`_mixed_factor`), so the mixed covariance is never rounded to double precision and
+    factored again.
+    """
     n_models = len(states)
     log_joint = log_mu[..., :, None] + log_pi  # (..., i, j)
     log_c = logsumexp(log_joint, axis=-2)  # (..., j)
@@ -413,8 +420,42 @@ def _mix(
         x0 = np.einsum("...i,...in->...n", wj, xs)
         d = xs - x0[..., None, :]
         p0 = np.einsum("...i,...iab->...ab", wj, ps + d[..., :, None] * d[..., None, :])
-        mixed.append(_trusted(GaussianState, mean=x0, cov=symmetrize(p0), time=own.time))
+        factors = [st.factor for st in states if st.factor is not None]
+        factor = _mixed_factor(factors, j, wj, d, emb) if len(factors) == n_models else None
+        mixed.append(
+            _trusted(GaussianState, mean=x0, cov=symmetrize(p0), time=own.time, factor=factor)
+        )
     return mixed, log_c
+
+
+def _mixed_factor(
+    factors: list[FloatArray],
+    j: int,
+    weights: FloatArray,
+    spread: FloatArray,
+    emb: list[list[tuple[np.ndarray, np.ndarray]]],
+) -> FloatArray:
+    """Return a factor of model ``j``'s mixed covariance from the components' ``factors``.
+
+    ``sum_i w_i (P_i^emb + d_i d_i^T)`` is ``F F^T`` for ``F = [sqrt(w_i) E_i, sqrt(w_i) d_i]``
+    over the components, where ``E_i`` (n_j, n_i + n_j) factors component i embedded into
+    model j: the rows of the states it shares are its own factor's (first n_i columns), the
+    others model j's own factor's rows (last n_j columns), uncorrelated. ``F`` is
+    triangularised. ``weights`` (..., M) are the mixing probabilities, ``spread`` (..., M,
+    n_j) the embedded means less the mixed mean.
+    """
+    own = factors[j]
+    n_j = own.shape[-1]
+    blocks = []
+    for i, fi in enumerate(factors):
+        dst, src = emb[i][j]
+        rest = np.setdiff1d(np.arange(n_j), dst)
+        e = np.zeros(own.shape[:-2] + (n_j, fi.shape[-1] + n_j))
+        e[..., dst, : fi.shape[-1]] = fi[..., src, :]
+        e[..., rest, fi.shape[-1] :] = own[..., rest, :]
+        root = np.sqrt(weights[..., i])[..., None, None]
+        blocks += [root * e, root * spread[..., i, :, None]]
+    return triangularize(np.concatenate(blocks, axis=-1))
 
 
 __all__ = ["IMMResult", "imm_filter"]

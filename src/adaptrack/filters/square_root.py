@@ -43,8 +43,17 @@ def lower_factor(a: FloatArray) -> FloatArray:
 
 
 def triangularize(pre: FloatArray) -> FloatArray:
-    """Return lower-triangular ``L`` (..., r, r) with ``L L^T = pre pre^T``; ``c >= r``."""
-    upper: FloatArray = np.linalg.qr(mT(pre), mode="r")  # type: ignore[assignment]
+    """Return lower-triangular ``L`` (..., r, r) with ``L L^T = pre pre^T``; ``c >= r``.
+
+    The columns of ``pre`` go to the QR in order of decreasing norm (which leaves
+    ``pre pre^T`` unchanged): Householder QR of a matrix whose rows differ widely in scale is
+    accurate row by row only with its rows so sorted (Cox & Higham 1998). Seen: a prior with
+    variances from 5e-3 to 9e7 left the filter 0.039 posterior sigma off a 60-digit reference,
+    1.3e-6 sorted.
+    """
+    order = np.argsort(-np.linalg.norm(pre, axis=-2), axis=-1, kind="stable")
+    sorted_pre = np.take_along_axis(pre, order[..., None, :], axis=-1)
+    upper: FloatArray = np.linalg.qr(mT(sorted_pre), mode="r")  # type: ignore[assignment]
     return mT(upper)
 
 
