@@ -199,3 +199,31 @@ def test_rts_smooth_rejects_an_unknown_form():
     )
     with pytest.raises(ValueError, match="'standard', 'joseph' or 'sqrt'; got 'ud'"):
         at.rts_smooth(res, form="ud")
+
+
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+def test_square_root_smoother_continues_from_the_filters_factors(backend):
+    """Fuzz case (17, 73728): trace(S) up to 1.7e20 times the smallest measurement variance.
+    The square-root filter's result carries its filtered factors and the smoother starts from
+    them: both backends 1.9e-9 (covariances) off the 60-digit smoother, where factoring the
+    stored covariances again left them 3e-4 (NumPy) and 2.3e-3 (compiled) off."""
+    from tests.stress.fuzz import Source, _filter, problem
+
+    p = problem(Source(np.random.default_rng((17, 73728))))
+    res = _filter(p, form="sqrt", backend=backend)
+    f, cov = res.filtered.factor, res.filtered.cov
+    d = np.sqrt(np.diagonal(cov, axis1=-2, axis2=-1))
+    assert (
+        np.max(np.abs(f @ np.swapaxes(f, -1, -2) - cov) / (d[..., :, None] * d[..., None, :]))
+        < 1e-12
+    )
+    sm = at.rts_smooth(res, form="sqrt", backend=backend)
+    mask = np.broadcast_to(p.mask, p.z.shape)
+    for tr in range(p.z.shape[0]):
+        mean, cov = kalman_mp(
+            res.transition[tr], res.process_cov[tr], p.h, p.r, p.z[tr], p.prior.mean[tr],
+            p.prior.cov[tr], dps=60, mask=mask[tr], offset=p.offset, smooth=True,
+        )  # fmt: skip
+        sigma = np.sqrt(np.diagonal(cov, axis1=-2, axis2=-1))
+        assert np.max(np.abs(sm.mean[tr] - mean) / sigma) < 1e-2
+        assert np.max(np.abs(sm.cov[tr] - cov) / (sigma[..., :, None] * sigma[..., None, :])) < 1e-6

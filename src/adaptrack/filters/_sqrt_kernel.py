@@ -193,10 +193,13 @@ def sqrt_kernel(x0, s0, phi, sq, u, z, mask, h, r, off):  # type: ignore[no-unty
     Shapes: x0 (N|1, n), s0 (N|1, n, n) a factor of the prior covariance, phi (N|1, T, n, n),
     sq (N|1, T, n, n) factors of ``Qd``, u (N|1, T, n), z (N, T, m), mask (N, T, m), h (m, n),
     r (N|1, T|1, m, m), off (m,). Raises ValueError if a masked ``R`` is not positive definite.
+    Returns what :func:`adaptrack.filters._kernels.kalman_kernel` returns, then the filtered
+    covariances' factors (N, T, n, n).
     """
     n_tr, n_st, m = z.shape
     n = h.shape[1]
     pm, pc, fm, fc, nu_o, s_o, nis_o, ll_o, k_o, nobs_o = filter_outputs(n_tr, n_st, n, m)
+    ff = np.empty((n_tr, n_st, n, n))
     x = np.empty(n)
     xp = np.empty(n)
     fac = np.empty((n, n))
@@ -217,6 +220,7 @@ def sqrt_kernel(x0, s0, phi, sq, u, z, mask, h, r, off):  # type: ignore[no-unty
                 raise ValueError("measurement covariance is not positive definite")
             outer_into(pre1, pc[i, k], n)
             outer_into(fac, fc[i, k], n)
+            ff[i, k] = fac
             outer_into(pre2, s_o[i, k], m)
             for a in range(n):
                 pm[i, k, a] = xp[a]
@@ -226,4 +230,4 @@ def sqrt_kernel(x0, s0, phi, sq, u, z, mask, h, r, off):  # type: ignore[no-unty
             nis_o[i, k] = nis
             ll_o[i, k] = -0.5 * (logdet + nis + nobs * _LOG_2PI) if nobs > 0 else 0.0
             nobs_o[i, k] = nobs
-    return pm, pc, fm, fc, nu_o, s_o, nis_o, ll_o, k_o, nobs_o
+    return pm, pc, fm, fc, nu_o, s_o, nis_o, ll_o, k_o, nobs_o, ff

@@ -358,8 +358,11 @@ def _run_compiled(p: _Problem) -> FilterResult:
             c(r4),
             off,
         )
+        ff = out[-1].reshape(batch + out[-1].shape[1:])
+        out = out[:-1]
     else:
         out = run_kernels(x0, p0, phi, qd, u, zk, mk, h, r4, off, p.form == "joseph")
+        ff = None
     pm, pc, fm, fc, nu, s_a, nis, ll, k_a, nobs = (a.reshape(batch + a.shape[1:]) for a in out)
     tb = np.broadcast_to(t, batch + (n_steps,))
 
@@ -386,6 +389,7 @@ def _run_compiled(p: _Problem) -> FilterResult:
         mask,
         h,
         np.broadcast_to(r, batch + ((n_steps,) if r_per_step else ()) + (m, m)),
+        factor=ff,
     )
 
 
@@ -436,9 +440,12 @@ def _raise_not_pd(what: str, k: int, tracks: list[int] | None) -> None:
 class _Recorder:
     """Per-step outputs of a filter run over batch + (T,), turned into a FilterResult."""
 
-    def __init__(self, batch: tuple[int, ...], n_steps: int, n: int, m: int) -> None:
+    def __init__(
+        self, batch: tuple[int, ...], n_steps: int, n: int, m: int, factors: bool = False
+    ) -> None:
         self.pm, self.pc = _alloc(batch, n_steps, n), _alloc(batch, n_steps, n, n)
         self.fm, self.fc = _alloc(batch, n_steps, n), _alloc(batch, n_steps, n, n)
+        self.ff = _alloc(batch, n_steps, n, n) if factors else None  # filtered factors
         self.nu, self.s = _alloc(batch, n_steps, m), _alloc(batch, n_steps, m, m)
         self.nis, self.ll = _alloc(batch, n_steps), _alloc(batch, n_steps)
         self.nobs, self.k = _alloc(batch, n_steps), _alloc(batch, n_steps, n, m)
@@ -451,9 +458,12 @@ class _Recorder:
         fm: FloatArray,
         fc: FloatArray,
         info: StepInfo,
+        factor: FloatArray | None = None,
     ) -> None:
-        """Keep step ``sv``'s predicted and filtered moments and its StepInfo."""
+        """Keep step ``sv``'s predicted and filtered moments (and factor) and its StepInfo."""
         self.pm[sv], self.pc[sv], self.fm[sv], self.fc[sv] = pm, pc, fm, fc
+        if self.ff is not None:
+            self.ff[sv] = factor
         self.nu[sv], self.s[sv], self.nis[sv] = info.innovation, info.innovation_cov, info.nis
         self.ll[sv], self.nobs[sv], self.k[sv] = info.log_likelihood, info.n_observed, info.gain
 
@@ -486,6 +496,7 @@ class _Recorder:
             mask,
             h,
             r,
+            factor=self.ff,
         )
 
 
@@ -513,7 +524,7 @@ def _run_per_track(
     tb, phi_b, qd_b, u_b = _per_track(batch, t, phi, qd, u)
     sqrt = form == "sqrt"
     sq_b = np.broadcast_to(lower_factor(qd), batch + (n_steps, n, n)) if sqrt else qd_b
-    out = _Recorder(batch, n_steps, n, m)
+    out = _Recorder(batch, n_steps, n, m, factors=sqrt)
     x = np.broadcast_to(initial.mean, batch + (n,))
     carried = np.broadcast_to(lower_factor(initial.cov) if sqrt else initial.cov, batch + (n, n))
     for k in range(n_steps):
@@ -522,7 +533,7 @@ def _run_per_track(
         if sqrt:
             xp, sp = sqrt_predict(x, carried, phi_b[sv], sq_b[sv], u_b[sv])
             x, carried, info = sqrt_update(xp, sp, z[sv], h, rk, mask[sv], off)
-            out.store(sv, xp, covariance(sp), x, covariance(carried), info)
+            out.store(sv, xp, covariance(sp), x, covariance(carried), info, carried)
             continue
         state = _trusted(GaussianState, mean=x, cov=carried, time=tb[sv])
         prior = predict(state, phi_b[sv], qd_b[sv], time=tb[sv], control=u_b[sv])
@@ -642,10 +653,19 @@ def _result(
     mask: BoolArray,
     h: FloatArray,
     r: FloatArray,
+    factor: FloatArray | None = None,
 ) -> FilterResult:
+    """Assemble a FilterResult (arrays made read-only).
+
+    ``factor``: the filtered covariances' factors of a square-root run, carried by
+    ``filtered`` for the smoother.
+    """
     t = _ro(np.array(t, dtype=np.float64)) if t.flags.writeable else t
     predicted = _trusted(GaussianState, mean=_ro(pm), cov=_ro(pc), time=t)
-    filtered = _trusted(GaussianState, mean=_ro(fm), cov=_ro(fc), time=t)
+    filtered = _trusted(
+        GaussianState, mean=_ro(fm), cov=_ro(fc), time=t,
+        factor=None if factor is None else _ro(factor),
+    )  # fmt: skip
     info = _trusted(
         StepInfo,
         innovation=_ro(nu),

@@ -55,8 +55,11 @@ def sqrt_smoother_step(sf, sq, ph, ss, pre, pre2, x11, c):  # type: ignore[no-un
 
 
 @numba.njit(cache=True)
-def rts_kernel(fm, fc, pm, pc, phi, qd, form):  # type: ignore[no-untyped-def]
+def rts_kernel(fm, fc, ff, pm, pc, phi, qd, form):  # type: ignore[no-untyped-def]
     """Smooth every track: fm (N, T, n), fc/pc (N, T, n, n), pm (N, T, n), phi/qd (N|1, T, n, n).
+
+    ``ff`` (N, T, n, n): the filtered covariances' factors of a square-root filter run (used in
+    square-root form; empty: factor ``fc``).
 
     ``form`` indexes ``rts.FORMS``. Difference and Joseph forms: ``C_k = P_k|k Phi_{k+1}^T
     P_{k+1|k}^-1`` (Cholesky solve; the pseudo-inverse where the prediction is singular), then
@@ -79,10 +82,16 @@ def rts_kernel(fm, fc, pm, pc, phi, qd, form):  # type: ignore[no-untyped-def]
     for i in range(n_tr):
         ip = min(i, phi.shape[0] - 1)
         if form == 2 and n_st > 1:
-            lower_factor_into(fc[i, n_st - 1], ss, lo)
+            if ff.shape[0]:
+                ss[:, :] = ff[i, n_st - 1]
+            else:
+                lower_factor_into(fc[i, n_st - 1], ss, lo)
         for k in range(n_st - 2, -1, -1):
             if form == 2:
-                lower_factor_into(fc[i, k], d, lo)
+                if ff.shape[0]:
+                    d[:, :] = ff[i, k]
+                else:
+                    lower_factor_into(fc[i, k], d, lo)
                 sqrt_smoother_step(d, qd[ip, k + 1], phi[ip, k + 1], ss, pre, pre2, b, c)
             else:
                 # B = Phi P_k|k  (n x n); solve P_{k+1|k} C^T = B for C^T column by column

@@ -168,8 +168,10 @@ def rts_smooth(
     tail = (slice(None),) * b
     sm = np.array(filt.mean)
     sc = np.array(pf)
-    if form == "sqrt":
-        sf, sq = lower_factor(pf), lower_factor(qd)
+    if form == "sqrt":  # the filter's factors where it carried them
+        factor = filt.factor if not shared or filt.factor is None else _shared(filt.factor, b)
+        sf = lower_factor(pf) if factor is None else factor
+        sq = lower_factor(qd)
         ss = sf[cov_tail + (-1,)]
     for k in range(n_steps - 2, -1, -1):
         i, j = cov_tail + (k,), cov_tail + (k + 1,)
@@ -199,10 +201,14 @@ def _rts_compiled(result: FilterResult, form: str) -> GaussianState:
     lead = filt.mean.shape[:-2]
     flat = (-1, n_steps)
     qd = lower_factor(result.process_cov) if form == "sqrt" else result.process_cov
+    ff = np.zeros((0, 0, n, n))  # none: the kernel factors the filtered covariances
+    if form == "sqrt" and filt.factor is not None:
+        ff = filt.factor.reshape(flat + (n, n))
     c = np.ascontiguousarray
     sm, sc = rts_kernel(
         c(filt.mean.reshape(flat + (n,))),
         c(filt.cov.reshape(flat + (n, n))),
+        c(ff),
         c(pred.mean.reshape(flat + (n,))),
         c(pred.cov.reshape(flat + (n, n))),
         c(result.transition.reshape(flat + (n, n))),
