@@ -190,8 +190,12 @@ def test_the_younger_of_two_tracks_on_one_body_is_dropped_unless_it_is_the_confi
     corridor = np.zeros(4, np.int64)
     static = np.zeros(4, bool)
 
+    no = np.zeros(4, bool)
+
     def drop(confirmed):
-        return merged_rows(corridor, x, p, spread, static, ids, confirmed, 1.2, 1.0).tolist()
+        return merged_rows(
+            corridor, x, p, spread, static, no, no, ids, confirmed, 1.2, 1.0, 4.0
+        ).tolist()
 
     assert drop(np.array([True, True, False, True])) == [False, True, True, False]
     # the only confirmed one of the body survives, although it is the youngest
@@ -257,3 +261,28 @@ def test_split_finds_two_queued_bodies_from_the_moments_of_their_reflections():
     assert body[0] == pytest.approx(math.sqrt(25.0 / 12.0 + 0.09), abs=0.1)
     stopped[0] = False
     assert split_rows(stopped, moved, m2, m4, 1.8, 2.0)[0].size == 0
+
+
+def test_two_moving_parts_of_one_long_body_are_one_track_two_cars_are_not():
+    """Two road users that have moved, faster than 4 m/s, whose bodies (two spreads either
+    side) overlap are one bus tracked in two parts: the younger goes. Two cars a safe
+    distance apart, a stopped queue and slow traffic keep both tracks."""
+    x = np.zeros((2, 4))
+    x[:, 1] = 12.0
+    p = np.tile(np.eye(4) * 0.01, (2, 1, 1))
+    ids = np.array([3, 4])
+    corridor = np.zeros(2, np.int64)
+    yes, no = np.ones(2, bool), np.zeros(2, bool)
+
+    def drop(gap_m, spread, stopped=no, speed=12.0, moved=yes):
+        x[1, 0] = gap_m
+        x[:, 1] = speed
+        return merged_rows(
+            corridor, x, p, np.full(2, spread), no, stopped, moved, ids, yes, 1.2, 1.0, 4.0
+        ).tolist()
+
+    assert drop(4.4, 1.6) == [False, True]  # halves of a 12 m bus, 4.4 m apart: one body
+    assert drop(7.0, 1.1) == [False, False]  # two 5 m cars with a 2 m gap at 43 km/h
+    assert drop(4.4, 1.6, stopped=yes, speed=0.0) == [False, False]  # a stopped queue
+    assert drop(4.4, 1.6, speed=3.0) == [False, False]  # creeping traffic
+    assert drop(4.4, 1.6, moved=no) == [False, False]  # spreads not learnt yet

@@ -158,7 +158,8 @@ def _model(  # type: ignore[no-untyped-def]
 
     A body partly outside the field of view is detected over its visible part only
     (:func:`_visible_part`): the detection is predicted at that part's centre, with its
-    spread. ``xv`` (4,): scratch.
+    spread. ``xv`` (4,): scratch; it holds the state at the visible part's centre after the
+    call. Returns the visible part's spread [m].
     """
     road = roads[:, bounds[corridor[i], 0] : bounds[corridor[i], 1]]
     offset, part_spread, slope = _visible_part(i, x, spread, corridor, roads, bounds, radar, fields)
@@ -177,17 +178,26 @@ def _model(  # type: ignore[no-untyped-def]
     for a in range(3):
         for c in range(3):
             rm[a, c] += s2 * bb[a] * bb[c]
+    return part_spread
 
 
 @numba.njit(cache=True)
 def gate_scan(  # type: ignore[no-untyped-def]
-    x, p, spread, starting, direction, corridor, roads, bounds, radar, noise_tab, noise_cnt,
-    fields, across_std, start_speed_max, z, d2, logdet,
+    x, p, spread, starting, road_user, direction, corridor, roads, bounds, radar, noise_tab,
+    noise_cnt, fields, across_std, start_speed_max, extent_gate, gate, z, d2, logdet,
 ):  # fmt: skip
     """Fill ``d2`` (T, D) with each detection's squared Mahalanobis distance to each track.
 
     ``logdet`` (T,) receives the log-determinant of each track's innovation covariance
     (``inf`` where ``d2`` is).
+    A body's reflections lie on it: with ``extent_gate``, a detection that lies on a road
+    user's body (a ``road_user`` track: confirmed, it has moved; within ``BODY_HALF_SPREADS``
+    of its spreads along the lane from its centre, and within ``gate``) costs a track whose
+    (visible) body ends before it the excess squared over the variance of its along-lane
+    position (the sensor's range and azimuth noise projected on the lane, and the track's):
+    the Gaussian body model's tail would otherwise reach into the next body of a queue. A
+    detection on no body is left as it is (a long vehicle's far reflections are how its track
+    learns its spread).
     A stopped vehicle may be starting (``starting`` rows): its held zero speed is replaced by
     the speed in ``[0, start_speed_max]`` along its ``direction`` that best explains the
     detection's radial speed (a road user passing by in the other direction does not fit).
@@ -201,8 +211,17 @@ def gate_scan(  # type: ignore[no-untyped-def]
     s = np.zeros((3, 3))
     lo = np.zeros((3, 3))
     w = np.zeros(3)
+    ground = np.zeros((n_d, 6))  # ground point, line of sight (unit), range and cross var
+    for j in range(n_d):
+        gx, gy, rho = _ground_point(z[j], radar)
+        sr = curve_at(noise_tab, noise_cnt, 0, z[j, 0])
+        sa = rho * curve_at(noise_tab, noise_cnt, 1, off_boresight(z[j, 1], radar))
+        ground[j, 0], ground[j, 1] = gx, gy
+        ground[j, 2], ground[j, 3] = math.sin(z[j, 1]), math.cos(z[j, 1])
+        ground[j, 4], ground[j, 5] = sr * sr, sa * sa
+    penalty = np.zeros((n_t, n_d)) if extent_gate else np.zeros((0, 0))
     for i in range(n_t):
-        _model(
+        part_spread = _model(
             i, x, spread, corridor, roads, bounds, radar, noise_tab, noise_cnt, fields,
             across_std, xv, zp, h, rm, jp, jv,
         )  # fmt: skip
@@ -223,8 +242,11 @@ def gate_scan(  # type: ignore[no-untyped-def]
             d2[i, :] = np.inf
             continue
         logdet[i] = 2.0 * (math.log(lo[0, 0]) + math.log(lo[1, 1]) + math.log(lo[2, 2]))
+        _, _, tx, ty, _, px, py = _lane_frame(roads, bounds, corridor[i], xv[0], xv[3])
+        half = BODY_HALF_SPREADS * part_spread
         for j in range(n_d):
             innovation_into(z[j], zp, radar, doppler, w)
+            along = (ground[j, 0] - px) * tx + (ground[j, 1] - py) * ty
             if starting[i] and h[2, 1] != 0.0:
                 v = min(max(direction[i] * w[2] / h[2, 1], 0.0), start_speed_max)
                 for a in range(3):
@@ -237,6 +259,20 @@ def gate_scan(  # type: ignore[no-untyped-def]
                 w[a] = v / lo[a, a]
                 acc += w[a] * w[a]
             d2[i, j] = acc
+            if extent_gate:
+                excess = abs(along) - half
+                if excess > 0.0:
+                    c = ground[j, 2] * tx + ground[j, 3] * ty
+                    var = ground[j, 4] * c * c + ground[j, 5] * (1.0 - c * c) + p[i, 0, 0]
+                    penalty[i, j] = excess * excess / var
+    if extent_gate:
+        for j in range(n_d):
+            on_a_body = False
+            for i in range(n_t):
+                on_a_body |= road_user[i] and d2[i, j] <= gate and penalty[i, j] == 0.0
+            if on_a_body:
+                for i in range(n_t):
+                    d2[i, j] += penalty[i, j]
     return seen
 
 
@@ -569,11 +605,18 @@ def open_tracks(  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True)
-def merged_rows(corridor, x, p, spread, static, ids, confirmed, lateral_m, speed_mps):  # type: ignore[no-untyped-def]
+def merged_rows(  # type: ignore[no-untyped-def]
+    corridor, x, p, spread, static, stopped, moved, ids, confirmed, lateral_m, speed_mps,
+    parts_speed,
+):  # fmt: skip
     """Rows to drop: the younger of two tracks on one body (see ``SceneTracker._merge``).
 
     Pairs in row order; a confirmed track outlives an unconfirmed one whatever their ages; a
-    track already dropped removes no other.
+    track already dropped removes no other. Besides tracks within their spreads of each
+    other, two road users that have moved, faster than ``parts_speed``, whose bodies
+    (``BODY_HALF_SPREADS`` spreads either side) overlap are one long body tracked in two parts
+    (no one drives into another): the younger goes, and the body's other reflections, on no
+    body now, teach the survivor its length.
     """
     n = x.shape[0]
     drop = np.zeros(n, dtype=np.bool_)
@@ -582,8 +625,14 @@ def merged_rows(corridor, x, p, spread, static, ids, confirmed, lateral_m, speed
             if corridor[a] != corridor[b] or static[a] != static[b]:
                 continue
             sv = math.sqrt(p[a, 1, 1] + p[b, 1, 1])
+            du = abs(x[a, 0] - x[b, 0])
+            parts = (
+                moved[a] and moved[b] and not (stopped[a] or stopped[b])
+                and min(abs(x[a, 1]), abs(x[b, 1])) > parts_speed
+                and du < BODY_HALF_SPREADS * (spread[a] + spread[b])
+            )  # fmt: skip
             if not (
-                abs(x[a, 0] - x[b, 0]) < spread[a] + spread[b] + 0.5
+                (du < spread[a] + spread[b] + 0.5 or parts)
                 and abs(x[a, 3] - x[b, 3]) < lateral_m
                 and abs(x[a, 1] - x[b, 1]) < speed_mps + 3.0 * sv
             ):

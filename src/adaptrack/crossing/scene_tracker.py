@@ -10,7 +10,8 @@ the body spread along (``body_along_std_m``) and across (``body_across_std_m``).
 
 One scan (all detections of one radar at one time) is processed as: predict every track to
 the scan time; gate the detections of the tracks in that radar's view (chi-square on the
-three-dimensional innovation); assign one detection per track by global nearest neighbour
+three-dimensional innovation; a detection on another road user's body that lies beyond a
+track's own body end along the lane costs that track its excess, ``body_extent_gate``); assign one detection per track by global nearest neighbour
 (:func:`adaptrack.tracking.gnn_assign`; a static object that has stood longer than
 ``clutter_age_s`` keeps the detections in its own tight gate: learnt clutter such as a rail);
 give every further gated detection to the track most likely to have made it (the body's
@@ -22,7 +23,8 @@ unless it lies within that track's own body: a duplicate); record hits and misse
 coasting time or, for a stopped track, by misses in a row: :mod:`adaptrack.tracking.lifecycle`);
 open tentative tracks from the detections left over, clustered within ``cluster_radius_m``;
 split a stopped track whose reflections come from two bodies of a queue
-(:meth:`SceneTracker._split`). The per-track arithmetic runs compiled (:mod:`._scene_kernels`).
+(:meth:`SceneTracker._split`); merge two tracks on one body (two moving parts of one long
+vehicle among them). The per-track arithmetic runs compiled (:mod:`._scene_kernels`).
 
 Stopped mode: a confirmed track slower than ``stop_speed_mps`` for ``stop_confirm_s`` (a
 speed estimate within ``stop_exit_sigmas`` sigmas above it does not restart the count: the
@@ -119,6 +121,7 @@ class SceneTrackerConfig:
     split_kurtosis: float = 1.8  # ... a stopped track's below this are two bodies ...
     split_min_half_gap_m: float = 2.0  # ... this far either side of it (a queue)
     body_across_std_m: float = 0.5
+    body_extent_gate: bool = True  # a detection beyond the body's end along the lane costs more
     gate_probability: float = 0.999
     clutter_gate_probability: float = 0.99  # a static object's own detections (reserved) ...
     clutter_age_s: float = 300.0  # ... once it has stood longer than any closure
@@ -135,6 +138,7 @@ class SceneTrackerConfig:
     confirm_speed_std_mps: float = 3.0  # a track is confirmed once its speed is known this well
     merge_lateral_m: float = 1.2  # two tracks this close across (and along: the spread) ...
     merge_speed_mps: float = 1.0  # ... and this similar in speed are one body
+    merge_parts_speed_mps: float = 4.0  # two faster road users whose bodies overlap: one
     stop_decel_mps2: float = 4.0  # a driver is expected to stop for the lights at this
     stationary_detections: bool = True  # the radars report stopped objects at zero Doppler
     stop_seen_s: float = 0.3  # ... so a stop counts only while detections show it
@@ -406,9 +410,11 @@ class SceneTracker:
             d2 = np.empty((n_t, z.shape[0]))
             logdet = np.empty(n_t)
             seen = gate_scan(
-                tr.x, tr.p, tr.spread, tr.stopped & tr.moved, tr.direction, tr.corridor,
+                tr.x, tr.p, tr.spread, tr.stopped & tr.moved, tr.moved & self.book.confirmed,
+                tr.direction, tr.corridor,
                 self._roads, self._bounds, radar_row, noise_tab, noise_cnt, fields,
-                cfg.body_across_std_m, cfg.start_speed_max_mps, z, d2, logdet,
+                cfg.body_across_std_m, cfg.start_speed_max_mps, cfg.body_extent_gate,
+                self._gate, z, d2, logdet,
             )  # fmt: skip
             hit = np.zeros(n_t, dtype=bool)
             if z.shape[0]:
@@ -513,15 +519,17 @@ class SceneTracker:
     def _merge(self) -> None:
         """Drop the younger of two tracks on one body.
 
-        Same corridor, within the bodies' spreads along it, within ``merge_lateral_m``
-        across, velocities alike (within ``merge_speed_mps`` plus three sigma), both static
-        objects or neither.
+        Same corridor, within the bodies' spreads along it (or, moving faster than
+        ``merge_parts_speed_mps``, with overlapping bodies: two parts of one long vehicle),
+        within ``merge_lateral_m`` across, velocities alike (within ``merge_speed_mps`` plus
+        three sigma), both static objects or neither.
         """
         tr = self.tracks
         cfg = self.config
         drop = merged_rows(
-            tr.corridor, tr.x, tr.p, tr.spread, tr.static, self.book.ids, self.book.confirmed,
-            cfg.merge_lateral_m, cfg.merge_speed_mps,
+            tr.corridor, tr.x, tr.p, tr.spread, tr.static, tr.stopped, tr.moved, self.book.ids,
+            self.book.confirmed, cfg.merge_lateral_m, cfg.merge_speed_mps,
+            cfg.merge_parts_speed_mps,
         )  # fmt: skip
         self._drop(np.flatnonzero(drop))
 
