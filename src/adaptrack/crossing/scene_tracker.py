@@ -11,7 +11,8 @@ the body spread along (``body_along_std_m``) and across (``body_across_std_m``).
 One scan (all detections of one radar at one time) is processed as: predict every track to
 the scan time; gate the detections of the tracks in that radar's view (chi-square on the
 three-dimensional innovation; a detection on another road user's body that lies beyond a
-track's own body end along the lane costs that track its excess, ``body_extent_gate``); assign one detection per track by global nearest neighbour
+track's own body end along the lane costs that track its excess, ``body_extent_gate``);
+assign one detection per track by global nearest neighbour
 (:func:`adaptrack.tracking.gnn_assign`; a static object that has stood longer than
 ``clutter_age_s`` keeps the detections in its own tight gate: learnt clutter such as a rail);
 give every further gated detection to the track most likely to have made it (the body's

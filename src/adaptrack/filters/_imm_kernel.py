@@ -197,6 +197,7 @@ def imm_kernel(  # type: ignore[no-untyped-def]
     mask,
     h,
     r,
+    r_min,
     log_mu0,
     log_pi,
     emb_dst,
@@ -211,6 +212,7 @@ def imm_kernel(  # type: ignore[no-untyped-def]
     comb_mean,
     comb_cov,
     status,
+    worst,
 ):
     """Run the IMM over every track; outputs are filled in place.
 
@@ -221,7 +223,9 @@ def imm_kernel(  # type: ignore[no-untyped-def]
     ``z``/``mask`` (N, T, m), ``h`` (M, m, nmax), ``r`` (N|1, T|1, m, m), ``emb_*`` the
     (dst, src, count) of the states model i shares with model j, ``out_idx`` (M, n_out).
     ``status[i]`` becomes ``k + 1`` if track ``i`` stops at step ``k`` (S not positive
-    definite).
+    definite). ``r_min`` (N|1, T|1) is the smallest eigenvalue of each ``R``; in the Joseph and
+    standard forms ``worst[i]`` becomes the largest ``trace(S) / r_min`` of track ``i`` over
+    its steps and models (the ``"auto"`` form's criterion, over observed components).
     """
     n_models, _, nmax = x0.shape
     n_tracks, n_steps, m = z.shape
@@ -312,6 +316,12 @@ def imm_kernel(  # type: ignore[no-untyped-def]
                         form == 1, xp[:nj], pp[:nj, :nj], tmp[:nj, :nj], hm[:, :nj], rm,
                         hp[:, :nj], s, lo, kt[:, :nj], nu, wv, ikh[:nj, :nj],
                     )  # fmt: skip
+                    if ok:
+                        tr = 0.0
+                        for a in range(m):
+                            if mask[i, k, a]:
+                                tr += s[a, a]
+                        worst[i] = max(worst[i], tr / r_min[ir, kr])
                 if not ok:
                     status[i] = k + 1
                     break

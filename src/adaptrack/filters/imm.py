@@ -26,10 +26,17 @@ from .._validation import as_float_array, check_symmetric_pd, check_times
 from ..models.continuous import MotionModel, as_motion_model
 from ..models.discretize import Method, Noise, discretize_with_input
 from ..types import GaussianState, _trusted
-from .kalman import _component_mask, _update, predict
+from .kalman import (
+    JOSEPH_MAX_RATIO,
+    CovarianceError,
+    _component_mask,
+    _update,
+    exceeds_joseph_limit,
+    predict,
+)
 from .square_root import covariance, lower_factor, sqrt_predict, sqrt_update, triangularize
 
-IMMForm = Literal["joseph", "standard", "sqrt"]
+IMMForm = Literal["auto", "joseph", "standard", "sqrt"]
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -77,7 +84,7 @@ def imm_filter(
     mask: ArrayLike | None = None,
     method: Method = "expm",
     noise: Noise = "white",
-    form: IMMForm = "sqrt",
+    form: IMMForm = "auto",
     backend: Backend = "auto",
 ) -> IMMResult:
     """Run an IMM estimator over one track or a batch of tracks.
@@ -103,12 +110,15 @@ def imm_filter(
     mask : array_like of bool, shape (..., T) or (..., T, m), optional
         True where a measurement (component) is present.
     method, noise : discretisation options.
-    form : {"sqrt", "joseph", "standard"}
-        Covariance update of every model: ``"sqrt"`` (default) carries each model's predict and
-        update in square-root form (a factor of the mixed covariance, QR of the pre-arrays, as
-        :func:`~adaptrack.kalman_filter` with ``form="sqrt"``): PSD by construction and
+    form : {"auto", "sqrt", "joseph", "standard"}
+        Covariance update of every model: ``"sqrt"`` carries each model's predict and update
+        in square-root form (the models' factors mixed in factor form, QR of the pre-arrays,
+        as :func:`~adaptrack.kalman_filter` with ``form="sqrt"``): PSD by construction and
         accurate on ill-conditioned problems (measurement covariances of condition 1e12, long
-        gaps), where the Joseph form ends sigmas off.
+        gaps), where the Joseph form ends sigmas off. ``"auto"`` (default) runs the Joseph
+        form and takes the square root instead when an innovation covariance is not positive
+        definite or some ``trace(S)`` exceeds :data:`~adaptrack.filters.kalman.JOSEPH_MAX_RATIO`
+        times the smallest eigenvalue of ``R`` (the criterion of ``kalman_filter``).
     backend : {"auto", "numpy", "numba"}
         The NumPy reference or the compiled kernel (same numbers to rounding); ``"auto"``
         compiles from 20,000 track-steps on.
@@ -166,8 +176,8 @@ def imm_filter(
     if np.any(np.isnan(z) & mk):
         idx = tuple(int(v) for v in np.argwhere(np.isnan(z) & mk)[0])
         raise ValueError(f"measurements is NaN at index {idx} where it is marked present")
-    if form not in ("sqrt", "joseph", "standard"):
-        raise ValueError(f"form must be 'sqrt', 'joseph' or 'standard'; got {form!r}")
+    if form not in ("auto", "sqrt", "joseph", "standard"):
+        raise ValueError(f"form must be 'auto', 'sqrt', 'joseph' or 'standard'; got {form!r}")
     tb = np.broadcast_to(t, batch + (n_steps,))
     t_prev = np.concatenate(
         [np.broadcast_to(initial[0].time, batch)[..., None], tb[..., :-1]], axis=-1
@@ -175,10 +185,43 @@ def imm_filter(
     dt = tb - t_prev
     if np.any(dt < 0):
         raise ValueError("initial times must not be after the first measurement time")
-    if use_compiled(backend, z.size // m):
-        return _imm_compiled(
-            tb, dt, z, mk, models, measured, r, initial, pi, mu0, method, noise, form
-        )
+    run = _imm_compiled if use_compiled(backend, z.size // m) else _imm_numpy
+    args = (tb, dt, z, mk, models, measured, r, initial, pi, mu0, method, noise)
+    if form != "auto":
+        return run(*args, form)[0]
+    if exceeds_joseph_limit(r, r):  # S >= R: every step would exceed the Joseph limit
+        return run(*args, "sqrt")[0]
+    try:
+        result, worst = run(*args, "joseph")
+    except CovarianceError:
+        return run(*args, "sqrt")[0]
+    return result if worst <= JOSEPH_MAX_RATIO else run(*args, "sqrt")[0]
+
+
+def _imm_numpy(
+    tb: FloatArray,
+    dt: FloatArray,
+    z: FloatArray,
+    mk: np.ndarray,
+    models: list[MotionModel],
+    measured: tuple[str, ...],
+    r: FloatArray,
+    initial: Sequence[GaussianState],
+    pi: FloatArray,
+    mu0: FloatArray,
+    method: Method,
+    noise: Noise,
+    form: str,
+) -> tuple[IMMResult, float]:
+    """Run :func:`imm_filter` in NumPy.
+
+    Also returns the largest ``trace(S) / lambda_min(R)`` of the Joseph and standard forms (0
+    in square-root form).
+    """
+    batch, n_steps, n_models = z.shape[:-2], z.shape[-2], len(models)
+    names = [m.state_names for m in models]
+    r_min = np.linalg.eigvalsh(r)[..., 0]
+    worst = 0.0
     disc = [discretize_with_input(mdl, dt, method, noise=noise) for mdl in models]
     noise_factors = [lower_factor(d[1]) if form == "sqrt" else None for d in disc]
     hs = [
@@ -230,7 +273,12 @@ def imm_filter(
                 )  # fmt: skip
             else:
                 prior = predict(mixed[j], phi, qd, time=tb[..., k], control=u)
-                states[j], info = _update(prior, zk, hs[j], rk, mask_k, form)
+                try:
+                    states[j], info = _update(prior, zk, hs[j], rk, mask_k, form)
+                except np.linalg.LinAlgError:
+                    raise _indefinite(k) from None
+                s_obs = np.einsum("...aa,...a->...", info.innovation_cov, mask_k)
+                worst = max(worst, float(np.max(s_obs / (r_min if r.ndim == 2 else r_min[..., k]))))
             lls.append(info.log_likelihood)
             comp_mean[j][..., k, :], comp_cov[j][..., k, :, :] = states[j].mean, states[j].cov
         ll = np.stack(lls, axis=-1)
@@ -256,7 +304,16 @@ def imm_filter(
         for j in range(n_models)
     )
     filtered = _trusted(GaussianState, mean=comb_mean, cov=comb_cov, time=tb)
-    return IMMResult(filtered, out_names, probs, comps, ll_mix)
+    return IMMResult(filtered, out_names, probs, comps, ll_mix), worst
+
+
+def _indefinite(step: int, track: int | None = None) -> CovarianceError:
+    """Name the step (and track) whose innovation covariance is not positive definite."""
+    where = f"step {step}" if track is None else f"step {step}, track {track}"
+    return CovarianceError(
+        f"innovation covariance is not positive definite at {where}; check the models, "
+        "measurement_cov and the priors (form='sqrt' keeps ill-conditioned problems definite)"
+    )
 
 
 def _imm_compiled(
@@ -273,8 +330,11 @@ def _imm_compiled(
     method: Method,
     noise: Noise,
     form: str,
-) -> IMMResult:
-    """Run :func:`imm_filter` in the compiled kernel (:mod:`adaptrack.filters._imm_kernel`)."""
+) -> tuple[IMMResult, float]:
+    """Run :func:`imm_filter` in the compiled kernel (:mod:`adaptrack.filters._imm_kernel`).
+
+    Also returns the largest ``trace(S) / lambda_min(R)`` (0 in square-root form).
+    """
     from ._imm_kernel import FORMS, imm_kernel
 
     batch, (n_steps, m) = z.shape[:-2], z.shape[-2:]
@@ -320,6 +380,7 @@ def _imm_compiled(
     comb_mean = np.empty((n_tr, n_steps, n_out))
     comb_cov = np.empty((n_tr, n_steps, n_out, n_out))
     status = np.zeros(n_tr, dtype=np.int64)
+    worst = np.zeros(n_tr)
     c = np.ascontiguousarray
     imm_kernel(
         sizes,
@@ -333,6 +394,7 @@ def _imm_compiled(
         c(mask.reshape(n_tr, n_steps, m)),
         h,
         c(r4),
+        c(np.linalg.eigvalsh(r4)[..., 0]),
         np.log(np.where(mu0 > 0, mu0, 1e-300)),
         log_pi,
         emb_dst,
@@ -347,13 +409,11 @@ def _imm_compiled(
         comb_mean,
         comb_cov,
         status,
+        worst,
     )
     if status.any():
         i = int(np.flatnonzero(status)[0])
-        raise ValueError(
-            f"innovation covariance is not positive definite at step {int(status[i]) - 1}, "
-            f"track {i}"
-        )
+        raise _indefinite(int(status[i]) - 1, i)
     comps = tuple(
         _trusted(
             GaussianState,
@@ -377,7 +437,7 @@ def _imm_compiled(
         probs.reshape(batch + (n_steps, n_models)),
         comps,
         ll_mix.reshape(batch + (n_steps,)),
-    )
+    ), float(worst.max(initial=0.0))
 
 
 def _mix(
