@@ -151,8 +151,8 @@ def test_compiled_imm_equals_the_numpy_reference(rng, per_track_times):
 @pytest.mark.parametrize("backend", ["numpy", "numba"])
 def test_square_root_form_matches_a_50_digit_reference_on_an_ill_conditioned_problem(backend):
     """One-model IMM on the square-root filter's hard problem (R of condition 1e11, prior of
-    1 km, gaps 1e-6 to 100 s): the default square-root form is within 1e-2 posterior sigma of
-    the 50-digit textbook filter, as the square-root Kalman filter is; the Joseph form was
+    1 km, gaps 1e-6 to 100 s): the default ("auto", square root here) is within 1e-2 posterior
+    sigma of the 50-digit textbook filter, as the square-root Kalman filter is; the Joseph form was
     measured 4 (NumPy) and 3200 (compiled) sigmas off on this problem."""
     from tests.filters.test_square_root import ill_conditioned_problem
     from tests.oracles.reference import kalman_mp
@@ -245,3 +245,29 @@ def test_square_root_and_joseph_forms_agree_on_a_well_conditioned_batch(rng, bac
     np.testing.assert_allclose(a.mean, b.mean, rtol=1e-10, atol=1e-10)
     np.testing.assert_allclose(a.cov, b.cov, rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(runs[0].mode_probabilities, runs[1].mode_probabilities, atol=1e-10)
+
+
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+def test_auto_form_is_joseph_where_it_keeps_its_digits_and_the_square_root_where_not(rng, backend):
+    """'auto' returns exactly the Joseph run on a well-conditioned batch (trace(S) / R below
+    1e8: no square-root cost) and exactly the square-root run where a 1 km prior meets a
+    1 mm measurement sigma (trace(S) / R = 1e12 at the first step, R itself well-conditioned)."""
+    t, z = data(rng)
+    models = [ConstantVelocity(accel_psd=0.5), ConstantAcceleration(jerk_psd=3.0)]
+    pi = np.array([[0.9, 0.1], [0.2, 0.8]])
+
+    def run(prior_var, r, form):
+        priors = [
+            at.GaussianState(np.zeros(m.state_dim), prior_var * np.eye(m.state_dim), 0.0)
+            for m in models
+        ]
+        res = imm_filter(t, z, models, ("x",), [[r]], priors, pi, [0.5, 0.5], form=form,
+                         backend=backend)  # fmt: skip
+        return res.filtered.mean, res.filtered.cov, res.mode_probabilities
+
+    for prior_var, r, expected in ((50.0, 4.0, "joseph"), (1e6, 1e-6, "sqrt")):
+        auto, chosen = run(prior_var, r, "auto"), run(prior_var, r, expected)
+        for a, b in zip(auto, chosen, strict=True):
+            np.testing.assert_array_equal(a, b)
+    joseph, root = run(1e6, 1e-6, "joseph"), run(1e6, 1e-6, "sqrt")
+    assert not np.array_equal(joseph[0], root[0])  # the two forms do differ there
