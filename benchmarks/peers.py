@@ -248,7 +248,7 @@ IMM_MU0 = np.array([0.6, 0.4])
 IMM_P0 = np.diag([1.0, 100.0])
 
 
-def adaptrack_imm(t: np.ndarray, z: np.ndarray, form: str = "sqrt") -> np.ndarray:
+def adaptrack_imm(t: np.ndarray, z: np.ndarray, form: str = "auto") -> np.ndarray:
     """``imm_filter`` over the batch; combined means (N, T, 2)."""
     from adaptrack.filters.imm import imm_filter
 

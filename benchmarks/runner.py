@@ -9,8 +9,8 @@ Workloads (full sizes; ``--quick`` shrinks them to a smoke test):
 * ``stream``: one online update per call from Python (20,000 measurements), also with
   jittered timestamps (``stream_jitter``); with the Joseph and square-root forms beside the
   default ``auto``;
-* ``imm``: a two-mode IMM over 1,000 tracks x 1,000 steps, square-root (default) and Joseph
-  forms, against FilterPy's ``IMMEstimator``;
+* ``imm``: a two-mode IMM over 1,000 tracks x 1,000 steps, the default ``auto`` beside the
+  Joseph and square-root forms, against FilterPy's ``IMMEstimator``;
 * ``lx_mc``: the ``lx_default`` level-crossing compliance Monte Carlo;
 * ``memory``: peak traced memory of the batch filter over its input + output arrays.
 

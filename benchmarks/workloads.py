@@ -249,8 +249,9 @@ def streaming(quick: bool, repeats: int) -> list[Result]:
 
 
 def imm(quick: bool, repeats: int) -> list[Result]:
-    """Two-mode IMM over 1,000 tracks x 1,000 steps (20 x 100 ``quick``): the square-root
-    form (the default) against the Joseph form, and FilterPy's ``IMMEstimator``."""
+    """Two-mode IMM over 1,000 tracks x 1,000 steps (20 x 100 ``quick``): the default
+    (``"auto"``, Joseph on this well-conditioned problem), the Joseph and square-root forms,
+    and FilterPy's ``IMMEstimator``."""
     n_tracks, n_steps = (20, 100) if quick else (1_000, 1_000)
     subset = 2 if quick else 5
     t, z = peers.data(n_tracks, n_steps, seed=6)
@@ -262,6 +263,11 @@ def imm(quick: bool, repeats: int) -> list[Result]:
             "adaptrack": (peers.adaptrack_imm, n_tracks, n_steps),
             "adaptrack (Joseph form)": (
                 lambda t, z: peers.adaptrack_imm(t, z, "joseph"),
+                n_tracks,
+                n_steps,
+            ),
+            "adaptrack (square-root form)": (
+                lambda t, z: peers.adaptrack_imm(t, z, "sqrt"),
                 n_tracks,
                 n_steps,
             ),
