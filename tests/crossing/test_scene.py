@@ -451,3 +451,30 @@ def test_a_hidden_truck_in_a_queue_keeps_its_place_behind_the_car_ahead(extent_g
         assert err.max() < 0.5, err
     else:
         assert err[1] > 1.5, err
+
+
+@pytest.mark.parametrize("same_object_m", [2.5, 0.0])
+def test_a_track_stopping_on_an_alarmed_object_raises_no_second_alarm(same_object_m):
+    """A car stalled 2 m before the crossing has raised its alarm; a second track stops 1.5 m
+    across and 1 m along from it (too far across to merge: a track from the other lane that
+    took the car's reflections, validation seed 31 at 767 s) and one stops 7 m behind it (a
+    second object). One object, one alarm: the first raises none, the second does; with
+    ``same_object_m = 0`` both would (the test can fail)."""
+    from adaptrack.crossing.scene_tracker import SceneTrackerConfig
+
+    tracker = SceneTracker(SITE, SceneTrackerConfig(same_object_m=same_object_m))
+    cor, radar, half_lane = _queue_lane(tracker)
+    car = cor.crossing_u - 2.0
+    _stopped_tracks(
+        tracker,
+        [(car, -half_lane, 1.1), (car - 1.0, -half_lane + 1.5, 1.1), (car - 7.0, -half_lane, 1.1)],
+    )
+    tracker.tracks.event_raised[0] = True
+    rng = np.random.default_rng(3)
+    for k in range(1, 20):  # 1 s
+        z = np.vstack(
+            [_body_scan(rng, radar, cor, u, -half_lane, 5.0, 1.8, 2) for u in (car, car - 7.0)]
+        )
+        tracker.step(radar.name, k * radar.period_s, z)
+    alarms = [e["track_id"] for e in tracker.events if e["event"] == "stopped_between_barriers"]
+    assert alarms == ([3] if same_object_m else [2, 3])

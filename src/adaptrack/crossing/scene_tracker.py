@@ -130,6 +130,7 @@ class SceneTrackerConfig:
     stop_speed_mps: float = 0.3  # a track this slow is slowing to a stop ...
     stop_exit_sigmas: float = 2.0  # ... stays slowing unless this many sigmas faster ...
     stop_confirm_s: float = 0.5  # ... and stops after this
+    same_object_m: float = 2.5  # a stop this near an alarmed stopped track is its object
     moving_radial_mps: float = 0.3  # a detection this fast (beyond 3 sigma) ends a stop
     start_speed_max_mps: float = 3.0  # a stopped vehicle's gate allows starting up to this
     moved_speed_mps: float = 0.8
@@ -546,9 +547,28 @@ class SceneTracker:
             cfg.stop_exit_sigmas, cfg.stop_confirm_s,
             cfg.stop_seen_s if cfg.stationary_detections else np.inf,
         )  # fmt: skip
-        self._raise("stopped_between_barriers", np.flatnonzero(hazard), time_s)
+        self._raise("stopped_between_barriers", self._new_objects(np.flatnonzero(hazard)), time_s)
         if self._warning(time_s):
             self._stop_line_events(time_s, on_road)
+
+    def _new_objects(self, rows: np.ndarray) -> np.ndarray:
+        """Keep the hazard ``rows`` that are not an object already alarmed: one object, one alarm.
+
+        A track stopped within ``same_object_m`` (half a car's length) of a stopped track whose
+        alarm is raised stands on that object's body (e.g. a track from the other lane that
+        took a stopped car's reflections); it raises no second alarm now, and may later if
+        the other track is gone.
+        """
+        tr = self.tracks
+        alarmed = np.setdiff1d(np.flatnonzero(tr.event_raised & tr.stopped), rows)
+        if rows.size == 0 or alarmed.size == 0:
+            return rows
+        new = self._planar(rows)["position"]
+        old = self._planar(alarmed)["position"]
+        gap = np.linalg.norm(new[:, None, :] - old[None, :, :], axis=-1).min(axis=1)
+        same = gap < self.config.same_object_m
+        tr.event_raised[rows[same]] = False
+        return rows[~same]
 
     def _warning(self, time_s: float) -> bool:
         """Whether the crossing's lights flash or its barriers are down at ``time_s``."""
