@@ -186,38 +186,51 @@ def imm_filter(
     if np.any(dt < 0):
         raise ValueError("initial times must not be after the first measurement time")
     run = _imm_compiled if use_compiled(backend, z.size // m) else _imm_numpy
-    args = (tb, dt, z, mk, models, measured, r, initial, pi, mu0, method, noise)
+    problem = _Problem(tb, dt, z, mk, models, measured, r, initial, pi, mu0, method, noise)
     if form != "auto":
-        return run(*args, form)[0]
+        return run(problem, form)[0]
     if exceeds_joseph_limit(r, r):  # S >= R: every step would exceed the Joseph limit
-        return run(*args, "sqrt")[0]
+        return run(problem, "sqrt")[0]
     try:
-        result, worst = run(*args, "joseph")
+        result, worst = run(problem, "joseph")
     except CovarianceError:
-        return run(*args, "sqrt")[0]
-    return result if worst <= JOSEPH_MAX_RATIO else run(*args, "sqrt")[0]
+        return run(problem, "sqrt")[0]
+    return result if worst <= JOSEPH_MAX_RATIO else run(problem, "sqrt")[0]
 
 
-def _imm_numpy(
-    tb: FloatArray,
-    dt: FloatArray,
-    z: FloatArray,
-    mk: np.ndarray,
-    models: list[MotionModel],
-    measured: tuple[str, ...],
-    r: FloatArray,
-    initial: Sequence[GaussianState],
-    pi: FloatArray,
-    mu0: FloatArray,
-    method: Method,
-    noise: Noise,
-    form: str,
-) -> tuple[IMMResult, float]:
+@dataclass(frozen=True)
+class _Problem:
+    """The validated arguments of :func:`imm_filter`.
+
+    ``tb`` the times and ``dt`` the steps broadcast over the batch (..., T); ``mask`` the
+    component mask.
+    """
+
+    tb: FloatArray
+    dt: FloatArray
+    z: FloatArray
+    mask: np.ndarray
+    models: list[MotionModel]
+    measured: tuple[str, ...]
+    r: FloatArray
+    initial: Sequence[GaussianState]
+    pi: FloatArray
+    mu0: FloatArray
+    method: Method
+    noise: Noise
+
+
+def _imm_numpy(problem: _Problem, form: str) -> tuple[IMMResult, float]:
     """Run :func:`imm_filter` in NumPy.
 
     Also returns the largest ``trace(S) / lambda_min(R)`` of the Joseph and standard forms (0
     in square-root form).
     """
+    tb, dt, z, mk, models, measured = (
+        problem.tb, problem.dt, problem.z, problem.mask, problem.models, problem.measured
+    )  # fmt: skip
+    r, initial, pi, mu0 = problem.r, problem.initial, problem.pi, problem.mu0
+    method, noise = problem.method, problem.noise
     batch, n_steps, n_models = z.shape[:-2], z.shape[-2], len(models)
     names = [m.state_names for m in models]
     r_min = np.linalg.eigvalsh(r)[..., 0]
@@ -316,25 +329,16 @@ def _indefinite(step: int, track: int | None = None) -> CovarianceError:
     )
 
 
-def _imm_compiled(
-    tb: FloatArray,
-    dt: FloatArray,
-    z: FloatArray,
-    mask: np.ndarray,
-    models: list[MotionModel],
-    measured: tuple[str, ...],
-    r: FloatArray,
-    initial: Sequence[GaussianState],
-    pi: FloatArray,
-    mu0: FloatArray,
-    method: Method,
-    noise: Noise,
-    form: str,
-) -> tuple[IMMResult, float]:
+def _imm_compiled(problem: _Problem, form: str) -> tuple[IMMResult, float]:
     """Run :func:`imm_filter` in the compiled kernel (:mod:`adaptrack.filters._imm_kernel`).
 
     Also returns the largest ``trace(S) / lambda_min(R)`` (0 in square-root form).
     """
+    dt, z, mask, models, measured = (
+        problem.dt, problem.z, problem.mask, problem.models, problem.measured
+    )  # fmt: skip
+    r, initial, pi, mu0 = problem.r, problem.initial, problem.pi, problem.mu0
+    method, noise, tb = problem.method, problem.noise, problem.tb
     from ._imm_kernel import FORMS, imm_kernel
 
     batch, (n_steps, m) = z.shape[:-2], z.shape[-2:]
