@@ -211,8 +211,8 @@ def gate_scan(  # type: ignore[no-untyped-def]
     s = np.zeros((3, 3))
     lo = np.zeros((3, 3))
     w = np.zeros(3)
-    ground = np.zeros((n_d, 6))  # ground point, line of sight (unit), range and cross var
-    for j in range(n_d):
+    ground = np.zeros((n_d if extent_gate else 0, 6))  # ground point, sight line, range and
+    for j in range(ground.shape[0]):  # cross variances (for the extent gate only)
         gx, gy, rho = _ground_point(z[j], radar)
         sr = curve_at(noise_tab, noise_cnt, 0, z[j, 0])
         sa = rho * curve_at(noise_tab, noise_cnt, 1, off_boresight(z[j, 1], radar))
@@ -246,7 +246,6 @@ def gate_scan(  # type: ignore[no-untyped-def]
         half = BODY_HALF_SPREADS * part_spread
         for j in range(n_d):
             innovation_into(z[j], zp, radar, doppler, w)
-            along = (ground[j, 0] - px) * tx + (ground[j, 1] - py) * ty
             if starting[i] and h[2, 1] != 0.0:
                 v = min(max(direction[i] * w[2] / h[2, 1], 0.0), start_speed_max)
                 for a in range(3):
@@ -260,6 +259,7 @@ def gate_scan(  # type: ignore[no-untyped-def]
                 acc += w[a] * w[a]
             d2[i, j] = acc
             if extent_gate:
+                along = (ground[j, 0] - px) * tx + (ground[j, 1] - py) * ty
                 excess = abs(along) - half
                 if excess > 0.0:
                     c = ground[j, 2] * tx + ground[j, 3] * ty
