@@ -103,6 +103,10 @@ def test_bad_state_files_are_one_line_errors(scene_files, tmp_path):
         ("[scene_tracker.rules]\nmax_coast_s = -1.0\n", "max_coast_s must be > 0"),
         ("[scene_tracker]\nstationary_detections = 1\n", "expected a bool"),
         ("scene_tracker = 3\n", "must be tables"),
+        ("[scene_tracker]\nsame_object_m = nan\n", "same_object_m must be >= 0; got nan"),
+        ("[scene_tracker]\naccel_psd = inf\n", "accel_psd must be > 0 and finite"),
+        ("[scene_tracker]\ngate_probability = 1.0\n", r"gate_probability must be in \(0, 1\)"),
+        ("[scene_tracker]\nspread_limits_m = [2.0, 1.0]\n", "0 < low <= high"),
     ],
 )
 def test_scene_config_errors_name_the_file_and_the_key(tmp_path, text, message):
@@ -123,3 +127,10 @@ def test_scene_config_is_read(tmp_path):
     assert cfg.accel_psd == 3.0 and cfg.spread_limits_m == (0.3, 2.5)
     assert cfg.rules.max_coast_s == 2.0 and cfg.rules.confirm_hits == 3
     assert np.isfinite(cfg.clutter_age_s)  # the rest default
+
+
+def test_scene_config_allows_no_limit_where_it_means_one(tmp_path):
+    path = tmp_path / "cfg.toml"
+    path.write_text("[scene_tracker]\nmerge_parts_speed_mps = inf\nsplit_kurtosis = 0.0\n")
+    cfg = load_scene_config(path)
+    assert cfg.merge_parts_speed_mps == np.inf and cfg.split_kurtosis == 0.0

@@ -151,6 +151,48 @@ class SceneTrackerConfig:
     bias_gate_m: float = 2.0  # detections further across from the lane centre are left out
     rules: LifecycleRules = field(default_factory=LifecycleRules)
 
+    def __post_init__(self) -> None:
+        """Reject settings no tracker can run on, naming the field (NaN included)."""
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if f.name == "rules" or isinstance(value, bool):
+                continue
+            if f.name == "spread_limits_m":
+                lo, hi = value
+                if not 0 < lo <= hi < np.inf:
+                    raise ValueError(
+                        "SceneTrackerConfig.spread_limits_m must be 0 < low <= high < inf; "
+                        f"got {value}"
+                    )
+                continue
+            if f.name in _PROBABILITIES:
+                ok, want = 0 < value < 1, "in (0, 1)"
+            elif f.name in _RATES:
+                ok, want = 0 < value <= 1, "in (0, 1]"
+            elif f.name == "bias_memory":
+                ok, want = 1 <= value, ">= 1"
+            elif f.name in _POSITIVE:
+                ok, want = 0 < value, "> 0"
+            else:
+                ok, want = 0 <= value, ">= 0"
+            if ok and f.name not in _NO_LIMIT:
+                ok, want = value < np.inf, f"{want} and finite"
+            if not ok:
+                raise ValueError(f"SceneTrackerConfig.{f.name} must be {want}; got {value}")
+
+
+_PROBABILITIES = ("gate_probability", "clutter_gate_probability")
+_RATES = ("spread_learning_rate", "shape_learning_rate")
+_POSITIVE = (
+    "accel_psd", "body_along_std_m", "body_across_std_m", "cluster_radius_m",
+    "initial_speed_std_mps", "confirm_speed_std_mps", "moving_speed_std_mps",
+    "stop_decel_mps2",
+)  # fmt: skip
+_NO_LIMIT = (  # inf: no limit
+    "merge_parts_speed_mps", "clutter_age_s", "stop_seen_s", "bias_min_samples",
+    "stop_confirm_s", "moved_distance_m",
+)  # fmt: skip
+
 
 def load_scene_config(path: str | Path) -> SceneTrackerConfig:
     """Scene-tracker settings of a TOML file's ``[scene_tracker]`` table (defaults without it).

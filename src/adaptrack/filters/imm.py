@@ -27,13 +27,12 @@ from ..models.continuous import MotionModel, as_motion_model
 from ..models.discretize import Method, Noise, discretize_with_input
 from ..types import GaussianState, _trusted
 from .kalman import (
-    JOSEPH_MAX_RATIO,
     CovarianceError,
     _component_mask,
     _update,
-    exceeds_joseph_limit,
     predict,
 )
+from .run import auto_form
 from .square_root import covariance, lower_factor, sqrt_predict, sqrt_update, triangularize
 
 IMMForm = Literal["auto", "joseph", "standard", "sqrt"]
@@ -189,13 +188,7 @@ def imm_filter(
     problem = _Problem(tb, dt, z, mk, models, measured, r, initial, pi, mu0, method, noise)
     if form != "auto":
         return run(problem, form)[0]
-    if exceeds_joseph_limit(r, r):  # S >= R: every step would exceed the Joseph limit
-        return run(problem, "sqrt")[0]
-    try:
-        result, worst = run(problem, "joseph")
-    except CovarianceError:
-        return run(problem, "sqrt")[0]
-    return result if worst <= JOSEPH_MAX_RATIO else run(problem, "sqrt")[0]
+    return auto_form(lambda: run(problem, "joseph"), lambda: run(problem, "sqrt")[0], r)
 
 
 @dataclass(frozen=True)

@@ -9,8 +9,9 @@ computed once and shared (the result holds broadcast views), which is exact and 
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
-from typing import Literal
+from typing import Literal, TypeVar
 
 import numpy as np
 
@@ -40,6 +41,7 @@ from .square_root import covariance, lower_factor, sqrt_predict, sqrt_update
 
 NanPolicy = Literal["raise", "missing"]
 FilterForm = Literal["auto", "joseph", "standard", "sqrt"]
+_Result = TypeVar("_Result")
 
 
 def kalman_filter(
@@ -225,15 +227,32 @@ def kalman_filter(
     )
     if form != "auto":
         return _solve(problem, compiled)
-    if exceeds_joseph_limit(r, r):  # S >= R: every step would exceed the Joseph limit
-        return _solve(replace(problem, form="sqrt"), compiled)
-    try:
+
+    def joseph() -> tuple[FilterResult, float]:
         result = _solve(problem, compiled)
+        return result, worst_joseph_ratio(result)
+
+    return auto_form(joseph, lambda: _solve(replace(problem, form="sqrt"), compiled), r)
+
+
+def auto_form(
+    joseph: Callable[[], tuple[_Result, float]], sqrt: Callable[[], _Result], r: FloatArray
+) -> _Result:
+    """Apply the ``form="auto"`` rule of every batch path: Joseph unless the root is needed.
+
+    ``joseph()`` runs the Joseph form and returns its result and worst ``trace(S) /
+    lambda_min(R)``; ``sqrt()`` runs the square-root form. The square root is taken where
+    ``R`` alone already exceeds the limit (then every step would), where Joseph loses
+    definiteness (``CovarianceError``), or where its worst ratio exceeds
+    :data:`JOSEPH_MAX_RATIO`.
+    """
+    if exceeds_joseph_limit(r, r):  # S >= R: every step would exceed the Joseph limit
+        return sqrt()
+    try:
+        result, worst = joseph()
     except CovarianceError:
-        return _solve(replace(problem, form="sqrt"), compiled)
-    if joseph_loses_digits(result):
-        return _solve(replace(problem, form="sqrt"), compiled)
-    return result
+        return sqrt()
+    return result if worst <= JOSEPH_MAX_RATIO else sqrt()
 
 
 # The Joseph update forms I - K H = R S^-1 (in the measured directions) by cancellation, so
@@ -256,12 +275,12 @@ def _min_eig(r: FloatArray) -> FloatArray:
     return np.linalg.eigvalsh(r)[..., 0]
 
 
-def joseph_loses_digits(result: FilterResult) -> bool:
-    """Whether any step's ``trace(S) / lambda_min(R)`` exceeds :data:`JOSEPH_MAX_RATIO`."""
+def worst_joseph_ratio(result: FilterResult) -> float:
+    """Return the largest ``trace(S) / lambda_min(R)`` over the steps of a filter run."""
     r_min = _min_eig(result.measurement_cov)
     s_trace = np.trace(result.info.innovation_cov, axis1=-2, axis2=-1)
     r_min = r_min if r_min.ndim == s_trace.ndim else r_min[..., None]
-    return bool(np.any(s_trace > JOSEPH_MAX_RATIO * r_min))
+    return float(np.max(s_trace / r_min, initial=0.0))
 
 
 def _solve(problem: _Problem, compiled: bool) -> FilterResult:

@@ -26,7 +26,8 @@ import numpy as np
 from .._backend import SHARED_MIN_TRACKS, Backend, use_compiled
 from .._linalg import matvec, mT, symmetrize
 from .._typing import FloatArray
-from ..filters.run import joseph_loses_digits
+from ..filters.kalman import JOSEPH_MAX_RATIO
+from ..filters.run import worst_joseph_ratio
 from ..filters.square_root import covariance, lower_factor, triangularize
 from ..types import FilterResult, GaussianState, _trusted
 
@@ -150,7 +151,7 @@ def rts_smooth(
     if form not in ("auto",) + FORMS:
         raise ValueError(f"form must be 'auto', 'standard', 'joseph' or 'sqrt'; got {form!r}")
     if form == "auto":
-        form = "sqrt" if joseph_loses_digits(result) else "standard"
+        form = "sqrt" if worst_joseph_ratio(result) > JOSEPH_MAX_RATIO else "standard"
     pred, filt = result.predicted, result.filtered
     b = pred.mean.ndim - 2
     n_steps = pred.mean.shape[-2]
