@@ -18,10 +18,12 @@ from rich.console import Console
 from rich.progress import Progress
 from rich.table import Table
 
+from . import __version__
 from ._cli_errors import err_console
 from ._cli_errors import fail as _fail
 from .analysis.evaluation import Evaluation, evaluate_scenario
 from .analysis.flights import FlightRow, evaluate_flight, smooth_kalman, smooth_lsq
+from .cli_site import site_app
 from .coords.geodetic import enu_to_ecef, enu_to_ecef_rotation
 from .crossing.compliance import (
     ComplianceResult,
@@ -82,10 +84,21 @@ app = typer.Typer(
 )
 app.command("serve")(service_commands.serve)
 app.command("replay")(service_commands.replay)
+app.add_typer(site_app, name="site")
+
+
+def _print_version(value: bool) -> None:
+    if value:
+        Console().print(f"adaptrack {__version__}")
+        raise typer.Exit()
 
 
 @app.callback()
-def _main() -> None:
+def _main(
+    version: bool = typer.Option(
+        False, "--version", callback=_print_version, is_eager=True, help="Print the version."
+    ),
+) -> None:
     """Adaptive motion estimation from noisy measurements."""
 
 

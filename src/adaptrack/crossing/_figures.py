@@ -12,7 +12,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from .site import Site
+from .site import Site, blind_zones
 
 
 def svg_of(fig: Any) -> str:
@@ -65,3 +65,20 @@ def draw_site(
             for sgn in (-1, 1):
                 a = r["boresight_rad"] + sgn * half
                 ax.plot([x, x + length * math.sin(a)], [y, y + length * math.cos(a)], "k:", lw=0.8)
+
+
+def blind_polylines(site: Site) -> dict[str, list[list[float]]]:
+    """Lane polylines of the site's blind zones, keyed ``"road: from-to m"`` [m]."""
+    return {
+        f"{name}: {a:.1f}-{b:.1f} m": site.roads[name].lane_point(np.linspace(a, b, 20)).tolist()
+        for name, parts in blind_zones(site).items()
+        for a, b in parts
+    }
+
+
+def draw_blind(ax: Any, blind: dict[str, list[list[float]]]) -> None:
+    """Draw blind zones (:func:`blind_polylines`) in red over the lanes."""
+    for j, pts in enumerate(blind.values()):
+        p = np.asarray(pts)
+        label = "blind zone (its radar does not see it)" if j == 0 else None
+        ax.plot(p[:, 0], p[:, 1], color="red", lw=5, alpha=0.6, label=label)

@@ -22,7 +22,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from .. import __version__
-from ._figures import draw_site, site_layers, svg_of
+from ._figures import blind_polylines, draw_blind, draw_site, site_layers, svg_of
 from .compliance import (
     CONFIRMATION_FACTOR,
     POSITION_LIMIT_M,
@@ -34,7 +34,7 @@ from .compliance import (
 from .mixed_traffic import MixedTraffic, mixed_traffic_html
 from .radar_sim import simulate_site_case
 from .selection import CRITERION_TEXT, SiteTuning
-from .site import Site, blind_zones
+from .site import Site
 from .trackers import PlanarTracker, Tracker
 from .tracking import track_free_2d
 
@@ -167,11 +167,7 @@ def build_report(
     ``mixed_traffic``: the scored scene (or ``mixed_traffic_note``: why there is none).
     """
     roads, radars = site_layers(site)
-    blind = {
-        f"{name}: {a:.1f}-{b:.1f} m": site.roads[name].lane_point(np.linspace(a, b, 20)).tolist()
-        for name, parts in blind_zones(site).items()
-        for a, b in parts
-    }
+    blind = blind_polylines(site)
     candidates = []
     selection: dict[str, Any] = {}
     if tuning is not None and validation is not None:
@@ -233,10 +229,7 @@ def _map_figure(data: ReportData) -> str:
     fig, ax = plt.subplots(figsize=(6, 6))
     reach = max(float(np.hypot(*np.asarray(p).T).max()) for p in data.roads.values())
     draw_site(ax, data.roads, data.radars, reach)  # each field of view up to the roads' reach
-    for j, pts in enumerate(data.blind.values()):
-        p = np.asarray(pts)
-        label = "blind zone (its radar does not see it)" if j == 0 else None
-        ax.plot(p[:, 0], p[:, 1], color="red", lw=5, alpha=0.6, label=label)
+    draw_blind(ax, data.blind)
     for s in data.samples:
         t = np.asarray(s.truth_xy)
         ax.plot(t[:, 0], t[:, 1], "g-", lw=1, label=f"truth ({s.label})")

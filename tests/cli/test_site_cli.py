@@ -1,0 +1,113 @@
+"""``adaptrack site list / new / check`` and ``--version``, run in-process."""
+
+from importlib.metadata import version
+
+import pytest
+from pydantic import BaseModel
+
+from adaptrack.cli import main
+from adaptrack.crossing.site import builtin_sites, load_site
+from adaptrack.crossing.site_authoring import site_template
+from adaptrack.crossing.site_schema import SiteFile
+
+
+def cli(capsys, *args):
+    """Run the CLI; return (exit status, stdout, stderr)."""
+    with pytest.raises(SystemExit) as info:
+        main(list(args))
+    out = capsys.readouterr()
+    return info.value.code, out.out, out.err
+
+
+def _field_names(model: type[BaseModel]) -> set[str]:
+    """Every key of a schema model and of the models nested in it."""
+    names = set()
+    for name, info in model.model_fields.items():
+        names.add(name)
+        for arg in _types(info.annotation):
+            if isinstance(arg, type) and issubclass(arg, BaseModel):
+                names |= _field_names(arg)
+    return names
+
+
+def _types(annotation):
+    yield annotation
+    for arg in getattr(annotation, "__args__", ()) or ():
+        yield from _types(arg)
+    for arg in getattr(annotation, "__metadata__", ()) or ():
+        yield from _types(arg)
+    origin = getattr(annotation, "__origin__", None)
+    if origin is not None:
+        yield from _types(origin)
+
+
+def test_version_is_the_installed_one(capsys, monkeypatch):
+    monkeypatch.setenv("COLUMNS", "200")
+    code, out, _ = cli(capsys, "--version")
+    assert code == 0 and out.strip() == f"adaptrack {version('adaptrack')}"
+
+
+def test_site_list_names_every_builtin_site(capsys, monkeypatch):
+    monkeypatch.setenv("COLUMNS", "200")
+    code, out, _ = cli(capsys, "site", "list")
+    assert code == 0
+    for name in builtin_sites():
+        assert name in out
+
+
+def test_template_shows_every_key_of_the_site_format():
+    text = site_template()
+    keys = _field_names(SiteFile)
+    assert len(keys) > 60  # the walk reached the nested tables
+    missing = sorted(k for k in keys if f"{k} =" not in text and f"[{k}" not in text)
+    assert not missing, f"keys of the site format absent from the template: {missing}"
+
+
+def test_site_new_then_check_writes_map_and_coverage(capsys, monkeypatch, tmp_path):
+    monkeypatch.setenv("COLUMNS", "200")
+    path = tmp_path / "mine.toml"
+    code, out, err = cli(capsys, "site", "new", str(path))
+    assert code == 0, err
+    site = load_site(path)
+    assert site.name == "my_crossing" and "scene" in site.source
+    code, out, err = cli(capsys, "site", "check", str(path), "--out", str(tmp_path / "chk"))
+    assert code == 0, err
+    assert "my_crossing: valid (2 roads, 2 radars, 4 cases, a scene)" in out
+    assert "north" in out and "100 %" in out
+    svg = (tmp_path / "chk" / "site_map.svg").read_text()
+    assert svg.startswith("<svg") and "stop line" in svg and "pole_n" in svg
+    assert "road south" in svg and "static clutter" in svg
+    cover = (tmp_path / "chk" / "coverage.svg").read_text()
+    assert cover.startswith("<svg") and "road north" in cover
+    code, _, err = cli(capsys, "site", "new", str(path))
+    assert code == 1 and "exists; pass --force" in err
+    assert cli(capsys, "site", "new", str(path), "--force")[0] == 0
+
+
+def test_site_check_names_a_misspelt_key(capsys, tmp_path):
+    path = tmp_path / "typo.toml"
+    path.write_text(site_template().replace("\nstop_line_m = ", "\nstop_lin_m = "))
+    code, _, err = cli(capsys, "site", "check", str(path), "--out", str(tmp_path / "chk"))
+    assert code == 1
+    assert err.strip() == (
+        f"error: {path}: the site: unknown key 'stop_lin_m' (did you mean 'stop_line_m'?)"
+    )
+    assert not (tmp_path / "chk").exists()  # nothing written for an invalid site
+
+
+def test_site_check_reports_a_blind_zone(capsys, monkeypatch, tmp_path):
+    monkeypatch.setenv("COLUMNS", "200")
+    path = tmp_path / "narrow.toml"  # the north radar's field narrowed to +-5 deg: near part unseen
+    text = site_template().replace("fov_half_deg = 60.0          ", "fov_half_deg = 5.0 ", 1)
+    path.write_text(text)
+    code, out, err = cli(capsys, "site", "check", str(path), "--out", str(tmp_path / "chk"))
+    assert code == 0, err
+    assert "blind zone on road north: 0.0-" in out
+    svg = (tmp_path / "chk" / "site_map.svg").read_text()
+    assert "blind zone (its radar does not see it)" in svg
+
+
+def test_site_check_refuses_a_file_as_its_output_folder(capsys, tmp_path):
+    (tmp_path / "f").write_text("")
+    code, _, err = cli(capsys, "site", "check", "lx_default", "--out", str(tmp_path / "f"))
+    assert code == 1 and "is a file; give a folder" in err
