@@ -52,7 +52,7 @@ def run(work: Path, duration: float, seed: int) -> None:
     with open(det) as f:
         n = sum(1 for _ in f) - 1
     start = time.perf_counter()
-    adaptrack("track", str(det), "--out", str(off), "--warnings", str(warn))
+    adaptrack("track", str(det), "--site", "lx_default", "--out", str(off), "--warnings", str(warn))
     offline_s = time.perf_counter() - start
     out = work / "live.jsonl"
     serve = subprocess.Popen(

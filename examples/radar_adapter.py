@@ -5,7 +5,7 @@ milliseconds, azimuth in degrees *positive to the left of its boresight*, radial
 *positive approaching*. adaptrack's lines want seconds, azimuth in radians clockwise from
 north, and radial speed in m/s positive away from the radar (docs/guide.md, "Live service").
 The adapter converts each row with the radar's boresight from the site file and writes JSON
-lines: pipe them into ``adaptrack serve --listen stdin``, or give ``--to udp://HOST:PORT``.
+lines: pipe them into ``adaptrack serve --site SITE --listen stdin``, or give ``--to udp://HOST:PORT``.
 Here the rows also go through the service's own tracker in-process, to show they are taken.
 
 Run: python examples/radar_adapter.py [--to udp://127.0.0.1:5600]

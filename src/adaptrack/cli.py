@@ -50,6 +50,7 @@ from .crossing.selection import (
     SiteTuning,
     load_tuning,
     select_estimator,
+    site_for,
 )
 from .crossing.site import Site, load_site, site_from_mapping
 from .crossing.trackers import RoadTracker, Tracker
@@ -466,10 +467,17 @@ def tune(
 @app.command()
 def track(
     measurements: Path = typer.Argument(..., help="Detections table (CSV or Parquet)."),
-    site: str = typer.Option("lx_default", "--site", help="Built-in site name or a .toml."),
+    site: str | None = typer.Option(
+        None,
+        "--site",
+        help="Built-in site name or a .toml (default: the site a tuned --config records).",
+    ),
     out: Path = typer.Option(..., "--out", help="Estimates table (CSV or Parquet)."),
     config: Path | None = typer.Option(
-        None, "--config", help="Tuned configuration from 'adaptrack tune' or 'demo'."
+        None,
+        "--config",
+        help="Tuned configuration from 'adaptrack tune' or 'demo' (refused for another site), "
+        "or a TOML with a [scene_tracker] table.",
     ),
     events: Path | None = typer.Option(
         None, "--events", help="Hazard events of raw detections (default: next to --out)."
@@ -497,8 +505,12 @@ def track(
     one track of the site's road estimator, the deployed one of ``--config`` (the road EKF with
     constant acceleration without it); the reflection-point scatter follows the
     ``vehicle_class`` column (a car when absent).
+    The site is needed: ``--site``, or the one a tuned ``--config`` was tuned for.
     """
-    st = _load_site(site)
+    try:
+        st = site_for(site, config)
+    except ValueError as exc:
+        _fail(str(exc))
     if ids not in ("hint", "truth"):
         _fail(f"--ids must be 'hint' or 'truth'; got {ids!r}")
     if ids == "hint":

@@ -103,7 +103,7 @@ def test_track_bad_input(simulated, change, message):
     path = simulated / "bad.csv"
     bad.to_csv(path, index=False)
     out = simulated / "never.csv"
-    proc = run("track", str(path), "--out", str(out), "--ids", "truth")
+    proc = run("track", str(path), "--site", "lx_default", "--out", str(out), "--ids", "truth")
     assert proc.returncode == 1
     assert proc.stderr.startswith("error: ")
     assert re.search(message, proc.stderr), proc.stderr

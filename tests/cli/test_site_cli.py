@@ -111,3 +111,49 @@ def test_site_check_refuses_a_file_as_its_output_folder(capsys, tmp_path):
     (tmp_path / "f").write_text("")
     code, _, err = cli(capsys, "site", "check", "lx_default", "--out", str(tmp_path / "f"))
     assert code == 1 and "is a file; give a folder" in err
+
+
+def _tuned(path, site: str, fingerprint: str = ""):
+    """A tuned.toml of one CV candidate, recording ``site`` (and its fingerprint)."""
+    from adaptrack.crossing.selection import Candidate, SiteTuning
+
+    cv = Candidate("cv", "road EKF (CV)", {"accel_psd": 0.5}, 0.4, 10, 0.42, 0.5, "car / x")
+    tuning = SiteTuning(site, "tail", 0, 1, 2, (cv,), "cv", "test", site_fingerprint=fingerprint)
+    path.write_text(tuning.to_toml())
+    return path
+
+
+def test_the_site_comes_from_the_option_or_the_tuned_configuration(tmp_path):
+    from adaptrack.crossing.selection import load_tuning, site_for
+
+    stress = load_site("lx_stress")
+    tuned = _tuned(tmp_path / "tuned.toml", "lx_stress", stress.fingerprint)
+    assert load_tuning(tuned).site_fingerprint == stress.fingerprint  # written and read back
+    assert site_for(None, tuned).name == "lx_stress"
+    assert site_for("lx_stress", tuned).name == "lx_stress"
+    assert site_for("lx_default", None).name == "lx_default"
+    with pytest.raises(ValueError, match="tuned for site 'lx_stress', not 'lx_default'"):
+        site_for("lx_default", tuned)
+    with pytest.raises(ValueError, match="--site is required"):
+        site_for(None, None)
+    changed = _tuned(tmp_path / "old.toml", "lx_stress", "0123456789abcdef")
+    with pytest.raises(ValueError, match="another version of site 'lx_stress'"):
+        site_for("lx_stress", changed)
+    own = _tuned(tmp_path / "own.toml", "my_crossing")
+    with pytest.raises(ValueError, match="not built in: pass its file with --site"):
+        site_for(None, own)
+    path = tmp_path / "mine.toml"
+    path.write_text(site_template())
+    assert site_for(str(path), own).name == "my_crossing"  # no fingerprint recorded: name only
+
+
+def test_track_refuses_a_configuration_tuned_for_another_site(capsys, tmp_path):
+    tuned = _tuned(tmp_path / "tuned.toml", "lx_stress")
+    det = tmp_path / "det.csv"
+    det.write_text("radar,time_s,range_m,azimuth_rad,radial_speed_mps\nradar_A,0.0,50,0.1,-5\n")
+    args = ("track", str(det), "--out", str(tmp_path / "est.csv"), "--config", str(tuned))
+    code, _, err = cli(capsys, *args, "--site", "lx_default")
+    assert code == 1 and "tuned for site 'lx_stress', not 'lx_default'" in err
+    code, _, err = cli(capsys, "track", str(det), "--out", str(tmp_path / "est.csv"))
+    assert code == 1 and "--site is required" in err
+    assert not (tmp_path / "est.csv").exists()

@@ -11,7 +11,7 @@ from .live_process import replay
 
 def test_a_track_appears_on_the_live_page_and_moves(serve, scene_files, tmp_path):
     browser_path = chromium_executable()
-    svc = serve("--listen", "udp://127.0.0.1:0", "--http", "127.0.0.1:0",
+    svc = serve("--site", "lx_default", "--listen", "udp://127.0.0.1:0", "--http", "127.0.0.1:0",
                       "--out", str(tmp_path / "live.jsonl"))  # fmt: skip
     host, port = svc.wait_for("listening udp")
     page_host, page_port = svc.wait_for("serving http")

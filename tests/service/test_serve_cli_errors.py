@@ -13,14 +13,18 @@ def adaptrack(*args):
     )
 
 
+SERVE = ("serve", "--site", "lx_default")
+
+
 @pytest.mark.parametrize(
     ("args", "message"),
     [
-        (("serve", "--listen", "http://x:1"), "expected one of udp://HOST:PORT, tcp://HOST:PORT"),
-        (("serve", "--listen", "udp://127.0.0.1"), "endpoint 'udp://127.0.0.1'"),
-        (("serve", "--listen", "stdin", "--publish", "udp://127.0.0.1:1"), "tcp://HOST:PORT"),
+        ((*SERVE, "--listen", "http://x:1"), "expected one of udp://HOST:PORT, tcp://HOST:PORT"),
+        ((*SERVE, "--listen", "udp://127.0.0.1"), "endpoint 'udp://127.0.0.1'"),
+        ((*SERVE, "--listen", "stdin", "--publish", "udp://127.0.0.1:1"), "tcp://HOST:PORT"),
         (("serve", "--listen", "stdin", "--site", "nowhere"), "nowhere"),
-        (("serve", "--listen", "stdin", "--config", "missing.toml"), "missing.toml"),
+        ((*SERVE, "--listen", "stdin", "--config", "missing.toml"), "missing.toml"),
+        (("serve", "--listen", "stdin"), "--site is required"),
         (("replay", "det.csv", "--rate", "0"), "--rate must be a positive number or 'max'"),
         (("replay", "missing.csv", "--rate", "max"), "missing.csv"),
     ],
@@ -40,7 +44,7 @@ def test_a_port_in_use_is_a_one_line_error():
         busy.bind(("127.0.0.1", 0))
         busy.listen()
         port = busy.getsockname()[1]
-        proc = adaptrack("serve", "--listen", f"tcp://127.0.0.1:{port}")
+        proc = adaptrack("serve", "--site", "lx_default", "--listen", f"tcp://127.0.0.1:{port}")
     assert proc.returncode == 1 and "cannot listen" in proc.stderr, proc.stderr
     assert "Traceback" not in proc.stderr
 
@@ -48,7 +52,7 @@ def test_a_port_in_use_is_a_one_line_error():
 def test_stdin_input_ends_with_its_stats():
     lines = "radar_A,1.0,30,0.1,-5\nradar_A,1.05,29.7,0.1,-5\ngarbage\n"
     proc = subprocess.run(
-        [sys.executable, "-m", "adaptrack", "serve", "--listen", "stdin"],
+        [sys.executable, "-m", "adaptrack", "serve", "--site", "lx_default", "--listen", "stdin"],
         input=lines, capture_output=True, text=True, timeout=120,
     )  # fmt: skip
     assert proc.returncode == 0, proc.stderr

@@ -22,8 +22,8 @@ def offline_tracks(scene_files, tmp_path_factory):
     """Offline ``adaptrack track`` of the scene, as Parquet (exact floats)."""
     out = tmp_path_factory.mktemp("offline") / "tracks.parquet"
     proc = subprocess.run(
-        [sys.executable, "-m", "adaptrack", "track", str(scene_files.detections), "--out",
-         str(out), "--warnings", str(scene_files.warnings)],
+        [sys.executable, "-m", "adaptrack", "track", str(scene_files.detections), "--site",
+         "lx_default", "--out", str(out), "--warnings", str(scene_files.warnings)],
         capture_output=True, text=True, timeout=600,
     )  # fmt: skip
     assert proc.returncode == 0, proc.stderr
@@ -34,7 +34,7 @@ def test_replay_at_max_rate_over_udp_loses_nothing_and_equals_offline(
     serve, scene_files, offline_tracks, tmp_path
 ):
     out = tmp_path / "live.jsonl"
-    svc = serve("--listen", "udp://127.0.0.1:0", "--out", str(out),
+    svc = serve("--site", "lx_default", "--listen", "udp://127.0.0.1:0", "--out", str(out),
                       "--warnings", str(scene_files.warnings))  # fmt: skip
     host, port = svc.wait_for("listening udp")
     replay(scene_files.detections, f"udp://{host}:{port}", "max")
@@ -54,7 +54,8 @@ def test_faults_become_rejections_and_the_service_runs_on(serve, scene_files, tm
     that stops sending, a subscriber that never reads."""
     out = tmp_path / "live.jsonl"
     svc = serve(
-        "--listen", "udp://127.0.0.1:0", "--listen", "tcp://127.0.0.1:0", "--out", str(out),
+        "--site", "lx_default", "--listen", "udp://127.0.0.1:0", "--listen", "tcp://127.0.0.1:0",
+        "--out", str(out),
         "--publish", "tcp://127.0.0.1:0", "--subscriber-buffer", "64",
     )  # fmt: skip
     udp = svc.wait_for("listening udp")
@@ -114,7 +115,8 @@ def test_kill_9_and_restart_from_the_state_continues_the_tracks(
     serve, scene_files, offline_tracks, tmp_path
 ):
     out, state = tmp_path / "live.jsonl", tmp_path / "state.pkl"
-    args = ("--listen", "udp://127.0.0.1:0", "--out", str(out), "--state", str(state),
+    args = ("--site", "lx_default", "--listen", "udp://127.0.0.1:0", "--out", str(out),
+            "--state", str(state),
             "--state-every", "0.2", "--warnings", str(scene_files.warnings))  # fmt: skip
     lines = scene_files.lines
     first = serve(*args)

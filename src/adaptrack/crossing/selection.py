@@ -48,7 +48,7 @@ from .compliance import (
 )
 from .families import FAMILIES, M1_LAMBDAS, Family
 from .radar_sim import CrossingRuns, simulate_site_case
-from .site import Site
+from .site import Site, builtin_sites, load_site
 from .trackers import Tracker
 from .traffic import Case, VehicleClass
 
@@ -244,6 +244,7 @@ class SiteTuning:
     deployed: str
     reason: str
     m1_profile: dict[str, list[float]] = field(default_factory=dict)
+    site_fingerprint: str = ""  # :attr:`Site.fingerprint` of the site tuned for ("": unknown)
 
     def candidate(self, key: str) -> Candidate:
         """Return the candidate of a family."""
@@ -284,6 +285,7 @@ class SiteTuning:
         lines = [
             "# adaptrack design-time selection: the deployed road estimator and every candidate",
             f"site = {_q(self.site)}",
+            *([f"site_fingerprint = {_q(self.site_fingerprint)}"] if self.site_fingerprint else []),
             f"criterion = {_q(self.criterion)}",
             f"seed = {self.seed}",
             f"training_runs = {self.training_runs}",
@@ -354,6 +356,7 @@ def load_tuning(path: str | Path) -> SiteTuning:
             str(data["deployed"]["family"]),
             str(data["deployed"]["reason"]),
             {k: [float(x) for x in v] for k, v in data.get("m1_profile", {}).items()},
+            str(data.get("site_fingerprint", "")),
         )
         tuning.winner  # noqa: B018 - the deployed family must be a candidate
     except KeyError as exc:
@@ -361,6 +364,46 @@ def load_tuning(path: str | Path) -> SiteTuning:
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{path}: not a tuned configuration ({exc})") from None
     return tuning
+
+
+def site_for(site: str | None, config: str | Path | None) -> Site:
+    """Return the site a command runs on: ``site`` (a name or a file) or the config's.
+
+    A tuned configuration (``tuned.toml``) records the site it was tuned for; without
+    ``site`` that one is used (a built-in site by name; a site file must be given), and a
+    ``site`` other than it, or a changed version of it (another fingerprint), is refused: the
+    estimator was tuned for another place. Raises ValueError saying which.
+    """
+    tuned_for = fingerprint = None
+    if config is not None:
+        if not Path(config).is_file():
+            raise ValueError(f"configuration file {config} does not exist")
+        data = load_toml(Path(config))
+        tuned_for, fingerprint = data.get("site"), data.get("site_fingerprint")
+    if site is None:
+        if tuned_for is None:
+            raise ValueError(
+                "--site is required: the site the detections come from (a built-in name, see "
+                "'adaptrack site list', or a site .toml), or a --config tuned.toml that records it"
+            )
+        if str(tuned_for) not in builtin_sites():
+            raise ValueError(
+                f"{config} was tuned for site {tuned_for!r}, which is not built in: pass its "
+                "file with --site"
+            )
+        site = str(tuned_for)
+    st = load_site(site)
+    if tuned_for is not None and st.name != tuned_for:
+        raise ValueError(
+            f"{config} was tuned for site {tuned_for!r}, not {st.name!r}: tune for this site "
+            "('adaptrack tune') or pass the site it was tuned for"
+        )
+    if fingerprint and fingerprint != st.fingerprint:
+        raise ValueError(
+            f"{config} was tuned for another version of site {st.name!r} (its definition has "
+            "changed since): tune again"
+        )
+    return st
 
 
 def select_estimator(
@@ -426,6 +469,7 @@ def select_estimator(
         ranked[0].family,
         _reason(ranked, criterion),
         profile,
+        site.fingerprint,
     )
     return tuning, validation
 

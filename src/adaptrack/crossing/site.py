@@ -12,6 +12,8 @@ zone and the run-in; every radar must see a road and every road must be seen.
 from __future__ import annotations
 
 import dataclasses
+import hashlib
+import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -52,6 +54,12 @@ class Site:
     run_in_m: float
     lateral_offset_std_m: float
     source: dict[str, Any]
+
+    @property
+    def fingerprint(self) -> str:
+        """Digest of the site's definition: changes with any value of its file (16 hex)."""
+        text = json.dumps(self.source, sort_keys=True, separators=(",", ":"))
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
 
     def radar_for(self, road: str) -> RadarSpec:
         """Return the radar that tracks a road."""

@@ -15,7 +15,11 @@ from .._cli_errors import fail as _fail
 
 
 def serve(
-    site: str = typer.Option("lx_default", "--site", help="Built-in site name or a .toml."),
+    site: str | None = typer.Option(
+        None,
+        "--site",
+        help="Built-in site name or a .toml (default: the site a tuned --config records).",
+    ),
     listen: list[str] = typer.Option(
         ..., "--listen", help="Input: udp://HOST:PORT, tcp://HOST:PORT or stdin (repeatable)."
     ),
@@ -58,12 +62,12 @@ def serve(
     """
     from ..crossing.measurements_io import read_warnings
     from ..crossing.scene_tracker import load_scene_config
-    from ..crossing.site import load_site
+    from ..crossing.selection import site_for
     from .engine import LiveTracker, load_state
     from .server import Endpoint, Service, announce
 
     try:
-        st = load_site(site)
+        st = site_for(site, config)
         inputs = [Endpoint.parse(x) for x in listen]
         outputs = [Endpoint.parse(x, ("tcp",)) for x in publish]
         page = Endpoint.parse(f"http://{http}", ("http",)) if http else None
