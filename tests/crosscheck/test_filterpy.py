@@ -80,3 +80,67 @@ def test_kalman_filter_and_rts_match_filterpy(case):
     xs, ps, _, _ = rts_smoother(fx, fp, np.array(fs[1:] + [fs[-1]]), np.array(qs[1:] + [qs[-1]]))
     assert relative(sm.mean, xs) <= 1e-9
     assert relative(sm.cov, ps) <= 1e-9
+
+
+def test_a_filterpy_layout_converts_with_filterpy_order():
+    """A problem set up the FilterPy way (its own CV model, x vx y vy) gives adaptrack's answer.
+
+    FilterPy's ``Q_discrete_white_noise(block_size=2)`` and its F are built by FilterPy, not
+    by adaptrack; converted with ``filterpy_order``, adaptrack's filter on its own model
+    reproduces FilterPy's estimates. The FilterPy-ordered H given as is measures the wrong
+    components: names (``["x", "y"]``) say what is meant.
+    """
+    from filterpy.common import Q_discrete_white_noise
+
+    from adaptrack.models import filterpy_order, measurement_matrix
+
+    rng = np.random.default_rng(7)
+    dt, q, n_steps = 0.5, 0.3, 60
+    truth = np.cumsum(np.full((n_steps, 2), [3.0, -1.0]) * dt, axis=0) + [100.0, 50.0]
+    z = truth + rng.normal(0.0, 2.0, size=truth.shape)
+    r = 4.0 * np.eye(2)
+    kf = KalmanFilter(dim_x=4, dim_z=2)  # FilterPy's layout: x, vx, y, vy
+    kf.F = np.kron(np.eye(2), [[1.0, dt], [0.0, 1.0]])
+    kf.Q = Q_discrete_white_noise(dim=2, dt=dt, var=q / dt, block_size=2)  # variance q / dt
+    kf.H = np.array([[1.0, 0, 0, 0], [0, 0, 1.0, 0]])
+    kf.R = r
+    x0, p0 = np.array([z[0, 0], 0.0, z[0, 1], 0.0]), np.diag([4.0, 100.0, 4.0, 100.0])
+    kf.x, kf.P = x0.copy(), p0.copy()
+    fx = []
+    for k in range(n_steps):
+        if k:
+            kf.predict()
+        kf.update(z[k])
+        fx.append(kf.x.copy())
+    fx = np.array(fx)
+
+    model = ConstantVelocity(accel_psd=q, n_axes=2)
+    p = filterpy_order(model)
+    np.testing.assert_allclose(at.discretize(model, dt)[0], kf.F[np.ix_(p, p)])
+    t = dt * np.arange(n_steps)
+    prior = at.GaussianState(x0[p], p0[np.ix_(p, p)], t[0])
+    h = kf.H[:, p]
+    np.testing.assert_array_equal(h, measurement_matrix(model, ["x", "y"]))
+    ours = at.kalman_filter(t, z, model, ["x", "y"], r, prior).filtered.mean
+    # FilterPy's Q is the piecewise-constant acceleration's (adaptrack's noise="piecewise")
+    same = at.kalman_filter(t, z, model, h, r, prior, noise="piecewise").filtered.mean
+    np.testing.assert_allclose(same, fx[:, p], rtol=1e-9, atol=1e-9)
+    right_rmse = np.sqrt(np.mean((ours[:, :2] - truth) ** 2))
+    assert right_rmse < 2.0  # (noise sigma 2 m) the exact-white-noise model tracks too
+    wrong = at.kalman_filter(t, z, model, kf.H, r, prior).filtered.mean  # FilterPy's H as is
+    assert np.sqrt(np.mean((wrong[:, :2] - truth) ** 2)) > 5.0 * right_rmse
+
+
+def test_unknown_component_names_are_refused():
+    from adaptrack.models import measurement_matrix
+
+    model = ConstantVelocity(n_axes=2)
+    with pytest.raises(ValueError, match=r"unknown state component\(s\) \['vz'\]; "
+                       r"ConstantVelocity has \['x', 'y', 'vx', 'vy'\]"):  # fmt: skip
+        measurement_matrix(model, ["x", "vz"])
+    t = np.arange(3.0)
+    prior = at.GaussianState(np.zeros(4), np.eye(4), 0.0)
+    with pytest.raises(ValueError, match="unknown state component"):
+        at.kalman_filter(t, np.zeros((3, 1)), model, ["z"], [[1.0]], prior)
+    f = at.OnlineFilter(model, ["x", "y"], np.eye(2), prior)
+    assert f.update(1.0, [1.0, 2.0]) >= 0.0

@@ -19,7 +19,7 @@ import numpy as np
 from .._linalg import matvec, mT, symmetrize
 from .._typing import ArrayLike, BoolArray, FloatArray
 from .._validation import as_float_array, check_finite, check_symmetric_pd
-from ..models.continuous import MotionModel, as_motion_model
+from ..models.continuous import MotionModel, as_motion_model, named_measurement_matrix
 from ..models.discretize import Method, Noise, discretize_with_input
 from ..types import GaussianState, StepInfo, _trusted, as_gaussian_state
 from ._measurement import LOG_2PI, masked_model
@@ -419,6 +419,7 @@ def kalman_step(
     """
     state = as_gaussian_state(state, "state")
     model = as_motion_model(model)
+    measurement_matrix = named_measurement_matrix(measurement_matrix, model)
     z, h, r, mk, _ = _measurement_inputs(
         state.dim, measurement, measurement_matrix, measurement_cov, mask, None
     )

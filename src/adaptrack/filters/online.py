@@ -23,7 +23,7 @@ import numpy as np
 
 from .._typing import ArrayLike, BoolArray, FloatArray
 from .._validation import as_float_array, check_symmetric_pd
-from ..models.continuous import MotionModel, as_motion_model
+from ..models.continuous import MotionModel, as_motion_model, named_measurement_matrix
 from ..models.discretize import Method, Noise, discretize_with_input
 from ..models.series_table import SeriesTable, model_series_table
 from ..types import GaussianState, as_gaussian_state
@@ -170,6 +170,7 @@ class OnlineFilter:
         cache_size: int = 16,
     ) -> None:
         self.model = as_motion_model(model)
+        measurement_matrix = named_measurement_matrix(measurement_matrix, self.model)
         initial = as_gaussian_state(initial, "initial")
         n = self.model.state_dim
         h = as_float_array(measurement_matrix, "measurement_matrix", min_ndim=2)

@@ -23,7 +23,7 @@ from .._validation import (
     check_symmetric_pd,
     check_times,
 )
-from ..models.continuous import MotionModel, as_motion_model
+from ..models.continuous import MotionModel, as_motion_model, named_measurement_matrix
 from ..models.discretize import Method, Noise, discretize_with_input
 from ..types import FilterResult, GaussianState, StepInfo, _trusted, as_gaussian_state
 from ._measurement import masked_model
@@ -73,8 +73,10 @@ def kalman_filter(
     model : MotionModel
         Continuous-time motion model, discretised for every step (``method``, ``noise``,
         ``order`` as in :func:`adaptrack.discretize`).
-    measurement_matrix : array_like, shape (m, n)
-        ``H``.
+    measurement_matrix : array_like, shape (m, n), or sequence of str
+        ``H``, or the names of the measured state components (``["x", "y"]``: see
+        :func:`adaptrack.models.measurement_matrix`; FilterPy's layout differs, see
+        :func:`adaptrack.models.filterpy_order`).
     measurement_cov : array_like, shape (m, m), (N, m, m) or (..., T, m, m)
         ``R``: shared, per track, or per step; symmetric positive definite.
     initial : GaussianState
@@ -133,6 +135,7 @@ def kalman_filter(
     (5, 2)
     """
     model = as_motion_model(model)
+    measurement_matrix = named_measurement_matrix(measurement_matrix, model)
     initial = as_gaussian_state(initial, "initial")
     if form not in ("auto", "joseph", "standard", "sqrt"):
         raise ValueError(f"form must be 'auto', 'joseph', 'standard' or 'sqrt'; got {form!r}")

@@ -24,7 +24,7 @@ import numpy as np
 from .._backend import Backend, use_compiled
 from .._typing import ArrayLike, FloatArray
 from .._validation import as_float_array
-from ..models.continuous import MotionModel, as_motion_model
+from ..models.continuous import MotionModel, as_motion_model, named_measurement_matrix
 from ..models.discretize import Method, Noise
 from ..smoothers.rts import rts_smooth, smoother_gains
 from ..types import GaussianState, as_gaussian_state
@@ -104,6 +104,7 @@ def shared_gain_filter(
         If finite input overflows the means.
     """
     model = as_motion_model(model)
+    measurement_matrix = named_measurement_matrix(measurement_matrix, model)
     initial = as_gaussian_state(initial, "initial")
     n = model.state_dim
     t = as_float_array(times, "times", min_ndim=1)

@@ -15,7 +15,7 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from .._typing import FloatArray
+from .._typing import ArrayLike, FloatArray
 from .._validation import as_float_array, check_square, check_symmetric_pd
 from ._layout import Block, assemble, interleave_order
 from ._phi import phi
@@ -491,6 +491,55 @@ def seed000_permutation() -> FloatArray:
     return np.fliplr(np.eye(3))
 
 
+def measurement_matrix(model: MotionModel, components: Sequence[str]) -> FloatArray:
+    """``H`` (m, n) measuring the named state components of ``model``, one row each.
+
+    Names are the model's :attr:`~MotionModel.state_names` (``x, y, vx, vy`` for a
+    two-axis constant-velocity model). Every filter that takes a model accepts the names
+    in place of ``H``.
+
+    >>> measurement_matrix(ConstantVelocity(n_axes=2), ["x", "y"])
+    array([[1., 0., 0., 0.],
+           [0., 1., 0., 0.]])
+    """
+    names = tuple(model.state_names)
+    wanted = list(components)
+    unknown = [c for c in wanted if c not in names]
+    if unknown or not wanted:
+        raise ValueError(
+            f"measurement_matrix: unknown state component(s) {unknown or wanted}; "
+            f"{type(model).__name__} has {list(names)}"
+        )
+    h = np.zeros((len(wanted), len(names)))
+    for i, c in enumerate(wanted):
+        h[i, names.index(c)] = 1.0
+    return h
+
+
+def named_measurement_matrix(h: ArrayLike, model: MotionModel) -> ArrayLike:
+    """``h`` unchanged, or :func:`measurement_matrix` of it if it is a sequence of names."""
+    if isinstance(h, list | tuple) and h and all(isinstance(c, str) for c in h):
+        return measurement_matrix(model, h)
+    return h
+
+
+def filterpy_order(model: MotionModel) -> np.ndarray:
+    """Permutation ``p`` from FilterPy's state layout to adaptrack's: ``x = x_filterpy[p]``.
+
+    FilterPy's models (``Q_discrete_white_noise(block_size=...)``, ``kinematic_kf``) list each
+    axis's derivatives together (``x, vx, y, vy``); adaptrack lists all positions first
+    (``x, y, vx, vy``). Then ``H = H_filterpy[:, p]``, ``P = P_filterpy[np.ix_(p, p)]``,
+    ``F = F_filterpy[np.ix_(p, p)]``; the inverse is ``np.argsort(p)``.
+
+    >>> filterpy_order(ConstantVelocity(n_axes=2))
+    array([0, 2, 1, 3])
+    """
+    _, order = model.blocks()  # per-block (FilterPy) index -> model index
+    p = np.empty_like(order)
+    p[order] = np.arange(order.size)
+    return p
+
+
 def as_motion_model(model: object, name: str = "model") -> MotionModel:
     """Check that ``model`` implements :class:`MotionModel` (TypeError otherwise)."""
     if not isinstance(model, MotionModel):
@@ -508,6 +557,8 @@ __all__ = [
     "MotionModel",
     "Singer",
     "drift_matrix",
+    "filterpy_order",
+    "measurement_matrix",
     "noise_input_matrix",
     "noise_psd",
     "seed000_permutation",
