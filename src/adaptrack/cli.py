@@ -221,6 +221,34 @@ def demo(
         f"wrote {out / 'summary.json'}, {out / 'tuned.toml'} and {out / 'report.html'} "
         f"(test Monte Carlo {test.elapsed_s:.1f} s)"
     )
+    verdict, line = _site_verdict(st, test, winner.label)
+    console.print(line, markup=False, highlight=False)
+    raise typer.Exit(VERDICT_EXIT[verdict])
+
+
+VERDICT_EXIT = {"pass": 0, "fail": 4, "undecided": 5}  # the demo's exit status by verdict
+
+
+def _site_verdict(st: Site, test: ComplianceResult, deployed: str) -> tuple[str, str]:
+    """Return the site's verdict with its deployed estimator, and the sentence saying it."""
+    s = test.summary()[deployed]
+    n = s["pass"] + s["fail"] + s["undecided"]
+    at = f"at {100 * test.confidence:.0f} % confidence"
+    if s["verdict"] == "pass":
+        return "pass", (
+            f"VERDICT: {st.name} complies with {deployed}: all {n} class x case pairs meet "
+            f"0.7 m / 2 km/h {at}"
+        )
+    if s["verdict"] == "fail":
+        return "fail", (
+            f"VERDICT: {st.name} does NOT comply with {deployed}: {s['fail']} of {n} class x "
+            f"case pairs fail {at} (worst {s['worst_case']}); exit status 4"
+        )
+    return "undecided", (
+        f"VERDICT: {st.name} undecided with {deployed}: {s['undecided']} of {n} class x case "
+        f"pairs undecided after the confirmation runs, none failing; more --runs decide "
+        "them; exit status 5"
+    )
 
 
 def _mixed_traffic(
@@ -835,7 +863,8 @@ def main(argv: list[str] | None = None) -> None:
 
     Exit status: 0 done, 1 bad input or a failed run (the command's message), 2 a usage error
     (unknown option, bad value, missing argument), 3 an internal error (a bug: its traceback
-    with ``ADAPTRACK_DEBUG=1``), 130 interrupted (no output file is left half-written).
+    with ``ADAPTRACK_DEBUG=1``), 130 interrupted (no output file is left half-written); the
+    demo's verdict: 4 the site does not comply, 5 undecided (its outputs are written).
     """
     args = sys.argv[1:] if argv is None else list(argv)
     try:

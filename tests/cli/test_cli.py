@@ -23,9 +23,12 @@ def test_demo_writes_summary(tmp_path):
         "--training-runs", "1", "--validation-runs", "2", "--families", "cv,ca,m1,m2",
         "--scene-seconds", "40",
     )  # fmt: skip
-    assert proc.returncode == 0, proc.stderr
-    assert "road EKF (M2)" in proc.stdout and "(deployed)" in proc.stdout
     summary = json.loads((tmp_path / "summary.json").read_text())
+    verdict = summary["test"]["summary"][summary["deployed"]]["verdict"]
+    assert proc.returncode == {"pass": 0, "fail": 4, "undecided": 5}[verdict], proc.stderr
+    said = {"pass": "complies", "fail": "does NOT comply", "undecided": "undecided"}[verdict]
+    assert f"VERDICT: lx_default {said} with {summary['deployed']}" in proc.stdout
+    assert "road EKF (M2)" in proc.stdout and "(deployed)" in proc.stdout
     test = summary["test"]
     assert test["runs"] == 2 and summary["seed"] == 3 and summary["site"]["name"] == "lx_default"
     rows = test["rows"]

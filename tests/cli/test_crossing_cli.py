@@ -123,7 +123,10 @@ def demo_on_a_site_file(tmp_path_factory):
         "--validation-runs", "2", "--workers", "1", "--seed", "5", "--out", str(out),
         "--scene-seconds", "30",
     )  # fmt: skip
-    assert proc.returncode == 0, proc.stderr[-3000:]
+    summary = json.loads((out / "summary.json").read_text())
+    verdict = summary["test"]["summary"][summary["deployed"]]["verdict"]
+    assert proc.returncode == {"pass": 0, "fail": 4, "undecided": 5}[verdict], proc.stderr[-3000:]
+    assert proc.stdout.count("VERDICT: rural_crossing ") == 1
     return out, proc.stdout
 
 
