@@ -24,3 +24,24 @@ def write_atomic(path: str | Path, write: Callable[[str], object]) -> None:
     finally:
         if os.path.exists(tmp):
             os.remove(tmp)
+
+
+def check_writable(path: str | Path, *, folder: bool = False) -> None:
+    """Raise ValueError if ``path`` cannot receive an output (checked before any work).
+
+    A file output must not be an existing folder (a folder output not an existing file), and
+    its nearest existing parent must be a writable folder (missing ones are created when
+    written). Nothing is created here.
+    """
+    p = Path(path)
+    if folder and p.exists() and not p.is_dir():
+        raise ValueError(f"{p} is a file; give a folder for the outputs")
+    if not folder and p.is_dir():
+        raise ValueError(f"{p} is a folder; give a file name")
+    parent = (p if folder else p.parent).absolute()
+    while not parent.exists():
+        parent = parent.parent
+    if not parent.is_dir():
+        raise ValueError(f"{p}: {parent} is a file, not a folder")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise ValueError(f"{p}: the folder {parent} is not writable")

@@ -21,6 +21,7 @@ from rich.table import Table
 from . import __version__
 from ._cli_errors import err_console
 from ._cli_errors import fail as _fail
+from ._files import check_writable
 from .analysis.evaluation import Evaluation, evaluate_scenario
 from .analysis.flights import FlightRow, evaluate_flight, smooth_kalman, smooth_lsq
 from .cli_site import site_app
@@ -148,6 +149,7 @@ def demo(
     Then the site's mixed traffic (many objects, raw detections, a vehicle stalled on the
     crossing) is tracked by the scene tracker and scored against its truth.
     """
+    _outputs(folder=out)
     st = _load_site(site)
     criterion = _criterion(criterion)
     keys = _families(families)
@@ -288,6 +290,18 @@ def _mixed_traffic_table(m: MixedTraffic) -> Table:
     return table
 
 
+def _outputs(*paths: Path | None, folder: Path | None = None) -> None:
+    """Fail before any work if an output cannot be written (a folder as a file, ...)."""
+    try:
+        for p in paths:
+            if p is not None:
+                check_writable(p)
+        if folder is not None:
+            check_writable(folder, folder=True)
+    except ValueError as exc:
+        _fail(str(exc))
+
+
 def _load_site(site: str) -> Site:
     try:
         return load_site(site)
@@ -367,6 +381,7 @@ def report(
 
     The summary carries the site it was computed for, so any site works, built-in or a file.
     """
+    _outputs(out)
     try:
         data = json.loads(summary.read_text())
         st = site_from_mapping(data["site"], f"{summary}: site")
@@ -416,6 +431,7 @@ def simulate(
     ``object_id``. With ``--scene``: the site's mixed traffic (flows, closures, clutter), as
     raw detections without identities; ``--truth`` then holds every road user per traffic step.
     """
+    _outputs(out, truth, warnings)
     st = _load_site(site)
     if scene:
         try:
@@ -471,6 +487,7 @@ def tune(
     scheduler: str | None = SCHEDULER,
 ) -> None:
     """Adapt the road estimator to a site: tune every family, choose on validation runs."""
+    _outputs(out)
     st = _load_site(site)
     criterion = _criterion(criterion)
     keys = _families(families)
@@ -535,6 +552,7 @@ def track(
     ``vehicle_class`` column (a car when absent).
     The site is needed: ``--site``, or the one a tuned ``--config`` was tuned for.
     """
+    _outputs(out, events)
     try:
         st = site_for(site, config)
     except ValueError as exc:
@@ -666,6 +684,7 @@ def evaluate(
     ``adaptrack evaluate flights FILE...`` instead compares navigation smoothers (triple-node
     and position-only LSQ, Kalman filter, RTS smoother) on recorded flights used as truth.
     """
+    _outputs(json_path)
     if scenario == "flights":
         _evaluate_flights(files or [], seed, json_path)
         return
@@ -758,6 +777,7 @@ def smooth(
     out: Path = typer.Option(..., "--out", help="Output CSV or Parquet."),
 ) -> None:
     """Smooth radar (and velocity) measurements; write ENU and ECEF estimates with covariance."""
+    _outputs(out)
     lat, lon, alt = _parse_site(site)
     if method not in ("lsq", "rts"):
         raise typer.BadParameter("--method must be 'lsq' or 'rts'")

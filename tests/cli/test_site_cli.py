@@ -5,18 +5,9 @@ from importlib.metadata import version
 import pytest
 from pydantic import BaseModel
 
-from adaptrack.cli import main
 from adaptrack.crossing.site import builtin_sites, load_site
 from adaptrack.crossing.site_authoring import site_template
 from adaptrack.crossing.site_schema import SiteFile
-
-
-def cli(capsys, *args):
-    """Run the CLI; return (exit status, stdout, stderr)."""
-    with pytest.raises(SystemExit) as info:
-        main(list(args))
-    out = capsys.readouterr()
-    return info.value.code, out.out, out.err
 
 
 def _field_names(model: type[BaseModel]) -> set[str]:
@@ -41,15 +32,13 @@ def _types(annotation):
         yield from _types(origin)
 
 
-def test_version_is_the_installed_one(capsys, monkeypatch):
-    monkeypatch.setenv("COLUMNS", "200")
-    code, out, _ = cli(capsys, "--version")
+def test_version_is_the_installed_one(cli):
+    code, out, _ = cli("--version")
     assert code == 0 and out.strip() == f"adaptrack {version('adaptrack')}"
 
 
-def test_site_list_names_every_builtin_site(capsys, monkeypatch):
-    monkeypatch.setenv("COLUMNS", "200")
-    code, out, _ = cli(capsys, "site", "list")
+def test_site_list_names_every_builtin_site(cli):
+    code, out, _ = cli("site", "list")
     assert code == 0
     for name in builtin_sites():
         assert name in out
@@ -63,14 +52,13 @@ def test_template_shows_every_key_of_the_site_format():
     assert not missing, f"keys of the site format absent from the template: {missing}"
 
 
-def test_site_new_then_check_writes_map_and_coverage(capsys, monkeypatch, tmp_path):
-    monkeypatch.setenv("COLUMNS", "200")
+def test_site_new_then_check_writes_map_and_coverage(cli, tmp_path):
     path = tmp_path / "mine.toml"
-    code, out, err = cli(capsys, "site", "new", str(path))
+    code, out, err = cli("site", "new", str(path))
     assert code == 0, err
     site = load_site(path)
     assert site.name == "my_crossing" and "scene" in site.source
-    code, out, err = cli(capsys, "site", "check", str(path), "--out", str(tmp_path / "chk"))
+    code, out, err = cli("site", "check", str(path), "--out", str(tmp_path / "chk"))
     assert code == 0, err
     assert "my_crossing: valid (2 roads, 2 radars, 4 cases, a scene)" in out
     assert "north" in out and "100 %" in out
@@ -79,15 +67,15 @@ def test_site_new_then_check_writes_map_and_coverage(capsys, monkeypatch, tmp_pa
     assert "road south" in svg and "static clutter" in svg
     cover = (tmp_path / "chk" / "coverage.svg").read_text()
     assert cover.startswith("<svg") and "road north" in cover
-    code, _, err = cli(capsys, "site", "new", str(path))
+    code, _, err = cli("site", "new", str(path))
     assert code == 1 and "exists; pass --force" in err
-    assert cli(capsys, "site", "new", str(path), "--force")[0] == 0
+    assert cli("site", "new", str(path), "--force")[0] == 0
 
 
-def test_site_check_names_a_misspelt_key(capsys, tmp_path):
+def test_site_check_names_a_misspelt_key(cli, tmp_path):
     path = tmp_path / "typo.toml"
     path.write_text(site_template().replace("\nstop_line_m = ", "\nstop_lin_m = "))
-    code, _, err = cli(capsys, "site", "check", str(path), "--out", str(tmp_path / "chk"))
+    code, _, err = cli("site", "check", str(path), "--out", str(tmp_path / "chk"))
     assert code == 1
     assert err.strip() == (
         f"error: {path}: the site: unknown key 'stop_lin_m' (did you mean 'stop_line_m'?)"
@@ -95,21 +83,20 @@ def test_site_check_names_a_misspelt_key(capsys, tmp_path):
     assert not (tmp_path / "chk").exists()  # nothing written for an invalid site
 
 
-def test_site_check_reports_a_blind_zone(capsys, monkeypatch, tmp_path):
-    monkeypatch.setenv("COLUMNS", "200")
+def test_site_check_reports_a_blind_zone(cli, tmp_path):
     path = tmp_path / "narrow.toml"  # the north radar's field narrowed to +-5 deg: near part unseen
     text = site_template().replace("fov_half_deg = 60.0          ", "fov_half_deg = 5.0 ", 1)
     path.write_text(text)
-    code, out, err = cli(capsys, "site", "check", str(path), "--out", str(tmp_path / "chk"))
+    code, out, err = cli("site", "check", str(path), "--out", str(tmp_path / "chk"))
     assert code == 0, err
     assert "blind zone on road north: 0.0-" in out
     svg = (tmp_path / "chk" / "site_map.svg").read_text()
     assert "blind zone (its radar does not see it)" in svg
 
 
-def test_site_check_refuses_a_file_as_its_output_folder(capsys, tmp_path):
+def test_site_check_refuses_a_file_as_its_output_folder(cli, tmp_path):
     (tmp_path / "f").write_text("")
-    code, _, err = cli(capsys, "site", "check", "lx_default", "--out", str(tmp_path / "f"))
+    code, _, err = cli("site", "check", "lx_default", "--out", str(tmp_path / "f"))
     assert code == 1 and "is a file; give a folder" in err
 
 
@@ -147,13 +134,13 @@ def test_the_site_comes_from_the_option_or_the_tuned_configuration(tmp_path):
     assert site_for(str(path), own).name == "my_crossing"  # no fingerprint recorded: name only
 
 
-def test_track_refuses_a_configuration_tuned_for_another_site(capsys, tmp_path):
+def test_track_refuses_a_configuration_tuned_for_another_site(cli, tmp_path):
     tuned = _tuned(tmp_path / "tuned.toml", "lx_stress")
     det = tmp_path / "det.csv"
     det.write_text("radar,time_s,range_m,azimuth_rad,radial_speed_mps\nradar_A,0.0,50,0.1,-5\n")
     args = ("track", str(det), "--out", str(tmp_path / "est.csv"), "--config", str(tuned))
-    code, _, err = cli(capsys, *args, "--site", "lx_default")
+    code, _, err = cli(*args, "--site", "lx_default")
     assert code == 1 and "tuned for site 'lx_stress', not 'lx_default'" in err
-    code, _, err = cli(capsys, "track", str(det), "--out", str(tmp_path / "est.csv"))
+    code, _, err = cli("track", str(det), "--out", str(tmp_path / "est.csv"))
     assert code == 1 and "--site is required" in err
     assert not (tmp_path / "est.csv").exists()

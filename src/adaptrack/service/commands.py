@@ -12,6 +12,7 @@ import typer
 
 from .._cli_errors import err_console as _err
 from .._cli_errors import fail as _fail
+from .._files import check_writable
 
 
 def serve(
@@ -67,6 +68,8 @@ def serve(
     from .server import Endpoint, Service, announce
 
     try:
+        if out != "-":
+            check_writable(out)
         st = site_for(site, config)
         inputs = [Endpoint.parse(x) for x in listen]
         outputs = [Endpoint.parse(x, ("tcp",)) for x in publish]
