@@ -15,13 +15,13 @@ import numpy as np
 import pandas as pd
 import typer
 from rich.console import Console
-from rich.progress import Progress
 from rich.table import Table
 
 from . import __version__
 from ._cli_errors import err_console
 from ._cli_errors import fail as _fail
 from ._files import check_writable
+from ._progress import progress
 from .analysis.evaluation import Evaluation, evaluate_scenario
 from .analysis.flights import FlightRow, evaluate_flight, smooth_kalman, smooth_lsq
 from .cli_site import site_app
@@ -156,12 +156,11 @@ def demo(
     console = Console()
     test_seed = int(np.random.SeedSequence([seed, 13]).generate_state(1)[0])
     n_pairs = len(st.pairs())
-    with _pool(workers, scheduler) as pool, Progress(console=console, transient=True) as progress:
-        task = progress.add_task("tuning", total=len(keys) + 2 * n_pairs)
-
-        def step(msg: str) -> None:
-            progress.update(task, advance=1, description=msg)
-
+    with (
+        _pool(workers, scheduler) as pool,
+        progress(console, "demo", total=len(keys) + 2 * n_pairs) as bar,
+    ):
+        step = bar.advance
         tuning, validation = select_estimator(
             st,
             seed=seed,
@@ -260,12 +259,11 @@ def _mixed_traffic(
     if duration_s <= 0:
         return None, "not requested (--scene-seconds 0)"
     scene_seed = int(np.random.SeedSequence([seed, 17]).generate_state(1)[0])
-    with Progress(console=console, transient=True) as progress:
-        task = progress.add_task("mixed traffic", total=None)
+    with progress(console, "mixed traffic (scans)") as bar:
 
         def on_scan(done: int, total: int) -> None:
             if done % 500 == 0 or done == total:
-                progress.update(task, completed=done, total=total)
+                bar.set(done, total)
 
         try:
             return mixed_traffic_study(st, scene_seed, duration_s, on_scan=on_scan), ""
@@ -491,8 +489,11 @@ def tune(
     st = _load_site(site)
     criterion = _criterion(criterion)
     keys = _families(families)
-    with _pool(workers, scheduler) as pool, Progress(transient=True) as progress:
-        task = progress.add_task("tuning", total=len(keys) + len(st.pairs()))
+    console = Console()
+    with (
+        _pool(workers, scheduler) as pool,
+        progress(console, "tuning", total=len(keys) + len(st.pairs())) as bar,
+    ):
         tuning, _ = select_estimator(
             st,
             seed=seed,
@@ -501,10 +502,9 @@ def tune(
             criterion=criterion,  # type: ignore[arg-type]
             families=keys,
             pool=pool,
-            progress=lambda m: progress.update(task, advance=1, description=m),
+            progress=bar.advance,
         )
     write_text_atomic(out, tuning.to_toml())
-    console = Console()
     console.print(_candidates_table(tuning))
     console.print(f"deployed: {tuning.reason} Wrote {out}")
 
@@ -617,14 +617,13 @@ def _track_scene_file(
         settings = load_scene_config(config) if config is not None else None
     except (ValueError, OSError) as exc:
         _fail(str(exc))
-    with Progress(transient=True) as progress:
-        task = progress.add_task("tracking")
+    with progress(Console(), "tracking (scans)") as bar:
         try:
             tracks, events_frame, log = track_scene(
                 st,
                 det,
                 settings,
-                on_scan=lambda done, total: progress.update(task, completed=done, total=total),
+                on_scan=lambda done, total: bar.set(done, total),
                 warnings=intervals,
             )
         except ValueError as exc:
@@ -693,12 +692,7 @@ def evaluate(
     except ValueError as exc:
         _fail(str(exc))
     console = Console()
-    with _pool(workers, scheduler) as pool, Progress(console=console, transient=True) as progress:
-        task = progress.add_task("evaluating", total=None)
-
-        def step(msg: str) -> None:
-            progress.update(task, description=msg)
-
+    with _pool(workers, scheduler) as pool, progress(console, "evaluating") as bar:
         result = evaluate_scenario(
             sc,
             runs,
@@ -706,7 +700,7 @@ def evaluate(
             train_runs=train_runs,
             profile_points=profile_points,
             pool=pool,
-            progress=step,
+            progress=bar.describe,
         )
     console.print(_evaluation_table(result, sc.settings.get("published_table1")))
     if json_path is not None:
@@ -719,15 +713,14 @@ def _evaluate_flights(files: list[Path], seed: int, json_path: Path | None) -> N
         _fail("'evaluate flights' needs at least one flight CSV file")
     rows: list[FlightRow] = []
     console = Console()
-    with Progress(console=console, transient=True) as progress:
-        task = progress.add_task("flights", total=len(files))
+    with progress(console, "flights", total=len(files)) as bar:
         for path in files:
             try:
                 flight = read_flight_csv(path)
                 rows += evaluate_flight(flight, seed=seed)
             except ValueError as exc:
                 _fail(str(exc))
-            progress.update(task, advance=1)
+            bar.advance(path.name)
     table = Table(title=f"navigation smoothing on recorded flights (seed {seed})")
     for col in (
         "flight",

@@ -39,6 +39,7 @@ import numpy as np
 import pandas as pd
 import tomllib
 
+from adaptrack._progress import LINE_PREFIX
 from adaptrack.cli import VERDICT_EXIT, main
 
 DEFECTS = ("internal error", "traceback", "bad message", "partial output", "silent failure")
@@ -98,7 +99,9 @@ def run_case(inv: Invocation, workdir: Path, budget_s: float) -> tuple[str, str]
         signal.signal(signal.SIGALRM, old)
         sys.unraisablehook = old_hook
         os.chdir(cwd)
-    lines = [ln for ln in err.getvalue().splitlines() if ln.strip()]
+    lines = [  # (progress lines of a long run are not part of its message)
+        ln for ln in err.getvalue().splitlines() if ln.strip() and not ln.startswith(LINE_PREFIX)
+    ]
     leftovers = [p.name for p in workdir.iterdir() if p.name.endswith(".tmp")]
     if code == 3:
         return "internal error", f"{inv.spoiled}: {lines[-1] if lines else ''}"
