@@ -1,15 +1,17 @@
 """The HTML compliance report: plain data, self-containment, rendering in headless Chromium."""
 
 import copy
+import json
 import re
 
 import pytest
 
+from adaptrack.crossing._interactive import plotly_script
 from adaptrack.crossing.compliance import evaluate_site
 from adaptrack.crossing.report import build_report, render_html, sample_tracks
 from adaptrack.crossing.selection import select_estimator
 from adaptrack.crossing.site import site_from_mapping
-from tests.browser import render_in_chromium
+from tests.browser import chromium_executable
 
 # a small site written as a user would: one arm, a near and a far field, two cases
 SMALL = {
@@ -82,23 +84,48 @@ def test_report_data_shows_every_candidate_and_the_bound(small_report):
 
 def test_report_is_self_contained(small_report):
     _, html = small_report
-    assert "<script" not in html
-    assert not re.search(r"(src|href)\s*=\s*['\"]?(https?:)?//", html)
-    urls = set(re.findall(r"https?://[^\s\"'<>]+", html))
-    assert urls <= {"http://www.w3.org/2000/svg", "http://www.w3.org/1999/xlink"}
+    library = plotly_script()
+    assert html.count(library) == 1  # the plotting library, inlined once
+    rest = html.replace(library, "")
+    assert not re.search(r"<script[^>]*\bsrc\s*=", html) and "<link" not in html
+    assert not re.search(r"(src|href)\s*=\s*['\"]?(https?:)?//", rest)
+    urls = set(re.findall(r"https?://[^\s\"'<>]+", rest))
+    assert urls <= {"http://www.w3.org/2000/svg", "http://www.w3.org/1999/xlink"}, urls
     for element in (
+        "id='banner'",
+        "id='matrix-table'",
         "id='verdict'",
         "id='worst'",
         "id='candidates'",
         "id='map'",
+        'id="map-plot"',
         "id='blind'",
-        "id='errors'",
+        'id="errors-plot"',
         "id='rms'",
         "id='profile'",
         "id='passfail-table'",
     ):
         assert element in html
     assert "(deployed)" in html and "RMS / PCRLB" in html
+    assert html.index("id='banner'") < html.index("id='matrix-table'") < html.index("id='worst'")
+
+
+def test_the_banner_and_the_matrix_say_the_verdict(small_report):
+    import dataclasses
+
+    data, html = small_report
+    w = data.summary[data.deployed]
+    said = {"pass": "COMPLIES", "fail": "DOES NOT COMPLY", "undecided": "UNDECIDED"}
+    assert f"small: {said[w['verdict']]}</div>" in html
+    mine = [r for r in data.rows if r["filter"] == data.deployed]
+    assert html.count("<td class='m' ") == len(mine)  # one cell per class x case
+    failing = dataclasses.replace(
+        data,
+        summary={**data.summary, data.deployed: {**w, "verdict": "fail", "fail": 1}},
+        rows=[{**r, "verdict": "fail"} if r in mine[:1] else r for r in data.rows],
+    )
+    out = render_html(failing)
+    assert "small: DOES NOT COMPLY</div>" in out and "background:#f2b8b8" in out
 
 
 def test_user_strings_are_escaped(small_report):
@@ -113,14 +140,49 @@ def test_user_strings_are_escaped(small_report):
     assert evil not in html and "&lt;script&gt;alert(1)&lt;/script&gt;" in html
 
 
-def test_report_renders_in_headless_chromium(small_report, tmp_path):
-    page = tmp_path / "report.html"
-    page.write_text(small_report[1])
-    shown = render_in_chromium(page, tmp_path)
-    assert shown.screenshot_bytes > 20_000, shown.log[-2000:]
-    assert "CONSOLE" not in shown.log and "Uncaught" not in shown.log
-    assert "Pass/fail per estimator, class and case" in shown.dom and "<svg" in shown.dom
-    assert "Design-time selection" in shown.dom
+def test_report_renders_offline_in_headless_chromium(small_report, tmp_path):
+    """The page in Chromium with every network request refused: banner, map, zoom."""
+    from playwright.sync_api import sync_playwright
+
+    page_file = tmp_path / "report.html"
+    page_file.write_text(small_report[1])
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=chromium_executable(), args=["--no-sandbox"])
+        page = browser.new_page(viewport={"width": 1200, "height": 900})
+        errors, network = [], []
+        page.on("pageerror", lambda e: errors.append(str(e)))
+
+        def refuse(route):
+            if not route.request.url.startswith(("file:", "data:", "blob:")):
+                network.append(route.request.url)
+                route.abort()
+            else:
+                route.continue_()
+
+        page.route("**/*", refuse)
+        page.goto(page_file.as_uri())
+        banner = page.inner_text("#banner")
+        assert banner.startswith("small: ") and "confidence" in banner
+        page.wait_for_selector("#map-plot .main-svg", timeout=30_000)  # plotly drew the map
+        assert page.locator("#map-plot .modebar-btn").count() > 3  # zoom/pan buttons
+        assert page.locator("#errors-plot .main-svg").count() > 0
+        before = page.evaluate("document.getElementById('map-plot')._fullLayout.xaxis.range")
+        drag = page.locator("#map-plot .nsewdrag").first
+        drag.scroll_into_view_if_needed()
+        box = drag.bounding_box()
+        page.mouse.move(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+        page.mouse.wheel(0, -400)  # scroll to zoom in
+        page.wait_for_function(
+            f"JSON.stringify(document.getElementById('map-plot')._fullLayout.xaxis.range)"
+            f" != '{json.dumps(before, separators=(',', ':'))}'",
+            timeout=10_000,
+        )
+        after = page.evaluate("document.getElementById('map-plot')._fullLayout.xaxis.range")
+        assert after[1] - after[0] < before[1] - before[0]  # zoomed in
+        shot = page.screenshot(full_page=False)
+        browser.close()
+    assert not errors and not network, (errors, network)
+    assert len(shot) > 20_000
 
 
 def test_profile_figure_shows_the_cv_member(small_report):

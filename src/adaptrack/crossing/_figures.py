@@ -82,3 +82,31 @@ def draw_blind(ax: Any, blind: dict[str, list[list[float]]]) -> None:
         p = np.asarray(pts)
         label = "blind zone (its radar does not see it)" if j == 0 else None
         ax.plot(p[:, 0], p[:, 1], color="red", lw=5, alpha=0.6, label=label)
+
+
+MARK_LABELS = ("stop line", "barrier", "end of the controlled zone")
+
+
+def site_marks(site: Site) -> dict[str, list[list[list[float]]]]:
+    """Cross-sections of every road's carriageway: stop line, barrier, end of the zone.
+
+    Label -> segments ``[[x0, y0], [x1, y1]]`` [m] across both lanes.
+    """
+    out: dict[str, list[list[list[float]]]] = {label: [] for label in MARK_LABELS}
+    for road in site.roads.values():
+        for label, at_m in zip(MARK_LABELS, (site.stop_line_m, site.barrier_m, site.zone_m),
+                               strict=True):  # fmt: skip
+            centre, th = road.centreline(np.array([at_m]))
+            across = np.array([-math.cos(th[0]), math.sin(th[0])])  # right of inbound
+            ends = centre[0] + np.outer([-1.2, 1.2], across) * road.lane_width_m
+            out[label].append(ends.tolist())
+    return out
+
+
+def draw_marks(ax: Any, marks: dict[str, list[list[list[float]]]]) -> None:
+    """Draw :func:`site_marks` (blue stop lines, red barriers, dashed green zone ends)."""
+    styles = {"stop line": "b-", "barrier": "r-", "end of the controlled zone": "g--"}
+    for label, segments in marks.items():
+        for k, seg in enumerate(segments):
+            p = np.asarray(seg)
+            ax.plot(p[:, 0], p[:, 1], styles[label], lw=2, label=label if k == 0 else None)

@@ -1,14 +1,18 @@
 """Compliance report: plain data first (:func:`build_report`), then one self-contained HTML file.
 
-Sections: the verdict of the deployed estimator on the test runs (RMS with one-sided
-confidence bounds), the design-time selection (every candidate on the validation runs, its
-ratio to the road-aligned PCRLB, and why the winner won), the site map with fields of view and
-blind zones, sample tracks, the M1 profile J(lambda), the mixed-traffic scene
-(:mod:`adaptrack.crossing.mixed_traffic`: many objects from raw detections, GOSPA, events,
-per-class accuracy through association) and the pass/fail table.
+The answer leads: a verdict banner (does the site comply, with which deployed estimator, at
+what confidence) and the class x case matrix of the deployed estimator coloured by its margin
+to the requirement with the Monte-Carlo interval. Then the verdict table of every estimator on
+the test runs (RMS with one-sided confidence bounds), the design-time selection (every
+candidate on the validation runs, its ratio to the road-aligned PCRLB, and why the winner
+won), the interactive site map (pan/zoom: roads, stop lines, barriers, zone ends, radars with
+fields of view, blind zones, sample tracks), interactive error plots, the M1 profile
+J(lambda), the mixed-traffic scene (:mod:`adaptrack.crossing.mixed_traffic`) and the
+pass/fail table.
 
-The HTML has inline CSS and inline SVG figures (matplotlib, fixed hash salt, no dates), no
-scripts and no network resources; every user-supplied string is escaped.
+The HTML is one file: inline CSS, inline SVG figures (matplotlib, fixed hash salt, no dates)
+and the interactive ones with the plotting library's JavaScript inlined
+(:mod:`._interactive`); it loads no network resource. Every user-supplied string is escaped.
 """
 
 from __future__ import annotations
@@ -22,7 +26,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from .. import __version__
-from ._figures import blind_polylines, draw_blind, draw_site, site_layers, svg_of
+from ._figures import blind_polylines, site_layers, site_marks, svg_of
+from ._interactive import error_plot_div, plotly_script, site_map_div
 from .compliance import (
     CONFIRMATION_FACTOR,
     POSITION_LIMIT_M,
@@ -30,6 +35,7 @@ from .compliance import (
     SPEED_LIMIT_KMH,
     WARM_UP_S,
     ComplianceResult,
+    requirement_ratio,
 )
 from .mixed_traffic import MixedTraffic, mixed_traffic_html
 from .radar_sim import simulate_site_case
@@ -80,6 +86,7 @@ class ReportData:
     profile: dict[str, list[float]] = field(default_factory=dict)
     mixed_traffic: MixedTraffic | None = None
     mixed_traffic_note: str = ""  # why there is no mixed-traffic section
+    marks: dict[str, list[list[list[float]]]] = field(default_factory=dict)  # stop lines, ...
 
 
 def _sample_pairs(site: Site) -> list[tuple[Any, Any]]:
@@ -222,48 +229,20 @@ def build_report(
         dict(tuning.m1_profile) if tuning is not None else {},
         mixed_traffic,
         mixed_traffic_note,
+        site_marks(site),
     )
 
 
-def _map_figure(data: ReportData) -> str:
-    fig, ax = plt.subplots(figsize=(6, 6))
+def _map_div(data: ReportData) -> str:
     reach = max(float(np.hypot(*np.asarray(p).T).max()) for p in data.roads.values())
-    draw_site(ax, data.roads, data.radars, reach)  # each field of view up to the roads' reach
-    draw_blind(ax, data.blind)
+    tracks = []
     for s in data.samples:
-        t = np.asarray(s.truth_xy)
-        ax.plot(t[:, 0], t[:, 1], "g-", lw=1, label=f"truth ({s.label})")
-        f = np.asarray(s.free_xy)
-        ax.plot(f[:, 0], f[:, 1], "r.", ms=1, label=f"free 2-D EKF ({s.label})")
-        d = np.asarray(s.road_xy)
-        ax.plot(d[:, 0], d[:, 1], "b-", lw=0.8, label=f"deployed ({s.label})")
-    ax.plot(0, 0, "ks", ms=6, label="crossing centre")
-    ax.set_xlabel("east [m]")
-    ax.set_ylabel("north [m]")
-    ax.set_aspect("equal", "datalim")
-    ax.legend(fontsize=6, loc="best")
-    ax.set_title("site map: roads, radars' fields of view, blind zones, sample tracks")
-    return svg_of(fig)
-
-
-def _error_figure(data: ReportData) -> str:
-    fig, axes = plt.subplots(2, len(data.samples), figsize=(10, 5), squeeze=False)
-    for j, s in enumerate(data.samples):
-        t = np.asarray(s.times)
-        axes[0, j].plot(t, s.free_pos_err, "r-", lw=0.7, label="free 2-D EKF")
-        axes[0, j].plot(t, s.road_pos_err, "b-", lw=0.7, label="deployed")
-        axes[0, j].axhline(POSITION_LIMIT_M, color="k", ls="--", lw=0.8, label="0.7 m")
-        axes[0, j].set_ylabel("position error [m]")
-        axes[0, j].set_title(s.label)
-        axes[1, j].plot(t, s.free_speed_err_kmh, "r-", lw=0.7)
-        axes[1, j].plot(t, s.road_speed_err_kmh, "b-", lw=0.7)
-        for sgn in (-1, 1):
-            axes[1, j].axhline(sgn * SPEED_LIMIT_KMH, color="k", ls="--", lw=0.8)
-        axes[1, j].set_ylabel("speed error [km/h]")
-        axes[1, j].set_xlabel("time [s]")
-        axes[0, j].legend(fontsize=6)
-    fig.tight_layout()
-    return svg_of(fig)
+        tracks += [
+            (f"truth ({s.label})", s.truth_xy, "green"),
+            (f"free 2-D EKF ({s.label})", s.free_xy, "salmon"),
+            (f"deployed ({s.label})", s.road_xy, "blue"),
+        ]
+    return site_map_div(data.roads, data.radars, data.blind, data.marks, tracks, reach)
 
 
 def _rms_figure(data: ReportData, name: str) -> str:
@@ -318,7 +297,105 @@ def _num(v: float, fmt: str) -> str:
 CSS = """body{font-family:sans-serif;margin:2em;max-width:1150px}table{border-collapse:collapse;
 font-size:12px}td,th{border:1px solid #bbb;padding:2px 6px;text-align:right}th{background:#eee}
 td.l{text-align:left}.pass{background:#d9f2d9}.fail{background:#f7d4d4}
-.undecided{background:#fbeec2}.win{font-weight:bold}figure{margin:1em 0}"""
+.undecided{background:#fbeec2}.win{font-weight:bold}figure{margin:1em 0}
+.banner{color:#fff;padding:14px 18px;border-radius:6px;margin:1em 0;font-size:15px}
+.banner .big{font-size:26px;font-weight:bold}td.m{text-align:center;min-width:70px}
+td.na{color:#999;text-align:center}"""
+
+
+BANNER = {
+    "pass": ("#1e7b34", "COMPLIES"),
+    "fail": ("#a61b1b", "DOES NOT COMPLY"),
+    "undecided": ("#9a6b00", "UNDECIDED"),
+}
+
+
+def _banner(data: ReportData) -> str:
+    """Say the answer first: does the site comply, with which estimator, how sure."""
+    e = html.escape
+    name = data.deployed or next(iter(data.summary), "")
+    w = data.summary.get(name)
+    if w is None:
+        return "<div id='banner' class='banner'>No estimator was evaluated.</div>"
+    colour, said = BANNER[w["verdict"]]
+    n = w["pass"] + w["fail"] + w["undecided"]
+    conf = f"{100 * data.confidence:.0f} %"
+    detail = (
+        f"all {n} class x case pairs meet {POSITION_LIMIT_M} m / {SPEED_LIMIT_KMH} km/h at "
+        f"{conf} confidence"
+        if w["verdict"] == "pass"
+        else f"{w['pass']} of {n} class x case pairs pass, {w['fail']} fail, "
+        f"{w['undecided']} undecided at {conf} confidence"
+    )
+    return (
+        f"<div id='banner' class='banner' style='background:{colour}'><div class='big'>"
+        f"{e(data.site)}: {said}</div><div>with {e(name)}{' (deployed)' if data.deployed else ''}"
+        f": {detail}. Worst position RMS {w['position_rms_m']:.2f} m (bound "
+        f"{w['position_upper_m']:.2f} m), worst speed RMS {_num(w['speed_rms_kmh'], '.2f')} "
+        f"km/h (bound {_num(w['speed_upper_kmh'], '.2f')} km/h); {data.runs} test runs per "
+        "pair that neither tuning nor selection has seen.</div></div>"
+    )
+
+
+def _margin_colour(verdict: str, upper_ratio: float) -> str:
+    """Cell colour: green, paler as the margin to the requirement shrinks; amber; red."""
+    if verdict == "fail":
+        return "#f2b8b8"
+    if verdict == "undecided":
+        return "#fbe3a6"
+    margin = min(max(1.0 - upper_ratio, 0.0), 1.0)  # 0: at the limit, 1: perfect
+    light = 88 - 38 * margin  # lightness [%]
+    return f"hsl(130, 55%, {light:.0f}%)"
+
+
+def _matrix(data: ReportData) -> list[str]:
+    """Case x class matrix of the deployed estimator: RMS / limit with its interval."""
+    e = html.escape
+    name = data.deployed or next(iter(data.summary), "")
+    mine = [r for r in data.rows if r["filter"] == name]
+    if not mine:
+        return []
+    classes = list(dict.fromkeys(r["vehicle_class"] for r in mine))
+    cases = list(dict.fromkeys(r["case"] for r in mine))
+    cell = {(r["vehicle_class"], r["case"]): r for r in mine}
+    conf = f"{100 * data.confidence:.0f} %"
+    parts = [
+        f"<h2 id='matrix'>Class x case: {e(name)}</h2><p>Each cell: the worse of position "
+        f"RMS / {POSITION_LIMIT_M} m and speed RMS / {SPEED_LIMIT_KMH} km/h (1 is the "
+        f"requirement), with its {conf} Monte-Carlo interval; green is darker the larger the "
+        "margin to the requirement at the upper bound, amber undecided, red failed. Hover a "
+        "cell for the figures.</p><table id='matrix-table'><tr><th>case \\ class</th>"
+        + "".join(f"<th>{e(v)}</th>" for v in classes)
+        + "</tr>"
+    ]
+    for c in cases:
+        parts.append(f"<tr><th class='l'>{e(c)}</th>")
+        for v in classes:
+            r = cell.get((v, c))
+            if r is None:
+                parts.append("<td class='na' title='the class cannot drive this case'>-</td>")
+                continue
+            ratio = requirement_ratio(r["position_rms_m"], r["speed_rms_kmh"],
+                                      r["speed_rel_rms_pct"])  # fmt: skip
+            lo = requirement_ratio(r["position_lower_m"], r["speed_lower_kmh"],
+                                   r["speed_rel_lower_pct"])  # fmt: skip
+            hi = requirement_ratio(r["position_upper_m"], r["speed_upper_kmh"],
+                                   r["speed_rel_upper_pct"])  # fmt: skip
+            tip = (
+                f"position RMS {r['position_rms_m']:.3f} m ({conf}: "
+                f"{_num(r['position_lower_m'], '.3f')}-{_num(r['position_upper_m'], '.3f')}); "
+                f"speed RMS {_num(r['speed_rms_kmh'], '.3f')} km/h ({conf}: "
+                f"{_num(r['speed_lower_kmh'], '.3f')}-{_num(r['speed_upper_kmh'], '.3f')}); "
+                f"{r['n_runs']} runs; {r['verdict']}"
+            )
+            parts.append(
+                f"<td class='m' style='background:{_margin_colour(r['verdict'], hi)}' "
+                f"title='{e(tip)}'><b>{_num(ratio, '.2f')}</b> "
+                f"<small>({_num(lo, '.2f')}-{_num(hi, '.2f')})</small></td>"
+            )
+        parts.append("</tr>")
+    parts.append("</table>")
+    return parts
 
 
 def _verdict_table(data: ReportData) -> list[str]:
@@ -400,8 +477,9 @@ def render_html(data: ReportData) -> str:
     e = html.escape
     parts = [
         f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'><title>{e(data.title)}"
-        f"</title><style>{CSS}</style></head><body>",
+        f"</title><style>{CSS}</style>{plotly_script()}</head><body>",
         f"<h1>{e(data.title)}</h1>",
+        _banner(data),
         f"<p>{e(data.description)}</p>" if data.description else "",
         f"<p>Site <b>{e(data.site)}</b>; seed {data.seed}; adaptrack {e(data.version)}. "
         f"Requirement (seed 001, table 1.1): position RMS &le; {POSITION_LIMIT_M} m, speed RMS "
@@ -410,11 +488,12 @@ def render_html(data: ReportData) -> str:
         f"{data.zone_m:g} m from the crossing centre), stopped ones included, from "
         f"{WARM_UP_S:g} s after the track starts; zone epochs without an estimate are counted "
         "as untracked.</p>",
+        *_matrix(data),
         *_verdict_table(data),
     ]
     if data.candidates:
         parts += _selection_table(data)
-    parts.append("<h2>Site</h2><figure id='map'>" + _map_figure(data) + "</figure>")
+    parts.append("<h2>Site</h2><figure id='map'>" + _map_div(data) + "</figure>")
     parts.append(
         "<p id='blind'>Blind zones (parts of a controlled zone its road's radar does not see): "
         + (", ".join(e(k) for k in data.blind) if data.blind else "none")
@@ -429,7 +508,7 @@ def render_html(data: ReportData) -> str:
     if data.samples:
         parts.append(
             "<h2>Errors over time (sample runs)</h2><figure id='errors'>"
-            + _error_figure(data)
+            + error_plot_div(data.samples, (POSITION_LIMIT_M, SPEED_LIMIT_KMH))
             + "</figure>"
         )
     if data.deployed:

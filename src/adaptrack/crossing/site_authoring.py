@@ -10,16 +10,22 @@ each lane).
 
 from __future__ import annotations
 
-import math
 from importlib import resources
-from typing import Any
 
 import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
 from .._typing import FloatArray
-from ._figures import blind_polylines, draw_blind, draw_site, site_layers, svg_of
+from ._figures import (
+    blind_polylines,
+    draw_blind,
+    draw_marks,
+    draw_site,
+    site_layers,
+    site_marks,
+    svg_of,
+)
 from .site import COVERAGE_STEP_M, Site
 
 TEMPLATE = "site_template.toml"
@@ -55,15 +61,6 @@ def coverage_table(site: Site) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def _tick(ax: Any, site: Site, road: str, at_m: float, style: str, label: str | None) -> None:
-    """Mark a cross-section of ``road``'s carriageway at ``at_m`` from the centre."""
-    rd = site.roads[road]
-    centre, th = rd.centreline(np.array([at_m]))
-    across = np.array([-math.cos(th[0]), math.sin(th[0])])  # right of the inbound direction
-    ends = centre[0] + np.outer([-1.2, 1.2], across) * rd.lane_width_m  # both lanes
-    ax.plot(ends[:, 0], ends[:, 1], style, lw=2, label=label)
-
-
 def site_map_svg(site: Site, centre_m: float = 40.0) -> str:
     """Map of the site as inline SVG: the whole site, and its centre within ``centre_m``.
 
@@ -77,12 +74,8 @@ def site_map_svg(site: Site, centre_m: float = 40.0) -> str:
     for ax, half in zip(axes, (None, centre_m), strict=True):
         draw_site(ax, roads, radars, reach)
         draw_blind(ax, blind_polylines(site))
-        for k, name in enumerate(site.roads):
-            first = k == 0
-            _tick(ax, site, name, site.stop_line_m, "b-", "stop line" if first else None)
-            _tick(ax, site, name, site.barrier_m, "r-", "barrier" if first else None)
-            zone_label = "end of the controlled zone" if first else None
-            _tick(ax, site, name, site.zone_m, "g--", zone_label)
+        draw_marks(ax, site_marks(site))
+        for name in site.roads:
             end = site.roads[name].lane_point(np.array([reach if half is None else half]))[0]
             ax.annotate(f"road {name}", end, fontsize=8)
         for r in radars:
