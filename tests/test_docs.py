@@ -25,5 +25,5 @@ def test_page_runs(page, tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     namespace: dict = {"__name__": f"docs_{page.stem}"}
     for k, code in enumerate(BLOCK.findall(page.read_text())):
-        exec(compile(code, f"{page.name} (block {k + 1})", "exec"), namespace)  # noqa: S102
+        exec(compile(code, f"{page.name} (block {k + 1})", "exec"), namespace)
     assert capsys.readouterr().out.strip()  # every page prints what it shows
