@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+from pathlib import Path
 from typing import Literal
 
 Backend = Literal["auto", "numpy", "numba"]
@@ -22,3 +24,15 @@ def use_compiled(
     if backend not in ("auto", "numpy", "numba"):
         raise ValueError(f"backend must be 'auto', 'numpy' or 'numba'; got {backend!r}")
     return backend == "numba" or (backend == "auto" and track_steps >= threshold)
+
+
+def kernels_cached(kernel: str = "_ekf_kernels.ekf_kernel") -> bool:
+    """Whether numba's on-disk cache holds a crossing ``kernel`` (else a first run compiles).
+
+    ``kernel`` is ``module.function`` in :mod:`adaptrack.crossing`; its cache index is looked
+    for next to the package (numba's default) and under ``NUMBA_CACHE_DIR``.
+    """
+    roots = [Path(__file__).parent / "crossing"]
+    if os.environ.get("NUMBA_CACHE_DIR"):
+        roots.append(Path(os.environ["NUMBA_CACHE_DIR"]))
+    return any(next(root.rglob(f"{kernel}-*.nbi"), None) for root in roots)

@@ -42,3 +42,20 @@ def test_track_in_a_pipe_shows_progress_lines(cli, tmp_path, monkeypatch):
     last = re.match(r".* (\d+)/(\d+) \(100 %\)", lines[-1])
     assert last and last.group(1) == last.group(2)
     assert "wrote" in out
+
+
+def test_a_first_run_says_that_it_compiles(monkeypatch, capsys, tmp_path):
+    import adaptrack.cli as cli_module
+    from adaptrack._backend import kernels_cached
+
+    assert not kernels_cached("_no_such_module.kernel")
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    (tmp_path / "x").mkdir()
+    (tmp_path / "x" / "_no_such_module.kernel-12.py311.nbi").write_text("")
+    assert kernels_cached("_no_such_module.kernel")  # numba's cache folder counts too
+    monkeypatch.setattr(cli_module, "kernels_cached", lambda kernel: False)
+    cli_module._announce_compilation("5 min")
+    assert "first run on this machine: numba compiles the kernels now" in capsys.readouterr().err
+    monkeypatch.setattr(cli_module, "kernels_cached", lambda kernel: True)
+    cli_module._announce_compilation("5 min")
+    assert capsys.readouterr().err == ""
