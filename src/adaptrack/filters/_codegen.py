@@ -148,9 +148,9 @@ def _kernel_dir() -> Path:
     base = Path(env) if env else Path.home() / ".cache" / "adaptrack" / "kernels"
     try:
         base.mkdir(parents=True, exist_ok=True)
-        probe = base / ".write-test"
-        probe.write_text("")
-        probe.unlink()
+        fd, probe = tempfile.mkstemp(dir=base, prefix=".write-test-")  # own name: processes
+        os.close(fd)  # (Dask workers, test workers) probe the folder at the same time
+        os.unlink(probe)
     except OSError:
         base = Path(tempfile.gettempdir()) / f"adaptrack-kernels-{os.getuid()}"
         base.mkdir(parents=True, exist_ok=True)
