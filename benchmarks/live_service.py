@@ -56,17 +56,22 @@ def run(work: Path, duration: float, seed: int) -> None:
     offline_s = time.perf_counter() - start
     out = work / "live.jsonl"
     serve = subprocess.Popen(
-        [sys.executable, "-m", "adaptrack", "serve", "--listen", "udp://127.0.0.1:0",
-         "--out", str(out), "--warnings", str(warn)],
+        [sys.executable, "-m", "adaptrack", "serve", "--site", "lx_default", "--listen",
+         "udp://127.0.0.1:0", "--out", str(out), "--warnings", str(warn)],
         stderr=subprocess.PIPE, text=True,
     )  # fmt: skip
     assert serve.stderr is not None
-    port = None
+    port, said = None, []
     for line in serve.stderr:
+        said.append(line)
         m = re.match(r"listening udp://127\.0\.0\.1:(\d+)", line)
         if m:
             port = m.group(1)
             break
+    if port is None:
+        serve.wait()
+        serve.stderr.close()
+        raise SystemExit(f"adaptrack serve did not start: {''.join(said)}")
     start = time.perf_counter()
     adaptrack("replay", str(det), "--to", f"udp://127.0.0.1:{port}", "--rate", "max")
     sent_s = time.perf_counter() - start
