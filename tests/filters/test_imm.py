@@ -271,3 +271,83 @@ def test_auto_form_is_joseph_where_it_keeps_its_digits_and_the_square_root_where
             np.testing.assert_array_equal(a, b)
     joseph, root = run(1e6, 1e-6, "joseph"), run(1e6, 1e-6, "sqrt")
     assert not np.array_equal(joseph[0], root[0])  # the two forms do differ there
+
+
+@pytest.mark.crosscheck
+def test_switching_rates_match_filterpy_with_expm_per_step(rng):
+    """Irregular steps: FilterPy's IMMEstimator given expm(L dt) as its M before every step."""
+    from scipy.linalg import expm
+
+    t = np.cumsum(rng.uniform(0.02, 0.8, 70))
+    z = rng.normal(size=(70, 1)) * 3 + (10 * t + np.where(t > 12, 4 * (t - 12) ** 2, 0))[:, None]
+    models = [ConstantVelocity(accel_psd=0.05), ConstantVelocity(accel_psd=50.0)]
+    rates = np.array([[-0.3, 0.3], [0.5, -0.5]])  # [1/s]
+    mu0 = np.array([0.6, 0.4])
+    priors = [
+        at.GaussianState([0.0, 5.0], np.diag([25.0, 9.0]), t[0]),
+        at.GaussianState([1.0, 4.0], np.diag([16.0, 30.0]), t[0]),
+    ]
+    filters = []
+    for p in priors:
+        kf = KalmanFilter(dim_x=2, dim_z=1)
+        kf.H, kf.R = np.array([[1.0, 0.0]]), np.array([[9.0]])
+        kf.x, kf.P = np.array(p.mean), np.array(p.cov)
+        filters.append(kf)
+    imm = IMMEstimator(filters, mu0.copy(), np.eye(2))  # M = I: its first update weighs by mu0
+    xs, mus = [], []
+    for k in range(t.size):
+        if k:
+            dt = t[k] - t[k - 1]
+            imm.M = expm(rates * dt)
+            imm._compute_mixing_probabilities()  # FilterPy mixes with the M of its last update
+            for kf, m in zip(filters, models):
+                kf.F, kf.Q = discretize(m, dt)
+            imm.predict()
+        imm.update(z[k].copy())
+        xs.append(imm.x.copy())
+        mus.append(imm.mu.copy())
+    for backend in ("numpy", "numba"):
+        res = imm_filter(
+            t, z, models, ("x",), [[9.0]], priors, initial_probs=mu0, switching_rates=rates,
+            backend=backend,
+        )  # fmt: skip
+        np.testing.assert_allclose(res.filtered.mean, np.array(xs), rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(res.mode_probabilities, np.array(mus), rtol=1e-9, atol=1e-12)
+
+
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+def test_switching_rates_on_a_regular_grid_are_the_matrix_exponential(rng, backend):
+    from scipy.linalg import expm
+
+    t = 0.25 * np.arange(1, 61)
+    z = rng.normal(size=(4, 60, 1)) * 2 + (5 * t + 0.3 * t**2)[:, None]
+    models = [ConstantVelocity(accel_psd=0.1), ConstantAcceleration(jerk_psd=1.0)]
+    priors = [
+        at.GaussianState(np.zeros(m.state_dim), 100 * np.eye(m.state_dim), 0.0) for m in models
+    ]
+    rates = np.array([[-0.2, 0.2], [0.4, -0.4]])
+    by_rates = imm_filter(t, z, models, ("x",), [[4.0]], priors, None, [0.5, 0.5],
+                          switching_rates=rates, backend=backend)  # fmt: skip
+    by_probs = imm_filter(t, z, models, ("x",), [[4.0]], priors, expm(0.25 * rates),
+                          [0.5, 0.5], backend=backend)  # fmt: skip
+    np.testing.assert_allclose(by_rates.filtered.mean, by_probs.filtered.mean, rtol=1e-12)
+    np.testing.assert_allclose(by_rates.mode_probabilities, by_probs.mode_probabilities,
+                               rtol=1e-12, atol=1e-15)  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"transition_probs": np.eye(2), "switching_rates": -np.eye(2) + 1}, "give one of"),
+        ({}, "give one of"),
+        ({"switching_rates": [[-0.1, 0.1, 0.0]]}, r"must have shape \(2, 2\)"),
+        ({"switching_rates": [[0.1, -0.1], [0.2, -0.2]]}, "off-diagonal rates"),
+        ({"switching_rates": [[-0.1, 0.2], [0.2, -0.2]]}, "row 0 sums to 0.1"),
+    ],
+)
+def test_switching_rates_bad_input(rng, kwargs, message):
+    t, z = data(rng, 1, 10)
+    models = [ConstantVelocity(accel_psd=0.1), ConstantVelocity(accel_psd=10.0)]
+    priors = [at.GaussianState([0.0, 0.0], 100 * np.eye(2), t[0])] * 2
+    with pytest.raises(ValueError, match=message):
+        imm_filter(t, z[0], models, ("x",), [[4.0]], priors, initial_probs=[0.5, 0.5], **kwargs)

@@ -200,6 +200,7 @@ def imm_kernel(  # type: ignore[no-untyped-def]
     r_min,
     log_mu0,
     log_pi,
+    step_pi,
     emb_dst,
     emb_src,
     emb_cnt,
@@ -218,7 +219,8 @@ def imm_kernel(  # type: ignore[no-untyped-def]
 
     Shapes (M models padded to ``nmax`` states, m measured): ``x0`` (M, N|1, nmax), ``p0``
     (M, N|1, nmax, nmax); ``phi``/``qd`` (M, U, nmax, nmax) and ``u`` (M, U, nmax) for the U
-    distinct step lengths (``qd`` holds factors of ``Qd`` in square-root form),
+    distinct step lengths (``qd`` holds factors of ``Qd`` in square-root form), ``log_pi``
+    (P, M, M) the log transition matrices and ``step_pi`` (N, T) the one of each step,
     ``form`` an index into :data:`FORMS`, ``didx`` (N|1, T) the step length of every step;
     ``z``/``mask`` (N, T, m), ``h`` (M, m, nmax), ``r`` (N|1, T|1, m, m), ``emb_*`` the
     (dst, src, count) of the states model i shares with model j, ``out_idx`` (M, n_out).
@@ -276,13 +278,14 @@ def imm_kernel(  # type: ignore[no-untyped-def]
         for k in range(n_steps):
             kr = min(k, r.shape[1] - 1)
             q = didx[ip, k]
+            qp = step_pi[min(ii, step_pi.shape[0] - 1), k]
             if k == 0:
                 mx[:, :] = xs
                 mp[:, :, :] = ps
                 log_c[:] = log_mu
             else:
                 mix_into(
-                    xs, ps, sizes, log_mu, log_pi, emb_dst, emb_src, emb_cnt,
+                    xs, ps, sizes, log_mu, log_pi[qp], emb_dst, emb_src, emb_cnt,
                     mx, mp, log_c, log_joint, w, em, ep,
                 )  # fmt: skip
             if form == 2:  # mixed factors, from the factors of the step before

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
+from scipy.linalg import expm
 from scipy.special import logsumexp
 
 from .._backend import Backend, use_compiled
@@ -77,9 +78,10 @@ def imm_filter(
     measured_states: Sequence[str],
     measurement_cov: ArrayLike,
     initial: Sequence[GaussianState],
-    transition_probs: ArrayLike,
-    initial_probs: ArrayLike,
+    transition_probs: ArrayLike | None = None,
+    initial_probs: ArrayLike | None = None,
     *,
+    switching_rates: ArrayLike | None = None,
     mask: ArrayLike | None = None,
     method: Method = "expm",
     noise: Noise = "white",
@@ -102,10 +104,17 @@ def imm_filter(
         Measurement noise covariance, shared or per step.
     initial : sequence of GaussianState, length M
         Prior of each model at the first measurement time (or earlier).
-    transition_probs : array_like, shape (M, M)
-        Markov matrix ``pi[i, j] = P(model j at k | model i at k-1)``, rows sum to 1.
+    transition_probs : array_like, shape (M, M), optional
+        Markov matrix ``pi[i, j] = P(model j at k | model i at k-1)`` per step, rows sum to
+        1. Its meaning depends on the step length: with irregular sampling give
+        ``switching_rates`` instead.
     initial_probs : array_like, shape (M,)
-        Prior model probabilities.
+        Prior model probabilities (required).
+    switching_rates : array_like, shape (M, M), optional
+        Continuous-time switching: the generator ``L`` of the mode's Markov chain [1/s]
+        (``L[i, j] >= 0`` the rate of switching from model i to j, rows summing to 0); each
+        step of length ``dt`` switches with ``expm(L dt)``. Exactly one of
+        ``transition_probs`` and ``switching_rates`` is given.
     mask : array_like of bool, shape (..., T) or (..., T, m), optional
         True where a measurement (component) is present.
     method, noise : discretisation options.
@@ -152,15 +161,22 @@ def imm_filter(
             f"{batch + (n_steps, m, m)}; got {r.shape}"
         )
     check_symmetric_pd(r, "measurement_cov")
-    pi = as_float_array(transition_probs, "transition_probs", min_ndim=2)
+    if (transition_probs is None) == (switching_rates is None):
+        raise ValueError("give one of transition_probs (per step) and switching_rates (per s)")
+    if initial_probs is None:
+        raise ValueError("initial_probs is required: the prior probability of each model")
     mu0 = as_float_array(initial_probs, "initial_probs", min_ndim=1)
-    if pi.shape != (n_models, n_models) or mu0.shape != (n_models,):
-        raise ValueError(
-            f"transition_probs must be ({n_models}, {n_models}) and initial_probs "
-            f"({n_models},); got {pi.shape} and {mu0.shape}"
-        )
-    if np.any(pi < 0) or not np.allclose(pi.sum(axis=1), 1.0, rtol=0, atol=1e-12):
-        raise ValueError("transition_probs must be non-negative with rows summing to 1")
+    if mu0.shape != (n_models,):
+        raise ValueError(f"initial_probs must have shape ({n_models},); got {mu0.shape}")
+    rates = None if switching_rates is None else _check_rates(switching_rates, n_models)
+    if transition_probs is not None:
+        pi = as_float_array(transition_probs, "transition_probs", min_ndim=2)
+        if pi.shape != (n_models, n_models):
+            raise ValueError(
+                f"transition_probs must have shape ({n_models}, {n_models}); got {pi.shape}"
+            )
+        if np.any(pi < 0) or not np.allclose(pi.sum(axis=1), 1.0, rtol=0, atol=1e-12):
+            raise ValueError("transition_probs must be non-negative with rows summing to 1")
     if np.any(mu0 < 0) or not np.isclose(mu0.sum(), 1.0, rtol=0, atol=1e-12):
         raise ValueError("initial_probs must be non-negative and sum to 1")
     if len(initial) != n_models:
@@ -184,11 +200,45 @@ def imm_filter(
     dt = tb - t_prev
     if np.any(dt < 0):
         raise ValueError("initial times must not be after the first measurement time")
+    if rates is None:
+        pis, step_pi = pi[None], np.zeros(dt.shape, dtype=np.int64)
+    else:
+        pis, step_pi = _switching_probs(rates, dt)
     run = _imm_compiled if use_compiled(backend, z.size // m) else _imm_numpy
-    problem = _Problem(tb, dt, z, mk, models, measured, r, initial, pi, mu0, method, noise)
+    problem = _Problem(
+        tb, dt, z, mk, models, measured, r, initial, pis, step_pi, mu0, method, noise
+    )
     if form != "auto":
         return run(problem, form)[0]
     return auto_form(lambda: run(problem, "joseph"), lambda: run(problem, "sqrt")[0], r)
+
+
+def _check_rates(switching_rates: ArrayLike, n_models: int) -> FloatArray:
+    """``switching_rates`` as a valid (M, M) generator, or a ValueError saying what is wrong."""
+    rates = as_float_array(switching_rates, "switching_rates", min_ndim=2)
+    if rates.shape != (n_models, n_models):
+        raise ValueError(
+            f"switching_rates must have shape ({n_models}, {n_models}); got {rates.shape}"
+        )
+    off = rates[~np.eye(n_models, dtype=bool)]
+    if np.any(off < 0):
+        raise ValueError("switching_rates: the off-diagonal rates [1/s] must be >= 0")
+    row = np.abs(rates.sum(axis=1))
+    bad = np.flatnonzero(row > 1e-12 * np.maximum(np.abs(rates).max(axis=1), 1e-300))
+    if bad.size:
+        raise ValueError(
+            f"switching_rates: row {int(bad[0])} sums to {rates[bad[0]].sum():g}; each row of "
+            "a generator sums to 0 (the diagonal is minus the rate of leaving the model)"
+        )
+    return rates
+
+
+def _switching_probs(rates: FloatArray, dt: FloatArray) -> tuple[FloatArray, np.ndarray]:
+    """Transition matrices ``expm(L dt)`` (U, M, M) of the distinct steps and each step's index."""
+    uniq, inv = np.unique(dt, return_inverse=True)
+    pis = np.clip(expm(rates[None] * uniq[:, None, None]), 0.0, None)  # rounding below 0
+    pis /= pis.sum(axis=-1, keepdims=True)
+    return pis, inv.reshape(dt.shape).astype(np.int64)
 
 
 @dataclass(frozen=True)
@@ -196,7 +246,8 @@ class _Problem:
     """The validated arguments of :func:`imm_filter`.
 
     ``tb`` the times and ``dt`` the steps broadcast over the batch (..., T); ``mask`` the
-    component mask.
+    component mask; ``pis`` (U, M, M) the transition matrices and ``step_pi`` (..., T) the
+    one of each step (one matrix for ``transition_probs``).
     """
 
     tb: FloatArray
@@ -207,7 +258,8 @@ class _Problem:
     measured: tuple[str, ...]
     r: FloatArray
     initial: Sequence[GaussianState]
-    pi: FloatArray
+    pis: FloatArray
+    step_pi: np.ndarray
     mu0: FloatArray
     method: Method
     noise: Noise
@@ -222,7 +274,7 @@ def _imm_numpy(problem: _Problem, form: str) -> tuple[IMMResult, float]:
     tb, dt, z, mk, models, measured = (
         problem.tb, problem.dt, problem.z, problem.mask, problem.models, problem.measured
     )  # fmt: skip
-    r, initial, pi, mu0 = problem.r, problem.initial, problem.pi, problem.mu0
+    r, initial, mu0 = problem.r, problem.initial, problem.mu0
     method, noise = problem.method, problem.noise
     batch, n_steps, n_models = z.shape[:-2], z.shape[-2], len(models)
     names = [m.state_names for m in models]
@@ -255,12 +307,12 @@ def _imm_numpy(problem: _Problem, form: str) -> tuple[IMMResult, float]:
     comb_mean = np.empty(batch + (n_steps, len(out_names)))
     comb_cov = np.empty(batch + (n_steps, len(out_names), len(out_names)))
     with np.errstate(divide="ignore"):
-        log_pi = np.log(pi)
+        log_pis = np.log(problem.pis)
     for k in range(n_steps):
         if k == 0:
             mixed, log_c = states, log_mu
         else:
-            mixed, log_c = _mix(states, log_mu, log_pi, emb)
+            mixed, log_c = _mix(states, log_mu, log_pis[problem.step_pi[..., k]], emb)
         lls = []
         for j in range(n_models):
             phi, qd, u = (
@@ -330,7 +382,7 @@ def _imm_compiled(problem: _Problem, form: str) -> tuple[IMMResult, float]:
     dt, z, mask, models, measured = (
         problem.dt, problem.z, problem.mask, problem.models, problem.measured
     )  # fmt: skip
-    r, initial, pi, mu0 = problem.r, problem.initial, problem.pi, problem.mu0
+    r, initial, mu0 = problem.r, problem.initial, problem.mu0
     method, noise, tb = problem.method, problem.noise, problem.tb
     from ._imm_kernel import FORMS, imm_kernel
 
@@ -368,7 +420,7 @@ def _imm_compiled(problem: _Problem, form: str) -> tuple[IMMResult, float]:
             emb_dst[i, j, : dst.size], emb_src[i, j, : dst.size] = dst, src
     r4 = r[None, None] if r.ndim == 2 else r.reshape(n_tr, n_steps, m, m)
     with np.errstate(divide="ignore"):
-        log_pi = np.log(pi)
+        log_pis = np.log(problem.pis)
     n_out = len(out_names)
     comp_mean = np.zeros((n_models, n_tr, n_steps, nmax))
     comp_cov = np.zeros((n_models, n_tr, n_steps, nmax, nmax))
@@ -393,7 +445,8 @@ def _imm_compiled(problem: _Problem, form: str) -> tuple[IMMResult, float]:
         c(r4),
         c(np.linalg.eigvalsh(r4)[..., 0]),
         np.log(np.where(mu0 > 0, mu0, 1e-300)),
-        log_pi,
+        log_pis,
+        c(problem.step_pi.reshape(-1, n_steps)),
         emb_dst,
         emb_src,
         emb_cnt,
