@@ -156,3 +156,18 @@ def test_flight_reader_errors(tmp_path):
     f3.to_csv(tmp_path / "c.csv", index=False)
     with pytest.raises(DataFormatError, match="latitude/longitude out of range"):
         read_flight_csv(tmp_path / "c.csv")
+
+
+def test_unknown_columns_of_a_measurement_file_are_reported(tmp_path):
+    from adaptrack.io.navigation import read_navigation_measurements
+    from adaptrack.io.tables import DataFormatError
+
+    path, _ = write_measurements(tmp_path)
+    frame = pd.read_csv(path)
+    stds = {"range_std_m": 30.0, "azimuth_std_rad": 1e-3, "elevation_std_rad": 1e-3,
+            "velocity_std_mps": 1.0}  # fmt: skip
+    read_navigation_measurements(path, **stds)  # the file as written is read
+    frame.assign(range_rate_mps=1.0).to_csv(tmp_path / "rr.csv", index=False)
+    with pytest.raises(DataFormatError, match=r"unknown column\(s\) \['range_rate_mps'\].*"
+                       "range rate is not used by the smoother"):  # fmt: skip
+        read_navigation_measurements(tmp_path / "rr.csv", **stds)

@@ -21,6 +21,10 @@ from ..coords.radar import polar_to_enu, polar_to_enu_cov
 from .tables import DataFormatError, check_increasing, numeric_column, read_table
 
 VELOCITY_COLUMNS = ["velocity_east_mps", "velocity_north_mps", "velocity_up_mps"]
+KNOWN_COLUMNS = {
+    "time_s", "range_m", "azimuth_deg", "azimuth_rad", "elevation_deg", "elevation_rad",
+    *VELOCITY_COLUMNS,
+}  # fmt: skip
 
 
 def _angle(frame, name: str, path: Path, limit: float) -> np.ndarray:  # type: ignore[no-untyped-def]
@@ -55,6 +59,13 @@ def read_navigation_measurements(
     frame = read_table(p)
     if "time_s" not in frame.columns:
         raise DataFormatError(f"{p}: missing column 'time_s'; found {list(frame.columns)}")
+    unknown = [str(c) for c in frame.columns if c not in KNOWN_COLUMNS]
+    if unknown:
+        raise DataFormatError(
+            f"{p}: unknown column(s) {unknown}: the smoother would not use them (it reads "
+            f"{sorted(KNOWN_COLUMNS)}); drop or rename them"
+            + ("; range rate is not used by the smoother" if "range_rate_mps" in unknown else "")
+        )
     t = numeric_column(frame, "time_s", p)
     has_radar = "range_m" in frame.columns
     has_vel = all(c in frame.columns for c in VELOCITY_COLUMNS)
