@@ -2,9 +2,11 @@
 
 import json
 
+import pytest
 from benchmarks.runner import main
 
 
+@pytest.mark.slow
 def test_benchmarks_quick_run_writes_json(tmp_path, capsys):
     path = tmp_path / "bench.json"
     main(["--quick", "--json", str(path)])

@@ -6,6 +6,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 
 from adaptrack.analysis.evaluation import evaluate_scenario, interval_masks
 from adaptrack.simulation.scenario import load_scenario
@@ -20,6 +21,7 @@ def test_interval_masks_close_the_last_interval():
     assert sum(int(v.sum()) for v in m.values()) == 701
 
 
+@pytest.mark.slow
 def test_evaluation_on_table1_scenario():
     ev = evaluate_scenario(load_scenario("zimchuk_table1"), 10, 3, train_runs=4, profile_points=4)
     rows = {r.filter: r for r in ev.rows}
@@ -34,6 +36,7 @@ def test_evaluation_on_table1_scenario():
     json.dumps(out)
 
 
+@pytest.mark.slow
 def test_evaluate_cli_writes_json(tmp_path):
     path = tmp_path / "ev.json"
     proc = subprocess.run(

@@ -9,6 +9,7 @@ from .test_cli import run
 EVALUATE = ("evaluate", "zimchuk_table1", "--runs", "2", "--train-runs", "2")
 
 
+@pytest.mark.slow
 @pytest.mark.distributed
 def test_evaluate_on_an_existing_scheduler_is_bit_identical(tmp_path, dask_pool):
     local = run(*EVALUATE, "--profile-points", "4", "--workers", "1", "--json", str(tmp_path / "a"))

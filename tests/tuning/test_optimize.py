@@ -35,6 +35,7 @@ def test_m1_never_worse_than_cv_on_training_runs(training):
     json.dumps(m1.to_dict())  # serialisable
 
 
+@pytest.mark.slow
 @pytest.mark.distributed
 def test_m1_profile_on_a_dask_cluster_is_bit_identical(training, dask_pool):
     cv = tune_constant_velocity(training)
@@ -43,6 +44,7 @@ def test_m1_profile_on_a_dask_cluster_is_bit_identical(training, dask_pool):
     assert tune_inverse_dynamics(training, cv=cv, lambdas=grid, pool=dask_pool) == local
 
 
+@pytest.mark.slow
 def test_m2_tuning_runs_and_is_bounded(training):
     cv = tune_constant_velocity(training)
     m1 = tune_inverse_dynamics(training, cv=cv, lambdas=np.geomspace(1e-4, 1.0, 5))
