@@ -26,7 +26,7 @@ def use_compiled(
     return backend == "numba" or (backend == "auto" and track_steps >= threshold)
 
 
-def kernels_cached(kernel: str = "_ekf_kernels.ekf_kernel") -> bool:
+def kernels_cached(kernel: str = "_radar_kernel.detections_kernel") -> bool:
     """Whether numba's on-disk cache holds a crossing ``kernel`` (else a first run compiles).
 
     ``kernel`` is ``module.function`` in :mod:`adaptrack.crossing`; its cache index is looked

@@ -154,7 +154,7 @@ def demo(
     st = _load_site(site)
     criterion = _criterion(criterion)
     keys = _families(families)
-    _announce_compilation(DEMO_COMPILE_MINUTES)
+    _announce_compilation(DEMO_COMPILE_TIME)
     console = Console()
     test_seed = int(np.random.SeedSequence([seed, 13]).generate_state(1)[0])
     n_pairs = len(st.pairs())
@@ -292,18 +292,18 @@ def _mixed_traffic_table(m: MixedTraffic) -> Table:
 
 FIRST_RUN_NOTE = (
     "note: first run on this machine: numba compiles the kernels now (once; about "
-    "{minutes} on 2 cores); later runs reuse them and start in seconds"
+    "{duration} on 2 cores); later runs reuse them and start in seconds"
 )
 
 
-DEMO_COMPILE_MINUTES = "5 min"  # measured: fresh clone, demo wall time less a cached run's
-TRACK_COMPILE_MINUTES = "1 min"  # the scene tracker's kernels alone
+DEMO_COMPILE_TIME = "3 min"  # measured: a fresh clone's demo (4.8 min) less a cached run (1.7)
+TRACK_COMPILE_TIME = "35 s"  # the scene tracker's kernels alone (38 s, then 4 s cached)
 
 
-def _announce_compilation(minutes: str, kernel: str = "_ekf_kernels.ekf_kernel") -> None:
+def _announce_compilation(duration: str, kernel: str = "_radar_kernel.detections_kernel") -> None:
     """Say so on stderr when this run will compile the kernels (an empty numba cache)."""
     if not kernels_cached(kernel):
-        err_console.print(FIRST_RUN_NOTE.format(minutes=minutes), markup=False, highlight=False)
+        err_console.print(FIRST_RUN_NOTE.format(duration=duration), markup=False, highlight=False)
 
 
 def _outputs(*paths: Path | None, folder: Path | None = None) -> None:
@@ -507,7 +507,7 @@ def tune(
     st = _load_site(site)
     criterion = _criterion(criterion)
     keys = _families(families)
-    _announce_compilation(DEMO_COMPILE_MINUTES)
+    _announce_compilation(DEMO_COMPILE_TIME)
     console = Console()
     with (
         _pool(workers, scheduler) as pool,
@@ -636,7 +636,7 @@ def _track_scene_file(
         settings = load_scene_config(config) if config is not None else None
     except (ValueError, OSError) as exc:
         _fail(str(exc))
-    _announce_compilation(TRACK_COMPILE_MINUTES, "_scene_kernels.gate_scan")
+    _announce_compilation(TRACK_COMPILE_TIME, "_scene_kernels.gate_scan")
     with progress(Console(), "tracking (scans)") as bar:
         try:
             tracks, events_frame, log = track_scene(
