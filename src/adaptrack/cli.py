@@ -28,6 +28,8 @@ from .analysis.flights import FlightRow, evaluate_flight, smooth_kalman, smooth_
 from .cli_site import site_app
 from .coords.geodetic import enu_to_ecef, enu_to_ecef_rotation
 from .crossing.compliance import (
+    POSITION_LIMIT_M,
+    SPEED_LIMIT_KMH,
     ComplianceResult,
     confirm_undecided,
     default_trackers,
@@ -240,7 +242,7 @@ def _site_verdict(st: Site, test: ComplianceResult, deployed: str) -> tuple[str,
     if s["verdict"] == "pass":
         return "pass", (
             f"VERDICT: {st.name} complies with {deployed}: all {n} class x case pairs meet "
-            f"0.7 m / 2 km/h {at}"
+            f"{POSITION_LIMIT_M:g} m / {SPEED_LIMIT_KMH:g} km/h {at}"
         )
     if s["verdict"] == "fail":
         return "fail", (
