@@ -1,5 +1,6 @@
-"""Design-time adaptation of motion-model parameters (spec B.7)."""
+"""Design-time adaptation of motion-model parameters (spec B.7); truth-free ML tuning."""
 
+from .likelihood import LikelihoodFit, fit_by_likelihood
 from .optimize import (
     TrackingData,
     TuningResult,
@@ -12,8 +13,10 @@ from .optimize import (
 )
 
 __all__ = [
+    "LikelihoodFit",
     "TrackingData",
     "TuningResult",
+    "fit_by_likelihood",
     "rms_criterion",
     "tune_constant_acceleration",
     "tune_constant_velocity",

@@ -1,0 +1,91 @@
+"""Truth-free tuning by maximum likelihood: estimates and standard errors on seeded data.
+
+The data come from a constant-velocity process simulated here with its own closed-form
+transition and noise (not adaptrack's discretisation), observed in white noise.
+"""
+
+import numpy as np
+import pytest
+
+import adaptrack as at
+from adaptrack.models import ConstantVelocity
+from adaptrack.tuning import fit_by_likelihood
+
+Q, R, DT, T = 0.5, 0.25, 0.1, 300  # white-acceleration PSD [m^2/s^3], noise variance [m^2]
+
+
+def simulate(seed):
+    rng = np.random.default_rng(seed)
+    phi = np.array([[1.0, DT], [0.0, 1.0]])
+    chol = np.linalg.cholesky(Q * np.array([[DT**3 / 3, DT**2 / 2], [DT**2 / 2, DT]]))
+    x, xs = np.array([0.0, 3.0]), []
+    for _ in range(T):
+        x = phi @ x + chol @ rng.standard_normal(2)
+        xs.append(x[0])
+    return DT * np.arange(1, T + 1), (np.array(xs) + rng.normal(0, np.sqrt(R), T))[:, None]
+
+
+def fit(t, z):
+    def loglik(p):
+        prior = at.GaussianState([z[0, 0], 0.0], np.diag([1.0, 100.0]), t[0] - DT)
+        res = at.kalman_filter(t, z, ConstantVelocity(accel_psd=p["q"]), ["x"], [[p["r"]]],
+                               prior, backend="numba")  # fmt: skip
+        return float(res.info.log_likelihood.sum())
+
+    return fit_by_likelihood(loglik, {"q": 1.0, "r": 1.0})
+
+
+@pytest.mark.statistical
+def test_estimates_and_standard_errors_are_honest_over_seeded_runs():
+    """40 runs: the log-scale z-scores of q and r are standard normal, the intervals cover.
+
+    z = log(estimate / truth) / (standard error / estimate). Mean within +-0.6 (3.8 standard
+    errors of a mean of 40) and sd in [0.7, 1.5] (sd of a sample sd of 40: 0.11; measured
+    1.20 for q, 0.94 for r: q's curvature slightly flatters it on 30 s of data); standard
+    errors half their size would give sd near 2. 95 % intervals cover in >= 31 of 40 (measured
+    37 and 37; at a true 90 % coverage the chance of 30 or fewer is 0.5 %).
+    """
+    zs, covered = [], np.zeros(2, int)
+    for seed in range(40):
+        f = fit(*simulate(seed))
+        assert f.converged, f.message
+        zs.append([np.log(f.value(k) / v) / (f.std_error(k) / f.value(k))
+                   for k, v in (("q", Q), ("r", R))])  # fmt: skip
+        covered += [f.interval(k)[0] <= v <= f.interval(k)[1] for k, v in (("q", Q), ("r", R))]
+    zs = np.array(zs)
+    assert np.all(np.abs(zs.mean(axis=0)) < 0.6), zs.mean(axis=0)
+    assert np.all((zs.std(axis=0) > 0.7) & (zs.std(axis=0) < 1.5)), zs.std(axis=0)
+    assert np.all(covered >= 31), covered
+
+
+def test_the_maximum_is_a_maximum_and_its_value_is_reported():
+    t, z = simulate(100)
+    f = fit(t, z)
+    assert f.names == ("q", "r") and f.log_likelihood < 0
+    for k in ("q", "r"):  # every neighbour is less likely
+        for factor in (0.9, 1.1):
+            p = {n: f.value(n) for n in f.names}
+            p[k] *= factor
+            prior = at.GaussianState([z[0, 0], 0.0], np.diag([1.0, 100.0]), t[0] - DT)
+            res = at.kalman_filter(t, z, ConstantVelocity(accel_psd=p["q"]), ["x"], [[p["r"]]],
+                                   prior)  # fmt: skip
+            assert res.info.log_likelihood.sum() < f.log_likelihood
+
+
+@pytest.mark.parametrize(
+    ("initial", "bounds", "message"),
+    [
+        ({"q": 0.0}, None, "must be finite and > 0"),
+        ({"q": np.nan}, None, "must be finite and > 0"),
+        ({}, None, "must be finite and > 0"),
+        ({"q": 1.0}, {"q": (2.0, 1.0)}, r"bounds\['q'\] must satisfy"),
+    ],
+)
+def test_bad_input(initial, bounds, message):
+    with pytest.raises(ValueError, match=message):
+        fit_by_likelihood(lambda p: -1.0, initial, bounds=bounds)
+
+
+def test_a_likelihood_not_finite_at_the_start_is_an_error():
+    with pytest.raises(ValueError, match="not finite at the initial values"):
+        fit_by_likelihood(lambda p: float("nan"), {"q": 1.0})
