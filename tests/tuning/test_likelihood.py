@@ -77,7 +77,7 @@ def test_the_maximum_is_a_maximum_and_its_value_is_reported():
     [
         ({"q": 0.0}, None, "must be finite and > 0"),
         ({"q": np.nan}, None, "must be finite and > 0"),
-        ({}, None, "must be finite and > 0"),
+        ({}, None, "give each parameter once"),
         ({"q": 1.0}, {"q": (2.0, 1.0)}, r"bounds\['q'\] must satisfy"),
     ],
 )
