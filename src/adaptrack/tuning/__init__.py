@@ -1,5 +1,6 @@
-"""Design-time adaptation of motion-model parameters (spec B.7); truth-free ML tuning."""
+"""Design-time adaptation (spec B.7); truth-free ML tuning and clock-offset calibration."""
 
+from .calibration import fit_clock_offset
 from .likelihood import LikelihoodFit, fit_by_likelihood
 from .optimize import (
     TrackingData,
@@ -17,6 +18,7 @@ __all__ = [
     "TrackingData",
     "TuningResult",
     "fit_by_likelihood",
+    "fit_clock_offset",
     "rms_criterion",
     "tune_constant_acceleration",
     "tune_constant_velocity",
