@@ -143,7 +143,7 @@ def test_a_simulated_ctrl_c_swallowed_by_a_finaliser_is_pressed_again(tmp_path):
     def fake_main(argv):
         held.clear()  # runs slow_finaliser while the 0.1 s alarm comes due
         gc.collect()
-        time.sleep(5.0)  # without a second press the case would sleep its 5 s out
+        time.sleep(60.0)  # without a second press the case would sleep its 60 s out
 
     import tests.stress.cli_fuzz as harness
 
@@ -156,7 +156,7 @@ def test_a_simulated_ctrl_c_swallowed_by_a_finaliser_is_pressed_again(tmp_path):
         harness.main = original
     assert keep() is None
     assert category == "traceback"  # _Stop escaped fake_main: the harness reports it
-    assert time.perf_counter() - start < 2.0
+    assert time.perf_counter() - start < 20.0  # pressed again: about 0.6 s on a quiet machine
 
 
 def test_ctrl_c_leaves_no_output_file(tmp_path):

@@ -86,6 +86,13 @@ def test_bad_input(initial, bounds, message):
         fit_by_likelihood(lambda p: -1.0, initial, bounds=bounds)
 
 
+def test_bounds_and_scales_must_name_parameters_of_their_kind():
+    with pytest.raises(ValueError, match=r"bounds names \['t'\], which are not among \['q'\]"):
+        fit_by_likelihood(lambda p: -1.0, {"q": 1.0}, signed={"t": 0.0}, bounds={"t": (1, 2)})
+    with pytest.raises(ValueError, match=r"scales names \['q'\]"):
+        fit_by_likelihood(lambda p: -1.0, {"q": 1.0}, scales={"q": 2.0})
+
+
 def test_a_likelihood_not_finite_at_the_start_is_an_error():
     with pytest.raises(ValueError, match="not finite at the initial values"):
         fit_by_likelihood(lambda p: float("nan"), {"q": 1.0})

@@ -73,7 +73,7 @@ def fit_clock_offset(
         prior = GaussianState(
             np.concatenate([zp[0], zv[0]]),
             np.diag([p["position_var"]] * d + [PRIOR_SPEED_STD_MPS**2] * d),
-            min(t[0], tp[0] - p["offset_s"]),
+            t[0],
         )
         res = kalman_filter(t, z, model, model.state_names, r, prior, mask=mask)
         return float(res.info.log_likelihood.sum())

@@ -124,6 +124,10 @@ def fit_by_likelihood(
     names = positive + free
     if names == () or len(set(names)) < len(names):
         raise ValueError(f"give each parameter once, in initial or signed; got {names}")
+    for what, keys, allowed in (("bounds", bounds, positive), ("scales", scales, free)):
+        stray = sorted(set(keys or {}) - set(allowed))
+        if stray:
+            raise ValueError(f"{what} names {stray}, which are not among {list(allowed)}")
     box: list[tuple[float | None, float | None]] = []
     for n in positive:
         lo, hi = (bounds or {}).get(n, (0.0, math.inf))
