@@ -75,7 +75,7 @@ def fit_clock_offset(
             np.diag([p["position_var"]] * d + [PRIOR_SPEED_STD_MPS**2] * d),
             t[0],
         )
-        res = kalman_filter(t, z, model, model.state_names, r, prior, mask=mask)
+        res = kalman_filter(t, z, model, model.state_names, r, prior, mask=mask, backend="numba")
         return float(res.info.log_likelihood.sum())
 
     return fit_by_likelihood(
