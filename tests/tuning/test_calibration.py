@@ -49,3 +49,12 @@ def test_bad_input():
         fit_clock_offset(t, np.zeros((4, 2)), t, np.zeros((5, 2)))
     with pytest.raises(ValueError, match="at least 3"):
         fit_clock_offset(t[:2], np.zeros((2, 1)), t, np.zeros((5, 1)))
+
+
+def test_nan_and_unsorted_times_are_refused():
+    t = np.arange(5.0)
+    p = np.zeros((5, 2))
+    with pytest.raises(ValueError, match="positions"):
+        fit_clock_offset(t, np.where(t[:, None] == 2, np.nan, p), t, p)
+    with pytest.raises(ValueError, match="velocity_times"):
+        fit_clock_offset(t, p, t[::-1], p)
