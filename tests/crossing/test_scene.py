@@ -422,17 +422,23 @@ def _body_scan(rng, radar, cor, centre, d, length, width, n):
     return np.stack([rng_m + sr * noise[0], az + sa * noise[1], sv * noise[2]], -1)
 
 
-@pytest.mark.parametrize("extent_gate", [True, False])
-def test_a_hidden_truck_in_a_queue_keeps_its_place_behind_the_car_ahead(extent_gate):
+@pytest.mark.parametrize(("extent_gate", "occlusion_gate"), [(1, 1), (1, 0), (0, 0)])
+def test_a_hidden_truck_in_a_queue_keeps_its_place_behind_the_car_ahead(
+    extent_gate, occlusion_gate
+):
     """A truck (7.1 m) queued 1 m behind a car (5 m), seen along the lane by radar_A at the
     crossing: the car hides it in 80 % of the scans, and the car's two reflections a scan fall
     within the truck's Gaussian gate, so global nearest neighbour gives the truck one of them.
-    A detection on the car's body beyond the truck's end costs the truck track its excess over
-    the sensor's along-lane sigma: the truck track stays on the truck (0.3 m); without the
-    extent gate it creeps 3 m towards the car in 45 s (a development-seed failure)."""
+    A detection on the car's body beyond the truck's end costs the truck track its excess
+    over the sensor's along-lane sigma (extent gate): the truck track stays on the truck
+    (within 0.5 m), with or without the occlusion gate. Without either it creeps 3 m towards
+    the car in 45 s (a development-seed failure). (The occlusion gate alone does not hold it:
+    it applies while the truck track stands, and a false start lets it learn a longer body.)"""
     from adaptrack.crossing.scene_tracker import SceneTrackerConfig
 
-    config = SceneTrackerConfig(split_kurtosis=0.0, body_extent_gate=extent_gate)
+    config = SceneTrackerConfig(
+        split_kurtosis=0.0, body_extent_gate=bool(extent_gate), occlusion_gate=bool(occlusion_gate)
+    )
     tracker = SceneTracker(SITE, config)
     cor, radar, half_lane = _queue_lane(tracker)
     car = cor.crossing_u - 30.0  # approaching with u rising: the car is nearer the crossing
@@ -451,6 +457,45 @@ def test_a_hidden_truck_in_a_queue_keeps_its_place_behind_the_car_ahead(extent_g
         assert err.max() < 0.5, err
     else:
         assert err[1] > 1.5, err
+
+
+@pytest.mark.parametrize(
+    ("bus_spread_m", "occlusion_gate"), [(3.0, True), (2.0, True), (3.0, False)]
+)
+def test_a_car_hidden_behind_a_queued_bus_does_not_creep_onto_the_bus(bus_spread_m, occlusion_gate):
+    """A car (5 m) queued 1 m behind a bus (12 m), seen along the lane by radar_A at the
+    crossing: the bus hides it in 90 % of the scans and its reflections (4 a scan over 12 m)
+    reach to within 1 m of the car. A track hidden behind a road user is seen, if at all,
+    over its own body: a detection in the bus's gate beyond the car's body is the bus's. The
+    car track keeps its place (within 0.5 m after a minute) with the bus's spread learnt
+    (3 m) or under-learnt (2 m); without the occlusion gate it creeps onto the bus (the cause
+    of the bus's worst hours: development seed 42, where the car track then merged into the
+    bus's). The bus track itself stays within 0.5 m with its spread learnt; with 2 m it
+    drifts about 1.5 m backwards in the minute (not addressed here: a bus queued at the line
+    has learnt its spread on the way)."""
+    from adaptrack.crossing.scene_tracker import SceneTrackerConfig
+
+    config = SceneTrackerConfig(split_kurtosis=0.0, occlusion_gate=occlusion_gate)
+    tracker = SceneTracker(SITE, config)
+    cor, radar, half_lane = _queue_lane(tracker)
+    bus = cor.crossing_u - 30.0  # approaching with u rising: the bus is nearer the crossing
+    car = bus - 6.0 - 1.0 - 2.5
+    _stopped_tracks(tracker, [(bus, -half_lane, bus_spread_m), (car, -half_lane, 1.1)])
+    rng = np.random.default_rng(12)
+    for k in range(1, 1200):  # 60 s
+        z = _body_scan(rng, radar, cor, bus, -half_lane, 12.0, 2.5, 4)
+        if rng.uniform() < 0.1:  # the car seen past the bus
+            z = np.vstack([z, _body_scan(rng, radar, cor, car, -half_lane, 5.0, 1.8, 2)])
+        tracker.step(radar.name, k * radar.period_s, z)
+    rows = tracker.rows(tracker.last_scan_s).set_index("track_id")
+    where = cor.path.lane_geometry(np.array([bus, car]), -half_lane)[0]
+    err = np.hypot(*(rows.loc[[1, 2], ["east_m", "north_m"]].to_numpy() - where).T)
+    if not occlusion_gate:
+        assert err[1] > 1.0, err
+        return
+    assert err[1] < 0.5, err
+    if bus_spread_m == 3.0:
+        assert err[0] < 0.5, err
 
 
 @pytest.mark.parametrize("same_object_m", [2.5, 0.0])

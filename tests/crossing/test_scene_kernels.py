@@ -12,7 +12,7 @@ from adaptrack.crossing._scene_kernels import (
     merged_rows,
     mode_changes,
     nearest_sample,
-    occluded_rows,
+    occluders,
     open_tracks,
     owners,
     split_rows,
@@ -76,11 +76,15 @@ def test_a_nearer_body_on_the_line_of_sight_hides_what_is_behind_it():
     x[:, 0] = [20.0, 40.0, 40.0]
     x[2, 3] = -5.0
     spread = np.array([3.0, 1.0, 1.0])
-    out = occluded_rows(np.array([0, 1, 2]), x, spread, np.zeros(3, np.int64), roads, bounds, radar)
+    corridor, rows = np.zeros(3, np.int64), np.array([0, 1, 2])
+    out = occluders(rows, x, spread, corridor, roads, bounds, radar, np.ones(3, bool))
+    # a track that may not hide (e.g. not a road user) hides nothing
+    none = occluders(rows, x, spread, corridor, roads, bounds, radar, np.array([0, 1, 1], bool))
+    assert none.tolist() == [-1, -1, -1]
     # apparent half width of the truck seen end on: 1 m across -> atan(1 / 20) = 2.9 deg;
     # the aside track is atan(5 / 40) = 7.1 deg off the line of sight
     assert math.degrees(math.atan2(5.0, 40.0)) > math.degrees(math.atan2(1.0, 20.0))
-    assert out.tolist() == [False, True, False]
+    assert out.tolist() == [-1, 0, -1]  # the truck (row 0) hides the track behind it
 
 
 def test_a_track_inside_a_nearer_body_is_its_duplicate_not_hidden_by_it():
@@ -94,12 +98,12 @@ def test_a_track_inside_a_nearer_body_is_its_duplicate_not_hidden_by_it():
     x[:, 0] = [20.0, 25.0, 27.0]
     spread = np.array([3.0, 1.0, 1.0])
     corridor = np.zeros(3, np.int64)
-    out = occluded_rows(np.array([1, 2]), x, spread, corridor, roads, bounds, radar)
-    assert out.tolist() == [False, True]
+    out = occluders(np.array([1, 2]), x, spread, corridor, roads, bounds, radar, np.ones(3, bool))
+    assert out.tolist() == [-1, 0]
     bounds2 = np.array([[0, roads.shape[1]], [0, roads.shape[1]]])
     corridor[1] = 1
-    out = occluded_rows(np.array([1]), x, spread, corridor, roads, bounds2, radar)
-    assert out.tolist() == [True]
+    out = occluders(np.array([1]), x, spread, corridor, roads, bounds2, radar, np.ones(3, bool))
+    assert out.tolist() == [0]
 
 
 def test_a_body_reaching_past_the_radars_range_is_seen_over_its_near_part():

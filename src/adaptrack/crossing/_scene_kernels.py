@@ -183,7 +183,8 @@ def _model(  # type: ignore[no-untyped-def]
 
 @numba.njit(cache=True)
 def gate_scan(  # type: ignore[no-untyped-def]
-    x, p, spread, starting, road_user, direction, corridor, roads, bounds, radar, noise_tab,
+    x, p, spread, starting, road_user, occluder, direction, corridor, roads, bounds, radar,
+    noise_tab,
     noise_cnt, fields, across_std, start_speed_max, extent_gate, gate, z, d2, logdet,
 ):  # fmt: skip
     """Fill ``d2`` (T, D) with each detection's squared Mahalanobis distance to each track.
@@ -197,7 +198,11 @@ def gate_scan(  # type: ignore[no-untyped-def]
     position (the sensor's range and azimuth noise projected on the lane, and the track's):
     the Gaussian body model's tail would otherwise reach into the next body of a queue. A
     detection on no body is left as it is (a long vehicle's far reflections are how its track
-    learns its spread).
+    learns its spread). A track hidden behind a road user (``occluder``: the row of the
+    nearer road user on its line of sight, -1 none) is seen, if at all, over its own body past
+    the occluder: a detection in the occluder's gate that lies beyond the hidden track's body
+    is the occluder's (the hidden track's ``d2`` is ``inf``; a car queued behind a bus would
+    otherwise creep onto the bus's rear reflections, the nearest in its gate).
     A stopped vehicle may be starting (``starting`` rows): its held zero speed is replaced by
     the speed in ``[0, start_speed_max]`` along its ``direction`` that best explains the
     detection's radial speed (a road user passing by in the other direction does not fit).
@@ -211,15 +216,15 @@ def gate_scan(  # type: ignore[no-untyped-def]
     s = np.zeros((3, 3))
     lo = np.zeros((3, 3))
     w = np.zeros(3)
-    ground = np.zeros((n_d if extent_gate else 0, 6))  # ground point, sight line, range and
-    for j in range(ground.shape[0]):  # cross variances (for the extent gate only)
+    ground = np.zeros((n_d, 6))  # ground point, sight line, range and cross variances
+    for j in range(n_d):
         gx, gy, rho = _ground_point(z[j], radar)
         sr = curve_at(noise_tab, noise_cnt, 0, z[j, 0])
         sa = rho * curve_at(noise_tab, noise_cnt, 1, off_boresight(z[j, 1], radar))
         ground[j, 0], ground[j, 1] = gx, gy
         ground[j, 2], ground[j, 3] = math.sin(z[j, 1]), math.cos(z[j, 1])
         ground[j, 4], ground[j, 5] = sr * sr, sa * sa
-    penalty = np.zeros((n_t, n_d)) if extent_gate else np.zeros((0, 0))
+    penalty = np.zeros((n_t, n_d))  # beyond the body's end along the lane (see above)
     for i in range(n_t):
         part_spread = _model(
             i, x, spread, corridor, roads, bounds, radar, noise_tab, noise_cnt, fields,
@@ -258,13 +263,22 @@ def gate_scan(  # type: ignore[no-untyped-def]
                 w[a] = v / lo[a, a]
                 acc += w[a] * w[a]
             d2[i, j] = acc
-            if extent_gate:
-                along = (ground[j, 0] - px) * tx + (ground[j, 1] - py) * ty
-                excess = abs(along) - half
-                if excess > 0.0:
-                    c = ground[j, 2] * tx + ground[j, 3] * ty
-                    var = ground[j, 4] * c * c + ground[j, 5] * (1.0 - c * c) + p[i, 0, 0]
-                    penalty[i, j] = excess * excess / var
+            along = (ground[j, 0] - px) * tx + (ground[j, 1] - py) * ty
+            excess = abs(along) - half
+            if excess > 0.0:
+                c = ground[j, 2] * tx + ground[j, 3] * ty
+                var = ground[j, 4] * c * c + ground[j, 5] * (1.0 - c * c) + p[i, 0, 0]
+                penalty[i, j] = excess * excess / var
+    hidden = np.zeros((n_t, n_d), dtype=np.bool_)
+    for i in range(n_t):
+        k = occluder[i]
+        if k >= 0:
+            for j in range(n_d):
+                hidden[i, j] = d2[k, j] <= gate and penalty[i, j] > 0.0
+    for i in range(n_t):
+        for j in range(n_d):
+            if hidden[i, j]:
+                d2[i, j] = np.inf
     if extent_gate:
         for j in range(n_d):
             on_a_body = False
@@ -450,14 +464,16 @@ def split_rows(stopped, moved, along_m2, along_m4, kurtosis_max, min_half_gap): 
 
 
 @numba.njit(cache=True)
-def occluded_rows(rows, x, spread, corridor, roads, bounds, radar):  # type: ignore[no-untyped-def]
-    """Which tracks of ``rows`` a nearer track may hide from the radar (bool per row).
+def occluders(rows, x, spread, corridor, roads, bounds, radar, can_hide):  # type: ignore[no-untyped-def]
+    """Return the nearer track that may hide each track of ``rows`` from the radar (-1: none).
+
+    Only tracks with ``can_hide`` (bool per track) are taken as occluders.
 
     A track hides what lies behind it within its apparent half width: twice its body spread
     along its heading and 1 m across, seen from the radar. It does not hide a track on its
     corridor whose centre lies within its own body (``BODY_HALF_SPREADS`` spreads along):
     no other road user can be there, so that track is a duplicate of its body and its
-    misses count.
+    misses count. Of several, the nearest to the radar is returned.
     """
     n = x.shape[0]
     rng = np.zeros(n)
@@ -471,19 +487,20 @@ def occluded_rows(rows, x, spread, corridor, roads, bounds, radar):  # type: ign
         ux, uy = ex / max(rng[i], 1e-9), ey / max(rng[i], 1e-9)
         across = abs(ux * ty - uy * tx) * 2.0 * spread[i] + abs(ux * tx + uy * ty) * 1.0
         half[i] = math.atan2(across, max(rng[i], 1e-9))
-    out = np.zeros(rows.size, dtype=np.bool_)
+    out = np.full(rows.size, -1, dtype=np.int64)
     for k in range(rows.size):
         i = rows[k]
         for j in range(n):
-            if j == i or rng[j] >= rng[i]:
+            if j == i or rng[j] >= rng[i] or not can_hide[j]:
+                continue
+            if out[k] >= 0 and rng[j] >= rng[out[k]]:
                 continue
             inside = abs(x[i, 0] - x[j, 0]) < BODY_HALF_SPREADS * spread[j]
             if inside and corridor[j] == corridor[i]:
                 continue
             d = (az[i] - az[j] + math.pi) % (2.0 * math.pi) - math.pi
             if abs(d) < half[j]:
-                out[k] = True
-                break
+                out[k] = j
     return out
 
 

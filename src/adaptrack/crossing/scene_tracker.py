@@ -11,7 +11,10 @@ the body spread along (``body_along_std_m``) and across (``body_across_std_m``).
 One scan (all detections of one radar at one time) is processed as: predict every track to
 the scan time; gate the detections of the tracks in that radar's view (chi-square on the
 three-dimensional innovation; a detection on another road user's body that lies beyond a
-track's own body end along the lane costs that track its excess, ``body_extent_gate``);
+track's own body end along the lane costs that track its excess, ``body_extent_gate``; in a
+standing queue, a track hidden behind a nearer stopped road user is seen, if at all, over
+its own body: a detection in the occluder's gate beyond it is the occluder's,
+``occlusion_gate``);
 assign one detection per track by global nearest neighbour
 (:func:`adaptrack.tracking.gnn_assign`; a static object that has stood longer than
 ``clutter_age_s`` keeps the detections in its own tight gate: learnt clutter such as a rail);
@@ -85,7 +88,7 @@ from ._scene_kernels import (
     merged_rows,
     miss_updates,
     mode_changes,
-    occluded_rows,
+    occluders,
     open_tracks,
     owners,
     planar_rows,
@@ -123,6 +126,7 @@ class SceneTrackerConfig:
     split_min_half_gap_m: float = 2.0  # ... this far either side of it (a queue)
     body_across_std_m: float = 0.5
     body_extent_gate: bool = True  # a detection beyond the body's end along the lane costs more
+    occlusion_gate: bool = True  # a track hidden in a queue takes none of its occluder's
     gate_probability: float = 0.999
     clutter_gate_probability: float = 0.99  # a static object's own detections (reserved) ...
     clutter_age_s: float = 300.0  # ... once it has stood longer than any closure
@@ -453,9 +457,18 @@ class SceneTracker:
             stats = self._bias_stats[radar_name]
             d2 = np.empty((n_t, z.shape[0]))
             logdet = np.empty(n_t)
+            road_user = tr.moved & self.book.confirmed
+            behind = np.full(n_t, -1)  # in a standing queue, the stopped road user hiding it
+            if cfg.occlusion_gate:
+                queued = np.flatnonzero(tr.stopped)
+                behind[queued] = occluders(
+                    queued, tr.x, tr.spread, tr.corridor, self._roads, self._bounds, radar_row,
+                    road_user,
+                )  # fmt: skip
+                behind[(behind >= 0) & ~tr.stopped[behind]] = -1  # the nearest is moving
             seen = gate_scan(
-                tr.x, tr.p, tr.spread, tr.stopped & tr.moved, tr.moved & self.book.confirmed,
-                tr.direction, tr.corridor,
+                tr.x, tr.p, tr.spread, tr.stopped & tr.moved, road_user, behind, tr.direction,
+                tr.corridor,
                 self._roads, self._bounds, radar_row, noise_tab, noise_cnt, fields,
                 cfg.body_across_std_m, cfg.start_speed_max_mps, cfg.body_extent_gate,
                 self._gate, z, d2, logdet,
@@ -486,9 +499,10 @@ class SceneTracker:
                 tr.sensor_id[ti, r_col] = ids[di]  # its own detection's, not a body's other
             tr.miss_run[hit] = 1.0
             missed = np.flatnonzero(seen & ~hit)
-            hidden = occluded_rows(
-                missed, tr.x, tr.spread, tr.corridor, self._roads, self._bounds, radar_row
-            )
+            hidden = (
+                occluders(missed, tr.x, tr.spread, tr.corridor, self._roads, self._bounds,
+                          radar_row, np.ones(n_t, bool)) >= 0
+            )  # fmt: skip
             tr.occluded[hit] = False
             tr.occluded[missed] = hidden
             missed = missed[~hidden]  # a hidden track's miss tells nothing
