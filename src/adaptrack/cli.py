@@ -17,7 +17,7 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
-from . import __version__
+from . import __version__, cli_fit
 from ._backend import kernels_cached
 from ._cli_errors import err_console
 from ._cli_errors import fail as _fail
@@ -90,6 +90,8 @@ app = typer.Typer(
 app.command("serve")(service_commands.serve)
 app.command("replay")(service_commands.replay)
 app.add_typer(site_app, name="site")
+app.command("fit")(cli_fit.fit)
+app.command("filter")(cli_fit.filter_log)
 
 
 def _print_version(value: bool) -> None:

@@ -1,0 +1,102 @@
+"""The ``adaptrack fit`` and ``adaptrack filter`` commands: a recorded position log, no truth."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from ._cli_errors import err_console, fail
+from ._files import check_writable
+from ._toml import load_toml
+from .io.tables import DataFormatError, write_table_atomic, write_text_atomic
+from .tuning.position_log import (
+    MEASUREMENTS,
+    MODELS,
+    MotionFit,
+    PositionLog,
+    estimates_table,
+    fit_from_toml,
+    fit_motion,
+    fit_toml,
+    read_position_log,
+)
+
+
+def _writable(path: Path) -> None:
+    try:
+        check_writable(path)
+    except ValueError as exc:
+        fail(str(exc))
+
+
+def _read(path: Path, measurement: str) -> PositionLog:
+    """Read the log (errors as one line); say which of its columns are not used."""
+    if measurement not in MEASUREMENTS:
+        raise typer.BadParameter(f"--measurement must be one of {', '.join(MEASUREMENTS)}")
+    try:
+        log = read_position_log(path, measurement)  # type: ignore[arg-type]
+    except (DataFormatError, ValueError, OSError) as exc:
+        fail(str(exc))
+    if log.unused:
+        err_console.print(f"note: {path}: columns not used: {', '.join(log.unused)}", markup=False)
+    return log
+
+
+def fit(
+    log_file: Path = typer.Argument(..., help="CSV/Parquet position log."),
+    measurement: str = typer.Option(
+        ...,
+        "--measurement",
+        help="gnss (time_s, lat_deg, lon_deg[, alt_m]) or position "
+        "(time_s, east_m, north_m[, up_m]); t_s is taken for time_s.",
+    ),
+    model: str = typer.Option("cv", "--model", help="cv (white acceleration) or ca (jerk)."),
+    out: Path = typer.Option(..., "--out", help="Output TOML (input of `adaptrack filter`)."),
+) -> None:
+    """Fit motion PSD and noise variances to a log by maximum likelihood (no truth needed)."""
+    _writable(out)
+    if model not in MODELS:
+        raise typer.BadParameter(f"--model must be one of {', '.join(MODELS)}")
+    log = _read(log_file, measurement)
+    try:
+        result = fit_motion(log, model)  # type: ignore[arg-type]
+    except ValueError as exc:
+        fail(str(exc))
+    write_text_atomic(out, fit_toml(result, measurement, str(log_file)))
+    table = Table(title=f"{log_file.name}: {model.upper()} fit on {log.times.size} fixes")
+    for col in ("parameter", "value", "95 % interval"):
+        table.add_column(col)
+    for name in result.fit.names:
+        lo, hi = result.fit.interval(name)
+        table.add_row(name, f"{result.fit.value(name):.4g}", f"{lo:.4g} to {hi:.4g}")
+    Console().print(table)
+    if not result.fit.converged:
+        err_console.print(f"warning: the optimiser did not converge: {result.fit.message}")
+    Console().print(f"wrote {out}")
+
+
+def filter_log(
+    log_file: Path = typer.Argument(..., help="CSV/Parquet position log (the fit's layout)."),
+    config: Path = typer.Option(..., "--config", help="TOML written by `adaptrack fit`."),
+    smooth: bool = typer.Option(False, "--smooth", help="RTS smoothing (not causal)."),
+    out: Path = typer.Option(..., "--out", help="Output CSV or Parquet."),
+) -> None:
+    """Filter (or smooth) a log with a fit: estimates with sigmas and covariance at each fix."""
+    _writable(out)
+    try:
+        result: MotionFit
+        result, measurement = fit_from_toml(load_toml(config), str(config))
+    except (ValueError, OSError) as exc:
+        fail(str(exc))
+    log = _read(log_file, measurement)
+    try:
+        mean, cov = result.filter(log, smooth=smooth)
+    except ValueError as exc:
+        fail(f"{log_file}: {exc}")
+    write_table_atomic(estimates_table(log, mean, cov), out)
+    Console().print(
+        f"wrote {out} ({log.times.size} epochs, {'smoothed' if smooth else 'filtered'})"
+    )

@@ -1,0 +1,265 @@
+"""A recorded position log (GNSS or local): read it, fit its motion and noise, filter it.
+
+Truth-free: the motion model's PSD and the measurement noise variances are the maximum of the
+innovations' log-likelihood (:func:`adaptrack.tuning.fit_by_likelihood`), separately for the
+horizontal axes and the vertical one. GNSS fixes are filtered in a local east-north-up frame
+at the log's first fix and converted back to latitude, longitude and altitude.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+import pandas as pd
+
+from .._typing import FloatArray
+from ..coords.geodetic import ecef_to_enu, ecef_to_geodetic, enu_to_ecef, geodetic_to_ecef
+from ..filters.run import kalman_filter
+from ..io.tables import (
+    DataFormatError,
+    check_increasing,
+    numeric_column,
+    read_table,
+    require_columns,
+)
+from ..models import ConstantAcceleration, ConstantVelocity
+from ..smoothers import rts_smooth
+from ..types import GaussianState
+from .likelihood import LikelihoodFit, fit_by_likelihood
+
+Measurement = Literal["gnss", "position"]
+Model = Literal["cv", "ca"]
+MEASUREMENTS: tuple[str, ...] = ("gnss", "position")
+MODELS: tuple[str, ...] = ("cv", "ca")
+_AXES = ("x", "y", "z")
+_COLUMNS = {  # measured columns of each layout (the last is optional: a planar log)
+    "gnss": ("lat_deg", "lon_deg", "alt_m"),
+    "position": ("east_m", "north_m", "up_m"),
+}
+
+
+@dataclass(frozen=True)
+class PositionLog:
+    """One recording's positions in a local frame.
+
+    ``times`` (T,) [s]; ``enu`` (T, k) east, north (and up) [m]; ``origin`` the geodetic
+    origin of the frame (latitude, longitude [rad], height [m]) for a GNSS log, else None;
+    ``unused`` the file's columns that are not read.
+    """
+
+    times: FloatArray
+    enu: FloatArray
+    origin: tuple[float, float, float] | None
+    unused: tuple[str, ...]
+
+    @property
+    def n_axes(self) -> int:
+        """Measured axes: 2 (planar) or 3."""
+        return int(self.enu.shape[1])
+
+
+def read_position_log(path: str | Path, measurement: Measurement) -> PositionLog:
+    """Read a position log: ``time_s`` (or ``t_s``) and the layout's columns.
+
+    ``gnss``: ``lat_deg, lon_deg`` and optionally ``alt_m`` (WGS-84), converted to east-north-up
+    at the first fix; ``position``: ``east_m, north_m`` and optionally ``up_m``. Times must
+    increase; values must be finite (errors name the row and column).
+    """
+    if measurement not in MEASUREMENTS:
+        raise ValueError(f"measurement must be one of {MEASUREMENTS}; got {measurement!r}")
+    p = Path(path)
+    frame = read_table(p)
+    time_col = "time_s" if "time_s" in frame.columns or "t_s" not in frame.columns else "t_s"
+    wanted = _COLUMNS[measurement]
+    require_columns(frame, [time_col, *wanted[:2]], p)
+    cols = [c for c in wanted if c in frame.columns]
+    t = numeric_column(frame, time_col, p)
+    check_increasing(t, p, time_col)
+    values = np.stack([numeric_column(frame, c, p) for c in cols], axis=-1)
+    unused = tuple(str(c) for c in frame.columns if c not in (time_col, *cols))
+    if measurement == "position":
+        return PositionLog(t, values, None, unused)
+    lat, lon = np.deg2rad(values[:, 0]), np.deg2rad(values[:, 1])
+    if np.any(np.abs(values[:, 0]) > 90) or np.any(np.abs(values[:, 1]) > 360):
+        row = int(np.argmax((np.abs(values[:, 0]) > 90) | (np.abs(values[:, 1]) > 360)))
+        raise DataFormatError(f"{p}: row {row + 1}: latitude/longitude out of range (degrees)")
+    alt = values[:, 2] if values.shape[1] == 3 else np.zeros(t.size)
+    origin = (float(lat[0]), float(lon[0]), float(alt[0]))
+    enu = ecef_to_enu(geodetic_to_ecef(lat, lon, alt), *origin)
+    return PositionLog(t, enu[:, : values.shape[1]], origin, unused)
+
+
+@dataclass(frozen=True)
+class MotionFit:
+    """Maximum-likelihood motion model of a position log.
+
+    ``model`` "cv" (white acceleration, PSD [m^2/s^3]) or "ca" (white jerk, [m^2/s^5]);
+    parameters ``q_horizontal``, ``r_horizontal`` [m^2] (and ``q_vertical``, ``r_vertical``
+    for a 3-D log) with their standard errors and intervals in ``fit``.
+    """
+
+    model: str
+    n_axes: int
+    fit: LikelihoodFit
+
+    def filter(self, log: PositionLog, smooth: bool = False) -> tuple[FloatArray, FloatArray]:
+        """Estimates at the log's times: state means (T, n) and covariances (T, n, n).
+
+        State order ``x, y(, z), vx, vy(, vz)`` (and accelerations for "ca"), east-north-up.
+        """
+        if log.n_axes != self.n_axes:
+            raise ValueError(f"the fit is {self.n_axes}-D; the log has {log.n_axes} axes")
+        values = {name: self.fit.value(name) for name in self.fit.names}
+        res = _run(log, self.model, values)
+        est = rts_smooth(res) if smooth else res.filtered
+        return est.mean, est.cov
+
+
+def _parameters(values: dict[str, float], n_axes: int) -> tuple[list[float], list[float]]:
+    """Per-axis PSDs and noise variances from the horizontal / vertical parameters."""
+    q = [values["q_horizontal"]] * 2 + ([values["q_vertical"]] if n_axes == 3 else [])
+    r = [values["r_horizontal"]] * 2 + ([values["r_vertical"]] if n_axes == 3 else [])
+    return q, r
+
+
+def _run(log: PositionLog, model: str, values: dict[str, float]):  # type: ignore[no-untyped-def]
+    """Kalman filter of ``log`` with these parameters (first fix as the prior's mean)."""
+    k = log.n_axes
+    q, r = _parameters(values, k)
+    motion = (
+        ConstantVelocity(accel_psd=q, n_axes=k)
+        if model == "cv"
+        else ConstantAcceleration(jerk_psd=q, n_axes=k)
+    )
+    n = len(motion.state_names)
+    mean = np.zeros(n)
+    mean[:k] = log.enu[0]
+    prior_var = np.full(n, 100.0)  # velocity [m^2/s^2] (and acceleration): unknown at first
+    prior_var[:k] = r
+    prior = GaussianState(mean, np.diag(prior_var), np.asarray(log.times[0]))
+    return kalman_filter(
+        log.times, log.enu, motion, list(_AXES[:k]), np.diag(r), prior, backend="auto"
+    )
+
+
+def fit_motion(log: PositionLog, model: Model = "cv") -> MotionFit:
+    """Fit the motion PSD and the noise variances of ``log`` by maximum likelihood.
+
+    Horizontal and vertical parameters are separate (a GNSS receiver's vertical noise is
+    larger; a vehicle's vertical motion smaller). Standard errors come from the curvature of
+    the log-likelihood (they assume independent measurement noise).
+    """
+    if model not in MODELS:
+        raise ValueError(f"model must be one of {MODELS}; got {model!r}")
+    if log.times.size < 10:
+        raise ValueError(f"a fit needs at least 10 fixes; the log has {log.times.size}")
+    initial = {"q_horizontal": 1.0, "r_horizontal": 1.0}
+    if log.n_axes == 3:
+        initial |= {"q_vertical": 0.1, "r_vertical": 1.0}
+
+    def loglik(values: dict[str, float]) -> float:
+        return float(_run(log, model, values).info.log_likelihood.sum())
+
+    return MotionFit(model, log.n_axes, fit_by_likelihood(loglik, initial))
+
+
+def estimates_table(log: PositionLog, mean: FloatArray, cov: FloatArray) -> pd.DataFrame:
+    """Estimates as a table: position, velocity, their sigmas, the position covariance.
+
+    ``time_s, east_m, north_m(, up_m), velocity_east_mps, ...``, ``*_std_*``, ``cov_e_n`` (and
+    ``cov_e_u``, ``cov_n_u``); for a GNSS log also ``lat_deg, lon_deg, alt_m``.
+    """
+    k = log.n_axes
+    names = ("east", "north", "up")[:k]
+    cols: dict[str, FloatArray] = {"time_s": log.times}
+    for a, name in enumerate(names):
+        cols[f"{name}_m"] = mean[:, a]
+    for a, name in enumerate(names):
+        cols[f"velocity_{name}_mps"] = mean[:, k + a]
+    for a, name in enumerate(names):
+        cols[f"{name}_std_m"] = np.sqrt(cov[:, a, a])
+    for a, name in enumerate(names):
+        cols[f"velocity_{name}_std_mps"] = np.sqrt(cov[:, k + a, k + a])
+    for a in range(k):
+        for b in range(a + 1, k):
+            cols[f"cov_{names[a][0]}_{names[b][0]}"] = cov[:, a, b]
+    if log.origin is not None:
+        enu = np.zeros((log.times.size, 3))
+        enu[:, :k] = mean[:, :k]
+        lat, lon, alt = ecef_to_geodetic(enu_to_ecef(enu, *log.origin))
+        cols["lat_deg"], cols["lon_deg"] = np.rad2deg(lat), np.rad2deg(lon)
+        if k == 3:
+            cols["alt_m"] = alt
+    return pd.DataFrame(cols)
+
+
+def fit_toml(fit: MotionFit, measurement: str, source: str) -> str:
+    """Return the fit as TOML text (``adaptrack fit``'s output, ``adaptrack filter``'s input)."""
+    f = fit.fit
+    lines = [
+        "# adaptrack fit: maximum-likelihood motion model of a position log",
+        "[fit]",
+        f'measurement = "{measurement}"',
+        f'model = "{fit.model}"',
+        f"axes = {fit.n_axes}",
+        f"source = {_toml_string(source)}",
+        f"log_likelihood = {f.log_likelihood!r}",
+        f"converged = {str(f.converged).lower()}",
+    ]
+    for name in f.names:
+        lo, hi = f.interval(name)
+        lines += [
+            "",
+            f"[fit.parameters.{name}]",
+            f"value = {f.value(name)!r}",
+            f"std_error = {f.std_error(name)!r}",
+            f"low_95 = {lo!r}",
+            f"high_95 = {hi!r}",
+        ]
+    return "\n".join(lines) + "\n"
+
+
+def _toml_string(text: str) -> str:
+    return '"' + text.replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+
+def fit_from_toml(data: dict[str, object], where: str) -> tuple[MotionFit, str]:
+    """Return the fit and measurement kind of a parsed ``fit.toml`` (errors name ``where``)."""
+    table = data.get("fit")
+    if not isinstance(table, dict):
+        raise ValueError(f"{where}: no [fit] table (write one with `adaptrack fit`)")
+    try:
+        measurement, model, axes = table["measurement"], table["model"], int(table["axes"])
+        params = table["parameters"]
+        names = tuple(params)
+        values = np.array([float(params[n]["value"]) for n in names])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ValueError(f"{where}: incomplete [fit] table ({exc})") from None
+    expected = {"q_horizontal", "r_horizontal"} | (
+        {"q_vertical", "r_vertical"} if axes == 3 else set()
+    )
+    if measurement not in MEASUREMENTS or model not in MODELS or set(names) != expected:
+        raise ValueError(
+            f"{where}: [fit] must name a measurement in {MEASUREMENTS}, a model in {MODELS} and "
+            f"parameters {sorted(expected)}; got {measurement!r}, {model!r}, {sorted(names)}"
+        )
+    if not np.all(np.isfinite(values) & (values > 0)):
+        raise ValueError(f"{where}: fit parameters must be positive and finite; got {values}")
+    fit = LikelihoodFit(names, values, np.zeros((values.size, values.size)), np.nan, True, "")
+    return MotionFit(str(model), axes, fit), str(measurement)
+
+
+__all__ = [
+    "MEASUREMENTS",
+    "MODELS",
+    "MotionFit",
+    "PositionLog",
+    "estimates_table",
+    "fit_from_toml",
+    "fit_motion",
+    "fit_toml",
+    "read_position_log",
+]
