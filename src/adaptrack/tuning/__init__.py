@@ -1,6 +1,6 @@
 """Design-time adaptation (spec B.7); truth-free ML tuning and clock-offset calibration."""
 
-from .calibration import fit_clock_offset
+from .calibration import fit_clock_offset, fit_radar_bias
 from .likelihood import LikelihoodFit, fit_by_likelihood
 from .optimize import (
     TrackingData,
@@ -19,6 +19,7 @@ __all__ = [
     "TuningResult",
     "fit_by_likelihood",
     "fit_clock_offset",
+    "fit_radar_bias",
     "rms_criterion",
     "tune_constant_acceleration",
     "tune_constant_velocity",
