@@ -43,8 +43,11 @@ def adaptrack_filter(t: np.ndarray, z: np.ndarray, backend: str = "auto") -> np.
 def adaptrack_per_track_cov(
     t: np.ndarray, z: np.ndarray, backend: str = "auto", form: str = "auto"
 ) -> np.ndarray:
-    """``kalman_filter``'s general path: every track carries its own covariance recursion."""
-    prior = _prior(t, z.shape[0])
+    """``kalman_filter``'s general path: every track carries its own covariance recursion.
+
+    ``t`` (T,) shared or (N, T) per track (the prior at the earliest time).
+    """
+    prior = _prior(np.atleast_1d(t.min(axis=0)) if t.ndim > 1 else t, z.shape[0])
     return at.kalman_filter(t, z, MODEL, H, R, prior, backend=backend, form=form).filtered.mean
 
 
@@ -84,6 +87,32 @@ def filterpy_filter(t: np.ndarray, z: np.ndarray) -> np.ndarray:
         return kf
 
     return _filterpy_means(make, z, 3)
+
+
+def filterpy_jittered(times: np.ndarray, z: np.ndarray, t0: float) -> np.ndarray:
+    """FilterPy per track on its own times (N, T) from a prior at ``t0``: each step's Phi and
+    Q by Van Loan."""
+    from filterpy.kalman import KalmanFilter
+    from scipy.linalg import expm
+
+    blocks, _ = MODEL.blocks()
+    f = blocks[0].drift
+    w = blocks[0].noise_input @ blocks[0].noise_psd @ blocks[0].noise_input.T
+    out = np.zeros(z.shape[:2] + (3,))
+    for i in range(z.shape[0]):
+        kf = KalmanFilter(dim_x=3, dim_z=1)
+        kf.x, kf.P, kf.H, kf.R = np.zeros(3), P0.copy(), H, R
+        prev = t0
+        for k in range(z.shape[1]):
+            dt = times[i, k] - prev
+            prev = times[i, k]
+            vl = expm(np.block([[-f, w], [np.zeros((3, 3)), f.T]]) * dt)
+            kf.F = vl[3:, 3:].T
+            kf.Q = kf.F @ vl[:3, 3:]
+            kf.predict()
+            kf.update(z[i, k])
+            out[i, k] = kf.x
+    return out
 
 
 def filterpy_rts(t: np.ndarray, z: np.ndarray) -> np.ndarray:

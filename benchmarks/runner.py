@@ -5,6 +5,9 @@ Workloads (full sizes; ``--quick`` shrinks them to a smoke test):
 * ``single``: one track of 100,000 steps;
 * ``batch``: 10,000 tracks x 1,000 steps sharing model, start and sampling (peers without
   batching run a subset of tracks and are reported per track-step);
+* ``batch_jitter``: 2,000 tracks x 1,000 steps, each on its own jittered times (every step
+  length new), against the same tracks on shared times; checked against FilterPy given each
+  step's Van Loan discretisation;
 * ``rts``/``rts_batch``: fixed-interval smoothing of one long track and of the batch;
 * ``stream``: one online update per call from Python (20,000 measurements), also with
   jittered timestamps (``stream_jitter``); with the Joseph and square-root forms beside the
@@ -63,6 +66,7 @@ def run(quick: bool, only: list[str] | None = None, workers: int = 2) -> list[Re
     steps = {
         "single": lambda: workloads.single(quick, repeats),
         "batch": lambda: workloads.batch(quick, repeats),
+        "batch_jitter": lambda: workloads.batch_jitter(quick, repeats),
         "rts": lambda: workloads.rts(quick, repeats),
         "stream": lambda: workloads.streaming(quick, repeats),
         "imm": lambda: workloads.imm(quick, repeats),

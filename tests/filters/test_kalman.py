@@ -56,6 +56,43 @@ def test_batch_equals_loop(rng, per_track_times):
             np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12)
 
 
+@pytest.mark.parametrize(
+    "model",
+    [
+        SINGER,
+        ConstantVelocity(accel_psd=0.7, n_axes=1),
+        Singer(time_constant_s=0.2, accel_std_mps2=3.0),
+    ],
+    ids=["singer", "cv", "singer_fast"],
+)
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+def test_jittered_per_track_times_use_series_tables_equal_to_expm(rng, model, backend):
+    """40 tracks x 60 jittered steps (above ``SERIES_MIN_STEPS``: the per-track path
+    evaluates the series table for every step) against each track alone on its own 1-D times
+    (one matrix exponential per distinct step): transitions, noise and estimates equal to
+    1e-10 (the fast Singer, tau = 0.2 s, takes doublings on its 0.3 s steps)."""
+    from adaptrack.filters.run import SERIES_MIN_STEPS
+
+    n_tracks, n_steps = 40, 60
+    assert n_tracks * n_steps >= SERIES_MIN_STEPS
+    t = irregular_times(rng, n_steps, (n_tracks,))
+    n = model.state_dim
+    h = np.eye(1, n)
+    z = rng.normal(size=(n_tracks, n_steps, 1)) * 2
+    prior = at.GaussianState(np.zeros(n), 100.0 * np.eye(n), 0.0)
+    res = at.kalman_filter(t, z, model, h, [[0.5]], prior, backend=backend)
+    for i in range(0, n_tracks, 7):
+        one = at.kalman_filter(t[i], z[i], model, h, [[0.5]], prior, backend=backend)
+        for a, b in (
+            (res.transition[i], one.transition),
+            (res.process_cov[i], one.process_cov),
+            (res.filtered.mean[i], one.filtered.mean),
+            (res.filtered.cov[i], one.filtered.cov),
+            (res.info.log_likelihood[i], one.info.log_likelihood),
+        ):
+            np.testing.assert_allclose(a, b, rtol=1e-10, atol=1e-12)
+
+
 def test_shared_and_general_paths_agree(rng):
     t = irregular_times(rng, 50)
     z = rng.normal(size=(4, 50, 1))

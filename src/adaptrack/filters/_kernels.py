@@ -399,6 +399,17 @@ def series_transition_into(dt, phi_coef, qd_coef, off_coef, h_max, phi, qd, u, t
 
 
 @numba.njit(cache=True)
+def series_transitions(dt, phi_coef, qd_coef, off_coef, h_max):  # type: ignore[no-untyped-def]
+    """``Phi``, ``Qd``, ``u`` of every step length in ``dt`` (K,) from a series table."""
+    n = phi_coef.shape[1]
+    phi, qd = np.empty((dt.size, n, n)), np.empty((dt.size, n, n))
+    u, tmp = np.empty((dt.size, n)), np.empty((n, n))
+    for k in range(dt.size):
+        series_transition_into(dt[k], phi_coef, qd_coef, off_coef, h_max, phi[k], qd[k], u[k], tmp)
+    return phi, qd, u
+
+
+@numba.njit(cache=True)
 def series_bank_row(bank, row, dt, phi_coef, qd_coef, off_coef, h_max):  # type: ignore[no-untyped-def]
     """Write ``[dt, Phi, Qd, u]`` of step ``dt`` (from a series table) into ``bank[row]``."""
     n = phi_coef.shape[1]

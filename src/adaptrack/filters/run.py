@@ -39,6 +39,7 @@ from .kalman import (
 )
 from .square_root import covariance, lower_factor, sqrt_predict, sqrt_update
 
+SERIES_MIN_STEPS = 1024  # per-track times: from this many track-steps, series tables
 NanPolicy = Literal["raise", "missing"]
 FilterForm = Literal["auto", "joseph", "standard", "sqrt"]
 _Result = TypeVar("_Result")
@@ -418,9 +419,30 @@ def _run_compiled(p: _Problem) -> FilterResult:
 def _transitions(
     model: MotionModel, t: FloatArray, t_init: FloatArray, method: Method, noise: Noise, order: int
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Phi, Qd and control offsets per step (entry k maps step k-1 -> k), cached by dt."""
+    """Phi, Qd and control offsets per step (entry k maps step k-1 -> k).
+
+    Shared times: each distinct step discretised once. Per-track times, at least
+    :data:`SERIES_MIN_STEPS` track-steps (every step length new when sampling jitters): the
+    exact white-noise discretisation (``expm``, ``analytic`` or ``auto``) is evaluated for
+    every step by the model's series table, compiled (:mod:`adaptrack.models.series_table`:
+    exact to rounding), not by one matrix exponential per distinct step.
+    """
     prev = np.concatenate([np.broadcast_to(t_init, t.shape[:-1])[..., None], t[..., :-1]], axis=-1)
-    return discretize_with_input(model, t - prev, method, noise=noise, order=order)
+    dt = t - prev
+    exact = method in ("expm", "analytic", "auto") and noise == "white"
+    if t.ndim > 1 and dt.size >= SERIES_MIN_STEPS and exact:
+        from ..models.series_table import model_series_table
+        from ._kernels import series_transitions
+
+        if np.any(dt < 0):
+            return discretize_with_input(model, dt, method, noise=noise, order=order)  # names it
+        table = model_series_table(model, float(dt.max(initial=0.0)))
+        parts = series_transitions(
+            np.ascontiguousarray(dt).reshape(-1), table.phi_coef, table.qd_coef,
+            table.offset_coef, table.h_max,
+        )  # fmt: skip
+        return tuple(a.reshape(dt.shape + a.shape[1:]) for a in parts)
+    return discretize_with_input(model, dt, method, noise=noise, order=order)
 
 
 def _run(p: _Problem) -> FilterResult:
