@@ -615,9 +615,11 @@ class SceneTracker:
         took a stopped car's reflections); it raises no second alarm now, and may later if
         the other track is gone.
         """
+        if rows.size == 0:
+            return rows
         tr = self.tracks
         alarmed = np.setdiff1d(np.flatnonzero(tr.event_raised & tr.stopped), rows)
-        if rows.size == 0 or alarmed.size == 0:
+        if alarmed.size == 0:
             return rows
         new = self._planar(rows)["position"]
         old = self._planar(alarmed)["position"]
@@ -726,36 +728,58 @@ class SceneTracker:
     def status(self) -> np.ndarray:
         """Status (TrackStatus values) of every live track."""
         tr = self.tracks
-        st = np.full(tr.time_s.size, int(TrackStatus.TENTATIVE))
         conf = self.book.confirmed
-        coasting = conf & (tr.time_s - self.book.last_hit_s > 0.2)
-        st[conf] = int(TrackStatus.CONFIRMED)
-        st[coasting] = int(TrackStatus.COASTING)
+        coasting = tr.time_s - self.book.last_hit_s > 0.2
+        st = np.where(coasting, int(TrackStatus.COASTING), int(TrackStatus.CONFIRMED))
+        st[~conf] = int(TrackStatus.TENTATIVE)
         st[conf & tr.stopped] = int(TrackStatus.STOPPED)
         return st
 
-    def columns(self, time_s: float) -> dict[str, np.ndarray]:
-        """Columns of :meth:`rows` (arrays, one entry per confirmed track)."""
+    def snapshot(self, time_s: float) -> _Snapshot:
+        """Return the confirmed tracks' states at ``time_s`` (:meth:`rows` before geometry)."""
         tr = self.tracks
         rows = np.flatnonzero(self.book.confirmed)
-        geo = self._planar(rows)
-        status = self.status()[rows]
-        status[(status == TrackStatus.STOPPED) & ~tr.moved[rows]] = STATIC
-        vel = geo["velocity"]
+        coasting = tr.time_s[rows] - self.book.last_hit_s[rows] > 0.2
+        status = np.where(coasting, int(TrackStatus.COASTING), int(TrackStatus.CONFIRMED))
+        stopped = tr.stopped[rows]
+        status[stopped] = np.where(tr.moved[rows[stopped]], int(TrackStatus.STOPPED), STATIC)
+        return _Snapshot(
+            self.book.ids[rows], np.full(rows.size, time_s), tr.x[rows], tr.p[rows],
+            tr.corridor[rows], status, tr.moved[rows],
+        )  # fmt: skip
+
+    def table(self, snapshots: list[_Snapshot]) -> dict[str, np.ndarray]:
+        """Columns of :meth:`rows` for several snapshots at once (one planar conversion)."""
+        parts = [np.concatenate([getattr(s, f) for s in snapshots]) for f in _SNAPSHOT_FIELDS]
+        ids, times, x, p, corridor, status, moved = (
+            parts if snapshots else (np.zeros(0, np.int64), np.zeros(0), np.zeros((0, N_STATE)),
+                                     np.zeros((0, N_STATE, N_STATE)), np.zeros(0, np.int64),
+                                     np.zeros(0, np.int64), np.zeros(0, bool))
+        )  # fmt: skip
+        n = ids.size
+        pos, vel, pos_std, to_cross = np.zeros((n, 2)), np.zeros((n, 2)), np.zeros(n), np.zeros(n)
+        planar_rows(
+            x, p, corridor, self._roads, self._bounds, self._crossing_u, pos, vel, pos_std,
+            to_cross,
+        )  # fmt: skip
         return {
-            "track_id": self.book.ids[rows],
-            "time_s": np.full(rows.size, time_s),
-            "east_m": geo["position"][:, 0],
-            "north_m": geo["position"][:, 1],
+            "track_id": ids,
+            "time_s": times,
+            "east_m": pos[:, 0],
+            "north_m": pos[:, 1],
             "speed_mps": np.hypot(vel[:, 0], vel[:, 1]),
             "east_speed_mps": vel[:, 0],
             "north_speed_mps": vel[:, 1],
-            "from_crossing_m": geo["to_crossing"],
+            "from_crossing_m": to_cross,
             "status": status,
-            "moved": tr.moved[rows],
-            "position_std_m": geo["position_std"],
-            "speed_std_mps": np.sqrt(tr.p[rows, 1, 1]),
+            "moved": moved,
+            "position_std_m": pos_std,
+            "speed_std_mps": np.sqrt(p[:, 1, 1]),
         }
+
+    def columns(self, time_s: float) -> dict[str, np.ndarray]:
+        """Columns of :meth:`rows` (arrays, one entry per confirmed track)."""
+        return self.table([self.snapshot(time_s)])
 
     def rows(self, time_s: float) -> pd.DataFrame:
         """Estimates of every confirmed track at ``time_s`` (after the scan's update).
@@ -764,6 +788,25 @@ class SceneTracker:
         object that never moved (clutter).
         """
         return _frame([self.columns(time_s)])
+
+
+@dataclass(frozen=True)
+class _Snapshot:
+    """Confirmed tracks at one time.
+
+    Ids, time [s], states and covariances, corridor rows, status codes, whether each moved.
+    """
+
+    track_id: np.ndarray
+    time_s: FloatArray
+    x: FloatArray
+    p: FloatArray
+    corridor: np.ndarray
+    status: np.ndarray
+    moved: np.ndarray
+
+
+_SNAPSHOT_FIELDS = tuple(f.name for f in fields(_Snapshot))
 
 
 def _frame(columns: list[dict[str, np.ndarray]]) -> pd.DataFrame:
@@ -866,10 +909,11 @@ def track_scene(
     out = []
     for i, (radar, t, z, ids) in enumerate(scans):
         tracker.step(radar, t, z, ids)
-        out.append(tracker.columns(tracker.last_scan_s))
+        out.append(tracker.snapshot(tracker.last_scan_s))
         if on_scan is not None:
             on_scan(i + 1, len(scans))
-    return _frame(out), pd.DataFrame(tracker.events, columns=EVENT_COLUMNS), tracker.log
+    table = _frame([tracker.table(out)])
+    return table, pd.DataFrame(tracker.events, columns=EVENT_COLUMNS), tracker.log
 
 
 __all__ = [

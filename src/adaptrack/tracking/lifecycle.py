@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from enum import IntEnum
 
+import numba
 import numpy as np
 
 from .._typing import FloatArray
@@ -103,17 +104,12 @@ class TrackBook:
         ``ready`` (bool per row, default all): a track is confirmed only once its state is
         determined well enough (e.g. its speed), whatever its hits.
         """
-        mask = (1 << self.rules.confirm_window) - 1
-        self.history[rows] = ((self.history[rows] << 1) | hit.astype(np.int64)) & mask
-        self.misses[rows] = np.where(hit, 0, self.misses[rows] + 1)
-        self.last_hit_s[rows] = np.where(hit, time_s, self.last_hit_s[rows])
-        hits = np.bitwise_count(self.history[rows])
-        ok = hits >= self.rules.confirm_hits
-        if ready is not None:
-            ok &= ready
-        now = rows[~self.confirmed[rows] & ok]
-        self.confirmed[now] = True
-        return now
+        return _record(
+            self.history, self.misses, self.last_hit_s, self.confirmed,
+            np.asarray(rows, np.int64), np.asarray(hit, bool), float(time_s),
+            np.ones(len(rows), bool) if ready is None else np.asarray(ready, bool),
+            (1 << self.rules.confirm_window) - 1, self.rules.confirm_hits,
+        )  # fmt: skip
 
     def expired(
         self,
@@ -131,18 +127,14 @@ class TrackBook:
         objects at a standstill), stopped ones missed too often in a row.
         """
         r = self.rules
-        limit = np.where(
-            stopped, r.max_coast_stopped_s, np.where(hidden, r.max_coast_hidden_s, r.max_coast_s)
-        )
-        dead_tentative = ~self.confirmed & (
-            (self.misses >= r.tentative_misses) | (time_s - self.born_s > r.max_tentative_s)
-        )
-        dead = dead_tentative | (self.confirmed & (time_s - self.last_hit_s > limit))
-        if position_std_m is not None:
-            dead |= ~stopped & (np.asarray(position_std_m) > r.max_position_std_m)
-        if stopped_detectable:
-            dead |= self.confirmed & stopped & (self.misses >= r.max_stopped_misses)
-        return np.flatnonzero(dead)
+        std = np.zeros(self.ids.size) if position_std_m is None else np.asarray(position_std_m)
+        return _expired(
+            self.confirmed, self.misses, self.born_s, self.last_hit_s, float(time_s),
+            np.asarray(stopped, bool), np.asarray(hidden, bool), std.astype(float),
+            position_std_m is not None, stopped_detectable, r.tentative_misses,
+            r.max_tentative_s, r.max_coast_s, r.max_coast_stopped_s, r.max_coast_hidden_s,
+            r.max_position_std_m, r.max_stopped_misses,
+        )  # fmt: skip
 
     def remove(self, rows: np.ndarray) -> None:
         """Forget the tracks in ``rows``."""
@@ -150,6 +142,56 @@ class TrackBook:
         keep[rows] = False
         for name in ("ids", "history", "confirmed", "misses", "last_hit_s", "born_s"):
             setattr(self, name, getattr(self, name)[keep])
+
+
+@numba.njit(cache=True)
+def _record(  # type: ignore[no-untyped-def]
+    history, misses, last_hit_s, confirmed, rows, hit, time_s, ready, window_mask, confirm_hits
+):  # fmt: skip
+    """:meth:`TrackBook.record` in place; returns the rows confirmed now."""
+    now = np.zeros(rows.size, np.int64)
+    n = 0
+    for k in range(rows.size):
+        i = rows[k]
+        history[i] = ((history[i] << 1) | (1 if hit[k] else 0)) & window_mask
+        if hit[k]:
+            misses[i] = 0
+            last_hit_s[i] = time_s
+        else:
+            misses[i] += 1
+        hits, bits = 0, history[i]
+        while bits:
+            hits += bits & 1
+            bits >>= 1
+        if not confirmed[i] and hits >= confirm_hits and ready[k]:
+            confirmed[i] = True
+            now[n] = i
+            n += 1
+    return now[:n]
+
+
+@numba.njit(cache=True)
+def _expired(  # type: ignore[no-untyped-def]
+    confirmed, misses, born_s, last_hit_s, time_s, stopped, hidden, position_std, check_std,
+    stopped_detectable, tentative_misses, max_tentative_s, max_coast_s, max_coast_stopped_s,
+    max_coast_hidden_s, max_position_std_m, max_stopped_misses,
+):  # fmt: skip
+    """:meth:`TrackBook.expired`: the rows to delete."""
+    dead = np.zeros(confirmed.size, np.bool_)
+    for i in range(confirmed.size):
+        if not confirmed[i]:
+            dead[i] = misses[i] >= tentative_misses or time_s - born_s[i] > max_tentative_s
+        else:
+            limit = (
+                max_coast_stopped_s if stopped[i]
+                else (max_coast_hidden_s if hidden[i] else max_coast_s)
+            )  # fmt: skip
+            dead[i] = time_s - last_hit_s[i] > limit
+            if stopped_detectable and stopped[i] and misses[i] >= max_stopped_misses:
+                dead[i] = True
+        if check_std and not stopped[i] and position_std[i] > max_position_std_m:
+            dead[i] = True
+    return np.flatnonzero(dead)
 
 
 __all__ = ["LifecycleRules", "TrackBook", "TrackStatus"]
