@@ -398,14 +398,19 @@ def series_transition_into(dt, phi_coef, qd_coef, off_coef, h_max, phi, qd, u, t
         phi[:, :] = tmp
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, parallel=True)
 def series_transitions(dt, phi_coef, qd_coef, off_coef, h_max):  # type: ignore[no-untyped-def]
     """``Phi``, ``Qd``, ``u`` of every step length in ``dt`` (K,) from a series table."""
     n = phi_coef.shape[1]
     phi, qd = np.empty((dt.size, n, n)), np.empty((dt.size, n, n))
-    u, tmp = np.empty((dt.size, n)), np.empty((n, n))
-    for k in range(dt.size):
-        series_transition_into(dt[k], phi_coef, qd_coef, off_coef, h_max, phi[k], qd[k], u[k], tmp)
+    u = np.empty((dt.size, n))
+    chunk = 4096
+    for c in numba.prange((dt.size + chunk - 1) // chunk):
+        tmp = np.empty((n, n))
+        for k in range(c * chunk, min((c + 1) * chunk, dt.size)):
+            series_transition_into(
+                dt[k], phi_coef, qd_coef, off_coef, h_max, phi[k], qd[k], u[k], tmp
+            )
     return phi, qd, u
 
 

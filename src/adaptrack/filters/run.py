@@ -431,12 +431,12 @@ def _transitions(
     dt = t - prev
     exact = method in ("expm", "analytic", "auto") and noise == "white"
     if t.ndim > 1 and dt.size >= SERIES_MIN_STEPS and exact:
-        from ..models.series_table import model_series_table
+        from ..models.series_table import model_series_table, shortened
         from ._kernels import series_transitions
 
         if np.any(dt < 0):
             return discretize_with_input(model, dt, method, noise=noise, order=order)  # names it
-        table = model_series_table(model, float(dt.max(initial=0.0)))
+        table = shortened(model_series_table(model, float(dt.max(initial=0.0))))
         parts = series_transitions(
             np.ascontiguousarray(dt).reshape(-1), table.phi_coef, table.qd_coef,
             table.offset_coef, table.h_max,

@@ -95,6 +95,23 @@ def series_table(
     return SeriesTable(phi_coef, np.ascontiguousarray(qd_coef), offset_coef, h_max)
 
 
+def shortened(table: SeriesTable) -> SeriesTable:
+    """Drop the terms below ``1e-17`` of the leading one at the table's own ``h_max``.
+
+    A table for short steps (``max_dt`` well below ``0.5 / norm1(F)``) needs fewer terms
+    than the shared shape carries; the values are unchanged to rounding.
+    """
+    if math.isinf(table.h_max) or table.phi_coef.shape[0] < 2:
+        return table
+    x = float(np.abs(table.phi_coef[1]).sum(axis=0).max()) * table.h_max
+    p = min(_terms(x), table.phi_coef.shape[0])
+    q = min(_terms(2.0 * x), table.qd_coef.shape[0])
+    return SeriesTable(
+        table.phi_coef[:p], np.ascontiguousarray(table.qd_coef[:q]), table.offset_coef[:p],
+        table.h_max,
+    )  # fmt: skip
+
+
 def _terms(x: float) -> int:
     """Count the terms ``x^i / i!`` (``x <= 1``) before the first below ``1e-17``."""
     term, i = 1.0, 0
@@ -127,4 +144,4 @@ def model_series_table(
     return series_table(f, w, max_dt, b)
 
 
-__all__ = ["SeriesTable", "model_series_table", "series_table"]
+__all__ = ["SeriesTable", "model_series_table", "series_table", "shortened"]
