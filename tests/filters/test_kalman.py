@@ -67,14 +67,14 @@ def test_batch_equals_loop(rng, per_track_times):
 )
 @pytest.mark.parametrize("backend", ["numpy", "numba"])
 def test_jittered_per_track_times_use_series_tables_equal_to_expm(rng, model, backend):
-    """40 tracks x 60 jittered steps (above ``SERIES_MIN_STEPS``: the per-track path
-    evaluates the series table for every step) against each track alone on its own 1-D times
-    (one matrix exponential per distinct step): transitions, noise and estimates equal to
-    1e-10 (the fast Singer, tau = 0.2 s, takes doublings on its 0.3 s steps)."""
+    """40 tracks x 60 jittered steps (more distinct step lengths than ``SERIES_MIN_STEPS``:
+    the series table is evaluated for every step) against each track alone on its own 1-D
+    times (fewer: one matrix exponential per distinct step): transitions, noise and estimates
+    equal to 1e-10 (the fast Singer, tau = 0.2 s, takes doublings on its 0.3 s steps)."""
     from adaptrack.filters.run import SERIES_MIN_STEPS
 
     n_tracks, n_steps = 40, 60
-    assert n_tracks * n_steps >= SERIES_MIN_STEPS
+    assert n_steps < SERIES_MIN_STEPS <= n_tracks * n_steps
     t = irregular_times(rng, n_steps, (n_tracks,))
     n = model.state_dim
     h = np.eye(1, n)

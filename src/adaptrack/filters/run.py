@@ -39,7 +39,7 @@ from .kalman import (
 )
 from .square_root import covariance, lower_factor, sqrt_predict, sqrt_update
 
-SERIES_MIN_STEPS = 1024  # per-track times: from this many track-steps, series tables
+SERIES_MIN_STEPS = 256  # from this many distinct step lengths, series tables
 NanPolicy = Literal["raise", "missing"]
 FilterForm = Literal["auto", "joseph", "standard", "sqrt"]
 _Result = TypeVar("_Result")
@@ -421,16 +421,16 @@ def _transitions(
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Phi, Qd and control offsets per step (entry k maps step k-1 -> k).
 
-    Shared times: each distinct step discretised once. Per-track times, at least
-    :data:`SERIES_MIN_STEPS` track-steps (every step length new when sampling jitters): the
-    exact white-noise discretisation (``expm``, ``analytic`` or ``auto``) is evaluated for
+    Each distinct step is discretised once, unless there are at least
+    :data:`SERIES_MIN_STEPS` distinct ones (jittered sampling: every step length new): then
+    the exact white-noise discretisation (``expm``, ``analytic`` or ``auto``) is evaluated for
     every step by the model's series table, compiled (:mod:`adaptrack.models.series_table`:
     exact to rounding), not by one matrix exponential per distinct step.
     """
     prev = np.concatenate([np.broadcast_to(t_init, t.shape[:-1])[..., None], t[..., :-1]], axis=-1)
     dt = t - prev
     exact = method in ("expm", "analytic", "auto") and noise == "white"
-    if t.ndim > 1 and dt.size >= SERIES_MIN_STEPS and exact:
+    if exact and dt.size >= SERIES_MIN_STEPS and np.unique(dt).size >= SERIES_MIN_STEPS:
         from ..models.series_table import model_series_table, shortened
         from ._kernels import series_transitions
 

@@ -141,7 +141,7 @@ def _run(log: PositionLog, model: str, values: dict[str, float]):  # type: ignor
     prior_var[:k] = r
     prior = GaussianState(mean, np.diag(prior_var), np.asarray(log.times[0]))
     return kalman_filter(
-        log.times, log.enu, motion, list(_AXES[:k]), np.diag(r), prior, backend="auto"
+        log.times, log.enu, motion, list(_AXES[:k]), np.diag(r), prior, backend="numba"
     )
 
 
