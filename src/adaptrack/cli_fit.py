@@ -11,7 +11,9 @@ from rich.table import Table
 from ._cli_errors import err_console, fail
 from ._files import check_writable
 from ._toml import load_toml
+from .analysis.consistency import innovation_consistency
 from .io.tables import DataFormatError, write_table_atomic, write_text_atomic
+from .smoothers import rts_smooth
 from .tuning.position_log import (
     MEASUREMENTS,
     MODELS,
@@ -93,10 +95,18 @@ def filter_log(
         fail(str(exc))
     log = _read(log_file, measurement)
     try:
-        mean, cov = result.filter(log, smooth=smooth)
+        run = result.run(log)
+        check = innovation_consistency(run)
     except ValueError as exc:
         fail(f"{log_file}: {exc}")
-    write_table_atomic(estimates_table(log, mean, cov), out)
+    est = rts_smooth(run) if smooth else run.filtered
+    write_table_atomic(estimates_table(log, est.mean, est.cov), out)
+    lo, hi = check.mean_nis_band
+    Console().print(
+        f"innovations: mean NIS {check.mean_nis:.2f} (95 % band {lo:.2f}-{hi:.2f} for "
+        f"{check.dof:.0f} dof), lag-1 correlation {check.lag1:+.2f} (band "
+        f"+-{check.lag1_limit:.2f}): {check.verdict}"
+    )
     Console().print(
         f"wrote {out} ({log.times.size} epochs, {'smoothed' if smooth else 'filtered'})"
     )

@@ -19,6 +19,7 @@ def test_fit_and_filter_commands_end_to_end(tmp_path, cli):
         tmp_path / "est.csv",
     )  # fmt: skip
     assert code == 0, err
+    assert "innovations: mean NIS" in out and "consistent" in out  # simulated as fitted
     est = pd.read_csv(tmp_path / "est.csv")
     assert len(est) == N
     assert {"time_s", "east_m", "velocity_up_mps", "east_std_m", "cov_e_n", "lat_deg",

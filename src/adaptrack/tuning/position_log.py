@@ -27,7 +27,7 @@ from ..io.tables import (
 )
 from ..models import ConstantAcceleration, ConstantVelocity
 from ..smoothers import rts_smooth
-from ..types import GaussianState
+from ..types import FilterResult, GaussianState
 from .likelihood import LikelihoodFit, fit_by_likelihood
 
 Measurement = Literal["gnss", "position"]
@@ -110,12 +110,15 @@ class MotionFit:
 
         State order ``x, y(, z), vx, vy(, vz)`` (and accelerations for "ca"), east-north-up.
         """
-        if log.n_axes != self.n_axes:
-            raise ValueError(f"the fit is {self.n_axes}-D; the log has {log.n_axes} axes")
-        values = {name: self.fit.value(name) for name in self.fit.names}
-        res = _run(log, self.model, values)
+        res = self.run(log)
         est = rts_smooth(res) if smooth else res.filtered
         return est.mean, est.cov
+
+    def run(self, log: PositionLog) -> FilterResult:
+        """Return the Kalman filter's full result on ``log`` (its innovations included)."""
+        if log.n_axes != self.n_axes:
+            raise ValueError(f"the fit is {self.n_axes}-D; the log has {log.n_axes} axes")
+        return _run(log, self.model, {name: self.fit.value(name) for name in self.fit.names})
 
 
 def _parameters(values: dict[str, float], n_axes: int) -> tuple[list[float], list[float]]:
@@ -125,7 +128,7 @@ def _parameters(values: dict[str, float], n_axes: int) -> tuple[list[float], lis
     return q, r
 
 
-def _run(log: PositionLog, model: str, values: dict[str, float]):  # type: ignore[no-untyped-def]
+def _run(log: PositionLog, model: str, values: dict[str, float]) -> FilterResult:
     """Kalman filter of ``log`` with these parameters (first fix as the prior's mean)."""
     k = log.n_axes
     q, r = _parameters(values, k)
