@@ -422,6 +422,28 @@ def _body_scan(rng, radar, cor, centre, d, length, width, n):
     return np.stack([rng_m + sr * noise[0], az + sa * noise[1], sv * noise[2]], -1)
 
 
+def _queued_pair_errors(config, front, rear, seen_fraction, seconds, seed):
+    """Two road users stopped 1 m apart in radar_A's lane, 30 m before the crossing, tracked
+    from their true places (ids 1 and 2): ``front`` and ``rear`` are (length [m], width [m],
+    reflections a scan, learnt spread [m]). The front one is detected every scan, the one
+    behind it in ``seen_fraction`` of the scans. Returns each track's position error [m]
+    after ``seconds``."""
+    tracker = SceneTracker(SITE, config)
+    cor, radar, half_lane = _queue_lane(tracker)
+    u_front = cor.crossing_u - 30.0  # approaching with u rising: nearer the crossing
+    u_rear = u_front - front[0] / 2 - 1.0 - rear[0] / 2
+    _stopped_tracks(tracker, [(u_front, -half_lane, front[3]), (u_rear, -half_lane, rear[3])])
+    rng = np.random.default_rng(seed)
+    for k in range(1, round(seconds / radar.period_s)):
+        z = _body_scan(rng, radar, cor, u_front, -half_lane, *front[:3])
+        if rng.uniform() < seen_fraction:  # the one behind seen past the front one
+            z = np.vstack([z, _body_scan(rng, radar, cor, u_rear, -half_lane, *rear[:3])])
+        tracker.step(radar.name, k * radar.period_s, z)
+    rows = tracker.rows(tracker.last_scan_s).set_index("track_id")
+    where = cor.path.lane_geometry(np.array([u_front, u_rear]), -half_lane)[0]
+    return np.hypot(*(rows.loc[[1, 2], ["east_m", "north_m"]].to_numpy() - where).T)
+
+
 @pytest.mark.parametrize(("extent_gate", "occlusion_gate"), [(1, 1), (1, 0), (0, 0)])
 def test_a_hidden_truck_in_a_queue_keeps_its_place_behind_the_car_ahead(
     extent_gate, occlusion_gate
@@ -439,20 +461,8 @@ def test_a_hidden_truck_in_a_queue_keeps_its_place_behind_the_car_ahead(
     config = SceneTrackerConfig(
         split_kurtosis=0.0, body_extent_gate=bool(extent_gate), occlusion_gate=bool(occlusion_gate)
     )
-    tracker = SceneTracker(SITE, config)
-    cor, radar, half_lane = _queue_lane(tracker)
-    car = cor.crossing_u - 30.0  # approaching with u rising: the car is nearer the crossing
-    truck = car - 2.5 - 1.0 - 3.55
-    _stopped_tracks(tracker, [(car, -half_lane, 1.1), (truck, -half_lane, 1.56)])  # as learnt
-    rng = np.random.default_rng(11)
-    for k in range(1, 900):  # 45 s
-        z = _body_scan(rng, radar, cor, car, -half_lane, 5.0, 1.8, 2)
-        if rng.uniform() < 0.2:  # the truck seen past the car
-            z = np.vstack([z, _body_scan(rng, radar, cor, truck, -half_lane, 7.1, 2.5, 2)])
-        tracker.step(radar.name, k * radar.period_s, z)
-    rows = tracker.rows(tracker.last_scan_s).set_index("track_id")
-    where = cor.path.lane_geometry(np.array([car, truck]), -half_lane)[0]
-    err = np.hypot(*(rows.loc[[1, 2], ["east_m", "north_m"]].to_numpy() - where).T)
+    car, truck = (5.0, 1.8, 2, 1.1), (7.1, 2.5, 2, 1.56)  # spreads as learnt
+    err = _queued_pair_errors(config, car, truck, seen_fraction=0.2, seconds=45.0, seed=11)
     if extent_gate:
         assert err.max() < 0.5, err
     else:
@@ -476,20 +486,8 @@ def test_a_car_hidden_behind_a_queued_bus_does_not_creep_onto_the_bus(bus_spread
     from adaptrack.crossing.scene_tracker import SceneTrackerConfig
 
     config = SceneTrackerConfig(split_kurtosis=0.0, occlusion_gate=occlusion_gate)
-    tracker = SceneTracker(SITE, config)
-    cor, radar, half_lane = _queue_lane(tracker)
-    bus = cor.crossing_u - 30.0  # approaching with u rising: the bus is nearer the crossing
-    car = bus - 6.0 - 1.0 - 2.5
-    _stopped_tracks(tracker, [(bus, -half_lane, bus_spread_m), (car, -half_lane, 1.1)])
-    rng = np.random.default_rng(12)
-    for k in range(1, 1200):  # 60 s
-        z = _body_scan(rng, radar, cor, bus, -half_lane, 12.0, 2.5, 4)
-        if rng.uniform() < 0.1:  # the car seen past the bus
-            z = np.vstack([z, _body_scan(rng, radar, cor, car, -half_lane, 5.0, 1.8, 2)])
-        tracker.step(radar.name, k * radar.period_s, z)
-    rows = tracker.rows(tracker.last_scan_s).set_index("track_id")
-    where = cor.path.lane_geometry(np.array([bus, car]), -half_lane)[0]
-    err = np.hypot(*(rows.loc[[1, 2], ["east_m", "north_m"]].to_numpy() - where).T)
+    bus, car = (12.0, 2.5, 4, bus_spread_m), (5.0, 1.8, 2, 1.1)
+    err = _queued_pair_errors(config, bus, car, seen_fraction=0.1, seconds=60.0, seed=12)
     if not occlusion_gate:
         assert err[1] > 1.0, err
         return
