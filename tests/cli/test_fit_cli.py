@@ -52,3 +52,20 @@ def test_filter_refuses_a_config_that_is_not_a_fit(tmp_path, cli):
         "filter", tmp_path / "log.csv", "--config", tmp_path / "c.toml", "--out", tmp_path / "e.csv"
     )
     assert code == 1 and "incomplete [fit] table" in err
+
+
+def test_filter_refuses_a_log_of_other_axes_than_the_fit(tmp_path, cli):
+    gnss_log(tmp_path / "log.csv")
+    code, _, err = cli(
+        "fit", tmp_path / "log.csv", "--measurement", "gnss", "--out", tmp_path / "fit.toml"
+    )
+    assert code == 0, err
+    pd.read_csv(tmp_path / "log.csv").drop(columns="alt_m").to_csv(
+        tmp_path / "flat.csv", index=False
+    )
+    code, _, err = cli(
+        "filter", tmp_path / "flat.csv", "--config", tmp_path / "fit.toml", "--out",
+        tmp_path / "e.csv",
+    )  # fmt: skip
+    assert code == 1 and "the fit is 3-D; the log has 2 axes" in err, err
+    assert not (tmp_path / "e.csv").exists()
