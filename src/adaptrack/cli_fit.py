@@ -56,6 +56,12 @@ def fit(
         "(time_s, east_m, north_m[, up_m]); t_s is taken for time_s.",
     ),
     model: str = typer.Option("cv", "--model", help="cv (white acceleration) or ca (jerk)."),
+    clock_offset: bool = typer.Option(
+        False,
+        "--clock-offset",
+        help="Also fit how late the fixes are stamped against the "
+        "log's velocity reports (velocity_*_mps or groundspeed_mps, track_deg columns).",
+    ),
     out: Path = typer.Option(..., "--out", help="Output TOML (input of `adaptrack filter`)."),
 ) -> None:
     """Fit motion PSD and noise variances to a log by maximum likelihood (no truth needed)."""
@@ -64,7 +70,7 @@ def fit(
         raise typer.BadParameter(f"--model must be one of {', '.join(MODELS)}")
     log = _read(log_file, measurement)
     try:
-        result = fit_motion(log, model)  # type: ignore[arg-type]
+        result = fit_motion(log, model, clock_offset)  # type: ignore[arg-type]
     except ValueError as exc:
         fail(str(exc))
     write_text_atomic(out, fit_toml(result, measurement, str(log_file)))
@@ -74,6 +80,9 @@ def fit(
     for name in result.fit.names:
         lo, hi = result.fit.interval(name)
         table.add_row(name, f"{result.fit.value(name):.4g}", f"{lo:.4g} to {hi:.4g}")
+    if result.clock is not None:
+        lo, hi = result.clock.interval("offset_s")
+        table.add_row("clock offset_s", f"{result.offset_s:+.4f}", f"{lo:+.4f} to {hi:+.4f}")
     Console().print(table)
     if not result.fit.converged:
         err_console.print(f"warning: the optimiser did not converge: {result.fit.message}")
@@ -100,7 +109,7 @@ def filter_log(
     except ValueError as exc:
         fail(f"{log_file}: {exc}")
     est = rts_smooth(run) if smooth else run.filtered
-    write_table_atomic(estimates_table(log, est.mean, est.cov), out)
+    write_table_atomic(estimates_table(log, est.mean, est.cov, result.offset_s), out)
     lo, hi = check.mean_nis_band
     Console().print(
         f"innovations: mean NIS {check.mean_nis:.2f} (95 % band {lo:.2f}-{hi:.2f} for "

@@ -69,3 +69,62 @@ def test_filter_refuses_a_log_of_other_axes_than_the_fit(tmp_path, cli):
     )  # fmt: skip
     assert code == 1 and "the fit is 3-D; the log has 2 axes" in err, err
     assert not (tmp_path / "e.csv").exists()
+
+
+def _late_fixes_log(path, late_s=0.12, seed=9):
+    """A planar GNSS log whose fixes are stamped ``late_s`` late against the velocity reports
+    of the same rows: a constant-velocity truth on a 20 ms grid (its own closed form), fixes
+    (0.3 m noise) and velocities (0.1 m/s) at 10 Hz, converted to geodetic by pymap3d."""
+    import pymap3d
+
+    rng = np.random.default_rng(seed)
+    fine, q, n = 0.02, 1.0, 6000  # 120 s
+    phi = np.array([[1.0, fine], [0.0, 1.0]])
+    chol = np.linalg.cholesky(q * np.array([[fine**3 / 3, fine**2 / 2], [fine**2 / 2, fine]]))
+    s, states = np.array([[0.0, 6.0], [0.0, 2.0]]), np.zeros((n, 2, 2))
+    for k in range(n):
+        for a in range(2):
+            s[a] = phi @ s[a] + chol @ rng.standard_normal(2)
+        states[k] = s
+    step, shift = 5, round(late_s / fine)  # rows every 0.1 s; fixes made 0.12 s before
+    rows = np.arange(shift, n, step)
+    pos = states[rows - shift, :, 0] + rng.normal(0.0, 0.3, (rows.size, 2))
+    vel = states[rows, :, 1] + rng.normal(0.0, 0.1, (rows.size, 2))
+    lat, lon, _ = pymap3d.enu2geodetic(pos[:, 0], pos[:, 1], 0.0, 47.0, 8.0, 400.0)
+    pd.DataFrame(
+        {"time_s": fine * rows, "lat_deg": lat, "lon_deg": lon, "velocity_east_mps": vel[:, 0],
+         "velocity_north_mps": vel[:, 1]}
+    ).to_csv(path, index=False)  # fmt: skip
+
+
+def test_fit_finds_how_late_the_fixes_are_and_filter_corrects_their_times(tmp_path, cli):
+    """Fixes stamped 120 ms late: ``fit --clock-offset`` finds it within 3 standard errors;
+    ``filter`` writes when each fix was made."""
+    import tomllib
+
+    _late_fixes_log(tmp_path / "log.csv")
+    code, out, err = cli(
+        "fit", tmp_path / "log.csv", "--measurement", "gnss", "--clock-offset", "--out",
+        tmp_path / "fit.toml",
+    )  # fmt: skip
+    assert code == 0, err
+    assert "clock offset_s" in out and "columns not used" not in err
+    clock = tomllib.loads((tmp_path / "fit.toml").read_text())["fit"]["clock"]["offset_s"]
+    assert abs(clock["value"] - 0.12) < 3 * clock["std_error"] < 0.03, clock
+    code, _, err = cli(
+        "filter", tmp_path / "log.csv", "--config", tmp_path / "fit.toml", "--out",
+        tmp_path / "est.csv",
+    )  # fmt: skip
+    assert code == 0, err
+    est = pd.read_csv(tmp_path / "est.csv")
+    made = est["time_s"] - est["corrected_time_s"]
+    np.testing.assert_allclose(made, clock["value"], atol=1e-6)  # CSV keeps 10 digits
+
+
+def test_a_clock_offset_needs_velocity_reports(tmp_path, cli):
+    gnss_log(tmp_path / "log.csv")
+    code, _, err = cli(
+        "fit", tmp_path / "log.csv", "--measurement", "gnss", "--clock-offset", "--out",
+        tmp_path / "fit.toml",
+    )  # fmt: skip
+    assert code == 1 and "needs the log's velocity reports" in err, err

@@ -28,6 +28,7 @@ from ..io.tables import (
 from ..models import ConstantAcceleration, ConstantVelocity
 from ..smoothers import rts_smooth
 from ..types import FilterResult, GaussianState
+from .calibration import fit_clock_offset
 from .likelihood import LikelihoodFit, fit_by_likelihood
 
 Measurement = Literal["gnss", "position"]
@@ -47,13 +48,15 @@ class PositionLog:
 
     ``times`` (T,) [s]; ``enu`` (T, k) east, north (and up) [m]; ``origin`` the geodetic
     origin of the frame (latitude, longitude [rad], height [m]) for a GNSS log, else None;
-    ``unused`` the file's columns that are not read.
+    ``unused`` the file's columns that are not read; ``velocity`` the log's velocity reports
+    in the same frame, if it has them.
     """
 
     times: FloatArray
     enu: FloatArray
     origin: tuple[float, float, float] | None
     unused: tuple[str, ...]
+    velocity: FloatArray | None = None  # (T, k) the log's own velocity reports [m/s] (NaN: none)
 
     @property
     def n_axes(self) -> int:
@@ -66,7 +69,10 @@ def read_position_log(path: str | Path, measurement: Measurement) -> PositionLog
 
     ``gnss``: ``lat_deg, lon_deg`` and optionally ``alt_m`` (WGS-84), converted to east-north-up
     at the first fix; ``position``: ``east_m, north_m`` and optionally ``up_m``. Times must
-    increase; values must be finite (errors name the row and column).
+    increase; values must be finite (errors name the row and column). Velocity reports are
+    read where present (empty cells: none that epoch): ``velocity_east_mps,
+    velocity_north_mps[, velocity_up_mps]``, or ``groundspeed_mps, track_deg[,
+    vertical_rate_mps]`` (the project's flight files).
     """
     if measurement not in MEASUREMENTS:
         raise ValueError(f"measurement must be one of {MEASUREMENTS}; got {measurement!r}")
@@ -79,9 +85,10 @@ def read_position_log(path: str | Path, measurement: Measurement) -> PositionLog
     t = numeric_column(frame, time_col, p)
     check_increasing(t, p, time_col)
     values = np.stack([numeric_column(frame, c, p) for c in cols], axis=-1)
-    unused = tuple(str(c) for c in frame.columns if c not in (time_col, *cols))
+    velocity, vel_cols = _velocity_reports(frame, p, values.shape[1])
+    unused = tuple(str(c) for c in frame.columns if c not in (time_col, *cols, *vel_cols))
     if measurement == "position":
-        return PositionLog(t, values, None, unused)
+        return PositionLog(t, values, None, unused, velocity)
     lat, lon = np.deg2rad(values[:, 0]), np.deg2rad(values[:, 1])
     if np.any(np.abs(values[:, 0]) > 90) or np.any(np.abs(values[:, 1]) > 360):
         row = int(np.argmax((np.abs(values[:, 0]) > 90) | (np.abs(values[:, 1]) > 360)))
@@ -89,7 +96,33 @@ def read_position_log(path: str | Path, measurement: Measurement) -> PositionLog
     alt = values[:, 2] if values.shape[1] == 3 else np.zeros(t.size)
     origin = (float(lat[0]), float(lon[0]), float(alt[0]))
     enu = ecef_to_enu(geodetic_to_ecef(lat, lon, alt), *origin)
-    return PositionLog(t, enu[:, : values.shape[1]], origin, unused)
+    return PositionLog(t, enu[:, : values.shape[1]], origin, unused, velocity)
+
+
+def _velocity_reports(
+    frame: pd.DataFrame, path: Path, k: int
+) -> tuple[FloatArray | None, tuple[str, ...]]:
+    """Return the log's velocity reports (T, k) [m/s], east-north(-up), and their columns."""
+    names = ("velocity_east_mps", "velocity_north_mps", "velocity_up_mps")[:k]
+    if all(c in frame.columns for c in names):
+        cols = [numeric_column(frame, c, path, allow_nan=True) for c in names]
+        return np.stack(cols, axis=-1), names
+    if {"groundspeed_mps", "track_deg"} <= set(frame.columns):
+        speed = numeric_column(frame, "groundspeed_mps", path, allow_nan=True)
+        track = np.deg2rad(numeric_column(frame, "track_deg", path, allow_nan=True))
+        used: tuple[str, ...] = ("groundspeed_mps", "track_deg")
+        parts = [speed * np.sin(track), speed * np.cos(track)]
+        if k == 3:
+            has_up = "vertical_rate_mps" in frame.columns
+            up = (
+                numeric_column(frame, "vertical_rate_mps", path, allow_nan=True)
+                if has_up
+                else np.full(speed.size, np.nan)
+            )
+            parts.append(up)
+            used += ("vertical_rate_mps",) if has_up else ()
+        return np.stack(parts, axis=-1), used
+    return None, ()
 
 
 @dataclass(frozen=True)
@@ -98,12 +131,20 @@ class MotionFit:
 
     ``model`` "cv" (white acceleration, PSD [m^2/s^3]) or "ca" (white jerk, [m^2/s^5]);
     parameters ``q_horizontal``, ``r_horizontal`` [m^2] (and ``q_vertical``, ``r_vertical``
-    for a 3-D log) with their standard errors and intervals in ``fit``.
+    for a 3-D log) with their standard errors and intervals in ``fit``; ``clock``: how late the
+    fixes are stamped against the log's velocity reports (``offset_s``,
+    :func:`~adaptrack.tuning.calibration.fit_clock_offset`), if fitted.
     """
 
     model: str
     n_axes: int
     fit: LikelihoodFit
+    clock: LikelihoodFit | None = None  # the fixes' clock offset against the velocity reports
+
+    @property
+    def offset_s(self) -> float:
+        """How late the fixes are stamped [s] (0 without a clock fit)."""
+        return self.clock.value("offset_s") if self.clock is not None else 0.0
 
     def filter(self, log: PositionLog, smooth: bool = False) -> tuple[FloatArray, FloatArray]:
         """Estimates at the log's times: state means (T, n) and covariances (T, n, n).
@@ -148,13 +189,27 @@ def _run(log: PositionLog, model: str, values: dict[str, float]) -> FilterResult
     )
 
 
-def fit_motion(log: PositionLog, model: Model = "cv") -> MotionFit:
+def fit_motion(log: PositionLog, model: Model = "cv", clock_offset: bool = False) -> MotionFit:
     """Fit the motion PSD and the noise variances of ``log`` by maximum likelihood.
 
     Horizontal and vertical parameters are separate (a GNSS receiver's vertical noise is
     larger; a vehicle's vertical motion smaller). Standard errors come from the curvature of
-    the log-likelihood (they assume independent measurement noise).
+    the log-likelihood (they assume independent measurement noise). ``clock_offset``: also
+    fit how late the fixes are stamped against the log's velocity reports (horizontal
+    components; epochs with a report), which the log must have.
     """
+    clock = None
+    if clock_offset:
+        if log.velocity is None:
+            raise ValueError(
+                "a clock offset needs the log's velocity reports (velocity_east_mps, "
+                "velocity_north_mps or groundspeed_mps, track_deg columns)"
+            )
+        ok = np.all(np.isfinite(log.velocity[:, :2]), axis=1)
+        clock = fit_clock_offset(
+            log.times, log.enu[:, :2], log.times[ok], log.velocity[ok, :2], position_var=0.01,
+            velocity_var=0.1,
+        )  # fmt: skip
     if model not in MODELS:
         raise ValueError(f"model must be one of {MODELS}; got {model!r}")
     if log.times.size < 10:
@@ -166,14 +221,18 @@ def fit_motion(log: PositionLog, model: Model = "cv") -> MotionFit:
     def loglik(values: dict[str, float]) -> float:
         return float(_run(log, model, values).info.log_likelihood.sum())
 
-    return MotionFit(model, log.n_axes, fit_by_likelihood(loglik, initial))
+    return MotionFit(model, log.n_axes, fit_by_likelihood(loglik, initial), clock)
 
 
-def estimates_table(log: PositionLog, mean: FloatArray, cov: FloatArray) -> pd.DataFrame:
+def estimates_table(
+    log: PositionLog, mean: FloatArray, cov: FloatArray, offset_s: float = 0.0
+) -> pd.DataFrame:
     """Estimates as a table: position, velocity, their sigmas, the position covariance.
 
     ``time_s, east_m, north_m(, up_m), velocity_east_mps, ...``, ``*_std_*``, ``cov_e_n`` (and
-    ``cov_e_u``, ``cov_n_u``); for a GNSS log also ``lat_deg, lon_deg, alt_m``.
+    ``cov_e_u``, ``cov_n_u``); with a clock offset [s] (fixes stamped that late),
+    ``corrected_time_s``: when each fix was made; for a GNSS log also ``lat_deg, lon_deg,
+    alt_m``.
     """
     k = log.n_axes
     names = ("east", "north", "up")[:k]
@@ -189,6 +248,8 @@ def estimates_table(log: PositionLog, mean: FloatArray, cov: FloatArray) -> pd.D
     for a in range(k):
         for b in range(a + 1, k):
             cols[f"cov_{names[a][0]}_{names[b][0]}"] = cov[:, a, b]
+    if offset_s:
+        cols["corrected_time_s"] = log.times - offset_s
     if log.origin is not None:
         enu = np.zeros((log.times.size, 3))
         enu[:, :k] = mean[:, :k]
@@ -212,16 +273,18 @@ def fit_toml(fit: MotionFit, measurement: str, source: str) -> str:
         f"log_likelihood = {f.log_likelihood!r}",
         f"converged = {str(f.converged).lower()}",
     ]
-    for name in f.names:
-        lo, hi = f.interval(name)
-        lines += [
-            "",
-            f"[fit.parameters.{name}]",
-            f"value = {f.value(name)!r}",
-            f"std_error = {f.std_error(name)!r}",
-            f"low_95 = {lo!r}",
-            f"high_95 = {hi!r}",
-        ]
+    parts = [("parameters", f)] + ([("clock", fit.clock)] if fit.clock is not None else [])
+    for table, part in parts:
+        for name in part.names:
+            lo, hi = part.interval(name)
+            lines += [
+                "",
+                f"[fit.{table}.{name}]",
+                f"value = {float(part.value(name))!r}",
+                f"std_error = {float(part.std_error(name))!r}",
+                f"low_95 = {float(lo)!r}",
+                f"high_95 = {float(hi)!r}",
+            ]
     return "\n".join(lines) + "\n"
 
 
@@ -252,7 +315,17 @@ def fit_from_toml(data: dict[str, object], where: str) -> tuple[MotionFit, str]:
     if not np.all(np.isfinite(values) & (values > 0)):
         raise ValueError(f"{where}: fit parameters must be positive and finite; got {values}")
     fit = LikelihoodFit(names, values, np.zeros((values.size, values.size)), np.nan, True, "")
-    return MotionFit(str(model), axes, fit), str(measurement)
+    clock = None
+    if "clock" in table:
+        try:
+            offset = float(table["clock"]["offset_s"]["value"])
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ValueError(f"{where}: [fit.clock] needs offset_s.value ({exc})") from None
+        if not np.isfinite(offset):
+            raise ValueError(f"{where}: the clock offset must be finite; got {offset}")
+        clock = LikelihoodFit(("offset_s",), np.array([offset]), np.zeros((1, 1)), np.nan, True,
+                              "", signed=("offset_s",))  # fmt: skip
+    return MotionFit(str(model), axes, fit, clock), str(measurement)
 
 
 __all__ = [
