@@ -198,7 +198,7 @@ def test_the_younger_of_two_tracks_on_one_body_is_dropped_unless_it_is_the_confi
 
     def drop(confirmed):
         return merged_rows(
-            corridor, x, p, spread, static, no, no, ids, confirmed, 1.2, 1.0, 4.0
+            corridor, x, p, spread, static, no, no, ids, confirmed, 1.2, 1.0, 4.0, no
         ).tolist()
 
     assert drop(np.array([True, True, False, True])) == [False, True, True, False]
@@ -282,7 +282,7 @@ def test_two_moving_parts_of_one_long_body_are_one_track_two_cars_are_not():
         x[1, 0] = gap_m
         x[:, 1] = speed
         return merged_rows(
-            corridor, x, p, np.full(2, spread), no, stopped, moved, ids, yes, 1.2, 1.0, 4.0
+            corridor, x, p, np.full(2, spread), no, stopped, moved, ids, yes, 1.2, 1.0, 4.0, no
         ).tolist()
 
     assert drop(4.4, 1.6) == [False, True]  # halves of a 12 m bus, 4.4 m apart: one body
@@ -290,3 +290,30 @@ def test_two_moving_parts_of_one_long_body_are_one_track_two_cars_are_not():
     assert drop(4.4, 1.6, stopped=yes, speed=0.0) == [False, False]  # a stopped queue
     assert drop(4.4, 1.6, speed=3.0) == [False, False]  # creeping traffic
     assert drop(4.4, 1.6, moved=no) == [False, False]  # spreads not learnt yet
+
+
+def test_a_young_static_object_on_a_stopped_bus_is_its_reflection_an_old_one_is_clutter():
+    """A stopped bus (spread 2 m: its body reaches 4 m either side) and a static object 3 m
+    ahead of its centre: dropped while young (the bus's own far end taken for a post), kept
+    once it is learnt clutter, kept 5 m ahead (off the body) or 2 m across."""
+    x = np.zeros((2, 4))
+    x[1, 0] = 3.0
+    p = np.tile(np.eye(4) * 0.01, (2, 1, 1))
+    spread = np.array([2.0, 1.0])
+    static = np.array([False, True])
+    stopped = np.array([True, True])
+    moved = np.array([True, False])
+    ids = np.array([1, 2])
+    corridor = np.zeros(2, np.int64)
+
+    def drop(young, along=3.0, across=0.0):
+        x[1, 0], x[1, 3] = along, across
+        return merged_rows(
+            corridor, x, p, spread, static, stopped, moved, ids, np.ones(2, bool), 1.2, 1.0,
+            4.0, np.array([False, young]),
+        ).tolist()  # fmt: skip
+
+    assert drop(True) == [False, True]
+    assert drop(False) == [False, False]
+    assert drop(True, along=5.0) == [False, False]
+    assert drop(True, across=2.0) == [False, False]

@@ -624,7 +624,7 @@ def open_tracks(  # type: ignore[no-untyped-def]
 @numba.njit(cache=True)
 def merged_rows(  # type: ignore[no-untyped-def]
     corridor, x, p, spread, static, stopped, moved, ids, confirmed, lateral_m, speed_mps,
-    parts_speed,
+    parts_speed, young,
 ):  # fmt: skip
     """Rows to drop: the younger of two tracks on one body (see ``SceneTracker._merge``).
 
@@ -633,13 +633,26 @@ def merged_rows(  # type: ignore[no-untyped-def]
     other, two road users that have moved, faster than ``parts_speed``, whose bodies
     (``BODY_HALF_SPREADS`` spreads either side) overlap are one long body tracked in two parts
     (no one drives into another): the younger goes, and the body's other reflections, on no
-    body now, teach the survivor its length.
+    body now, teach the survivor its length. A ``young`` static object (not yet learnt
+    clutter) within a stopped road user's body (``BODY_HALF_SPREADS`` of its spreads along,
+    ``lateral_m`` across) is that road user's reflection: it goes (a bus stopped with an
+    under-learnt body would otherwise see its far end taken for a post, which then holds
+    half its reflections).
     """
     n = x.shape[0]
     drop = np.zeros(n, dtype=np.bool_)
     for a in range(n):
         for b in range(a + 1, n):
-            if corridor[a] != corridor[b] or static[a] != static[b]:
+            if corridor[a] != corridor[b]:
+                continue
+            if static[a] != static[b]:
+                s, r = (a, b) if static[a] else (b, a)  # the static one, the road user
+                if (
+                    young[s] and stopped[r] and moved[r] and not drop[r]
+                    and abs(x[s, 0] - x[r, 0]) < BODY_HALF_SPREADS * spread[r]
+                    and abs(x[s, 3] - x[r, 3]) < lateral_m
+                ):  # fmt: skip
+                    drop[s] = True
                 continue
             sv = math.sqrt(p[a, 1, 1] + p[b, 1, 1])
             du = abs(x[a, 0] - x[b, 0])

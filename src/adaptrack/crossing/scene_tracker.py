@@ -28,7 +28,8 @@ coasting time or, for a stopped track, by misses in a row: :mod:`adaptrack.track
 open tentative tracks from the detections left over, clustered within ``cluster_radius_m``;
 split a stopped track whose reflections come from two bodies of a queue
 (:meth:`SceneTracker._split`); merge two tracks on one body (two moving parts of one long
-vehicle among them). The per-track arithmetic runs compiled (:mod:`._scene_kernels`).
+vehicle among them; a young static object on a stopped road user's body,
+``absorb_young_static``). The per-track arithmetic runs compiled (:mod:`._scene_kernels`).
 
 Stopped mode: a confirmed track slower than ``stop_speed_mps`` for ``stop_confirm_s`` (a
 speed estimate within ``stop_exit_sigmas`` sigmas above it does not restart the count: the
@@ -127,6 +128,7 @@ class SceneTrackerConfig:
     body_across_std_m: float = 0.5
     body_extent_gate: bool = True  # a detection beyond the body's end along the lane costs more
     occlusion_gate: bool = True  # a track hidden in a queue takes none of its occluder's
+    absorb_young_static: bool = True  # a new static object on a stopped body is its reflection
     gate_probability: float = 0.999
     clutter_gate_probability: float = 0.99  # a static object's own detections (reserved) ...
     clutter_age_s: float = 300.0  # ... once it has stood longer than any closure
@@ -584,10 +586,11 @@ class SceneTracker:
         """
         tr = self.tracks
         cfg = self.config
+        young = tr.time_s - self.book.born_s < cfg.clutter_age_s
         drop = merged_rows(
             tr.corridor, tr.x, tr.p, tr.spread, tr.static, tr.stopped, tr.moved, self.book.ids,
             self.book.confirmed, cfg.merge_lateral_m, cfg.merge_speed_mps,
-            cfg.merge_parts_speed_mps,
+            cfg.merge_parts_speed_mps, young & cfg.absorb_young_static,
         )  # fmt: skip
         self._drop(np.flatnonzero(drop))
 
