@@ -480,9 +480,10 @@ def test_a_car_hidden_behind_a_queued_bus_does_not_creep_onto_the_bus(bus_spread
     car track keeps its place (within 0.5 m after a minute) with the bus's spread learnt
     (3 m) or under-learnt (2 m); without the occlusion gate it creeps onto the bus (the cause
     of the bus's worst hours: development seed 42, where the car track then merged into the
-    bus's). The bus track itself stays within 0.5 m with its spread learnt; with 2 m it
-    drifts about 1.5 m backwards in the minute (not addressed here: a bus queued at the line
-    has learnt its spread on the way)."""
+    bus's). The bus track itself stays within 0.5 m either way; with 2 m its far end's
+    reflections first open a static track, which is its own reflection and goes
+    (``absorb_young_static``; kept, it held the bus's front reflections and the bus track
+    drifted 1.7 m backwards in the minute)."""
     from adaptrack.crossing.scene_tracker import SceneTrackerConfig
 
     config = SceneTrackerConfig(split_kurtosis=0.0, occlusion_gate=occlusion_gate)
@@ -491,9 +492,7 @@ def test_a_car_hidden_behind_a_queued_bus_does_not_creep_onto_the_bus(bus_spread
     if not occlusion_gate:
         assert err[1] > 1.0, err
         return
-    assert err[1] < 0.5, err
-    if bus_spread_m == 3.0:
-        assert err[0] < 0.5, err
+    assert err.max() < 0.5, err
 
 
 @pytest.mark.parametrize("same_object_m", [2.5, 0.0])
