@@ -19,9 +19,9 @@ from rich.table import Table
 
 from . import __version__, cli_fit
 from ._backend import kernels_cached
+from ._cli_errors import check_outputs as _outputs
 from ._cli_errors import err_console
 from ._cli_errors import fail as _fail
-from ._files import check_writable
 from ._progress import progress
 from .analysis.evaluation import Evaluation, evaluate_scenario
 from .analysis.flights import FlightRow, evaluate_flight, smooth_kalman, smooth_lsq
@@ -308,18 +308,6 @@ def _announce_compilation(duration: str, kernel: str = "_radar_kernel.detections
     """Say so on stderr when this run will compile the kernels (an empty numba cache)."""
     if not kernels_cached(kernel):
         err_console.print(FIRST_RUN_NOTE.format(duration=duration), markup=False, highlight=False)
-
-
-def _outputs(*paths: Path | None, folder: Path | None = None) -> None:
-    """Fail before any work if an output cannot be written (a folder as a file, ...)."""
-    try:
-        for p in paths:
-            if p is not None:
-                check_writable(p)
-        if folder is not None:
-            check_writable(folder, folder=True)
-    except ValueError as exc:
-        _fail(str(exc))
 
 
 def _load_site(site: str) -> Site:

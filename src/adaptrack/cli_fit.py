@@ -8,8 +8,7 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
-from ._cli_errors import err_console, fail
-from ._files import check_writable
+from ._cli_errors import check_outputs, err_console, fail
 from ._toml import load_toml
 from .analysis.consistency import innovation_consistency
 from .io.tables import DataFormatError, write_table_atomic, write_text_atomic
@@ -25,13 +24,6 @@ from .tuning.position_log import (
     fit_toml,
     read_position_log,
 )
-
-
-def _writable(path: Path) -> None:
-    try:
-        check_writable(path)
-    except ValueError as exc:
-        fail(str(exc))
 
 
 def _read(path: Path, measurement: str) -> PositionLog:
@@ -65,7 +57,7 @@ def fit(
     out: Path = typer.Option(..., "--out", help="Output TOML (input of `adaptrack filter`)."),
 ) -> None:
     """Fit motion PSD and noise variances to a log by maximum likelihood (no truth needed)."""
-    _writable(out)
+    check_outputs(out)
     if model not in MODELS:
         raise typer.BadParameter(f"--model must be one of {', '.join(MODELS)}")
     log = _read(log_file, measurement)
@@ -96,7 +88,7 @@ def filter_log(
     out: Path = typer.Option(..., "--out", help="Output CSV or Parquet."),
 ) -> None:
     """Filter (or smooth) a log with a fit: estimates with sigmas and covariance at each fix."""
-    _writable(out)
+    check_outputs(out)
     try:
         result: MotionFit
         result, measurement = fit_from_toml(load_toml(config), str(config))

@@ -7,6 +7,7 @@ from scipy.stats import binom
 import adaptrack as at
 from adaptrack.analysis.consistency import innovation_consistency
 from adaptrack.models import ConstantVelocity
+from tests.cv_truth import cv_states
 
 Q, R, DT, N = 0.5, 0.25, 0.1, 500
 MODEL = ConstantVelocity(accel_psd=Q, n_axes=2)
@@ -15,13 +16,7 @@ MODEL = ConstantVelocity(accel_psd=Q, n_axes=2)
 def _track(seed, n=N):
     """Planar CV truth from its own closed form, positions measured with variance R."""
     rng = np.random.default_rng(seed)
-    phi = np.array([[1.0, DT], [0.0, 1.0]])
-    chol = np.linalg.cholesky(Q * np.array([[DT**3 / 3, DT**2 / 2], [DT**2 / 2, DT]]))
-    s, pos = np.array([[0.0, 5.0], [0.0, -2.0]]), np.zeros((n, 2))
-    for k in range(n):
-        for a in range(2):
-            s[a] = phi @ s[a] + chol @ rng.standard_normal(2)
-        pos[k] = s[:, 0]
+    pos = cv_states(rng, [[0.0, 5.0], [0.0, -2.0]], DT, Q, n)[:, :, 0]
     return DT * np.arange(1, n + 1), pos + rng.normal(0.0, np.sqrt(R), (n, 2))
 
 

@@ -4,6 +4,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from tests.cv_truth import cv_states
 from tests.tuning.test_position_log import N, gnss_log
 
 
@@ -79,13 +80,7 @@ def _late_fixes_log(path, late_s=0.12, seed=9):
 
     rng = np.random.default_rng(seed)
     fine, q, n = 0.02, 1.0, 6000  # 120 s
-    phi = np.array([[1.0, fine], [0.0, 1.0]])
-    chol = np.linalg.cholesky(q * np.array([[fine**3 / 3, fine**2 / 2], [fine**2 / 2, fine]]))
-    s, states = np.array([[0.0, 6.0], [0.0, 2.0]]), np.zeros((n, 2, 2))
-    for k in range(n):
-        for a in range(2):
-            s[a] = phi @ s[a] + chol @ rng.standard_normal(2)
-        states[k] = s
+    states = cv_states(rng, [[0.0, 6.0], [0.0, 2.0]], fine, q, n)
     step, shift = 5, round(late_s / fine)  # rows every 0.1 s; fixes made 0.12 s before
     rows = np.arange(shift, n, step)
     pos = states[rows - shift, :, 0] + rng.normal(0.0, 0.3, (rows.size, 2))

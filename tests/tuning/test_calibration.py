@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from adaptrack.tuning.calibration import fit_clock_offset, fit_radar_bias
+from tests.cv_truth import cv_states
 
 DT, N, Q, SIGMA_P, SIGMA_V = 0.1, 600, 2.0, 0.5, 0.2
 
@@ -14,13 +15,7 @@ def two_sources(seed, offset_s, n=N, sigma_p=SIGMA_P, sigma_v=SIGMA_V):
     """A planar constant-velocity truth (its own closed form), fixes stamped ``offset_s`` late;
     ``n`` fixes at 10 Hz with noise ``sigma_p`` [m], velocities with ``sigma_v`` [m/s]."""
     rng = np.random.default_rng(seed)
-    phi = np.array([[1.0, DT], [0.0, 1.0]])
-    chol = np.linalg.cholesky(Q * np.array([[DT**3 / 3, DT**2 / 2], [DT**2 / 2, DT]]))
-    s, states = np.array([[0.0, 8.0], [0.0, 3.0]]), np.zeros((n, 2, 2))
-    for k in range(n):
-        for a in range(2):
-            s[a] = phi @ s[a] + chol @ rng.standard_normal(2)
-        states[k] = s
+    states = cv_states(rng, [[0.0, 8.0], [0.0, 3.0]], DT, Q, n)
     t = DT * np.arange(n)
     pos = states[:, :, 0] + rng.normal(0, sigma_p, (n, 2))
     vel = states[:, :, 1] + rng.normal(0, sigma_v, (n, 2))
@@ -87,13 +82,7 @@ def radar_and_reference(seed, n=1200, q=0.1, range_bias=1.0, azimuth_bias=AZIMUT
     their biases."""
     rng = np.random.default_rng(seed)
     fine, m = 0.025, n * 4
-    phi = np.array([[1.0, fine], [0.0, 1.0]])
-    chol = np.linalg.cholesky(q * np.array([[fine**3 / 3, fine**2 / 2], [fine**2 / 2, fine]]))
-    s, truth = np.array([[-400.0, 7.0], [30.0, 0.0]]), np.zeros((m, 2))
-    for k in range(m):
-        for a in range(2):
-            s[a] = phi @ s[a] + chol @ rng.standard_normal(2)
-        truth[k] = s[:, 0]
+    truth = cv_states(rng, [[-400.0, 7.0], [30.0, 0.0]], fine, q, m)[:, :, 0]
     t = fine * np.arange(m)
     ref, rad = np.arange(0, m, 4), np.arange(1, m, 2)
     site = np.array([0.0, -40.0])

@@ -728,16 +728,6 @@ class SceneTracker:
         )  # fmt: skip
         return out
 
-    def status(self) -> np.ndarray:
-        """Status (TrackStatus values) of every live track."""
-        tr = self.tracks
-        conf = self.book.confirmed
-        coasting = tr.time_s - self.book.last_hit_s > 0.2
-        st = np.where(coasting, int(TrackStatus.COASTING), int(TrackStatus.CONFIRMED))
-        st[~conf] = int(TrackStatus.TENTATIVE)
-        st[conf & tr.stopped] = int(TrackStatus.STOPPED)
-        return st
-
     def snapshot(self, time_s: float) -> _Snapshot:
         """Return the confirmed tracks' states at ``time_s`` (:meth:`rows` before geometry)."""
         tr = self.tracks

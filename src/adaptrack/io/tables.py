@@ -98,6 +98,14 @@ class Flight:
     velocity_enu: FloatArray
 
 
+def ground_velocity(
+    groundspeed_mps: FloatArray, track_rad: FloatArray, vertical_rate_mps: FloatArray | None = None
+) -> FloatArray:
+    """East, north (and up) velocity [m/s] of a ground speed and a track (clockwise from north)."""
+    parts = [groundspeed_mps * np.sin(track_rad), groundspeed_mps * np.cos(track_rad)]
+    return np.stack(parts + ([] if vertical_rate_mps is None else [vertical_rate_mps]), axis=-1)
+
+
 def read_flight_csv(path: str | Path) -> Flight:
     """Read a trajectory in the format of the project's flight data.
 
@@ -126,7 +134,7 @@ def read_flight_csv(path: str | Path) -> Flight:
         if "vertical_rate_mps" in frame.columns
         else np.zeros_like(gs)
     )
-    vel = np.stack([gs * np.sin(trk), gs * np.cos(trk), vr], axis=-1)
+    vel = ground_velocity(gs, trk, vr)
     return Flight(p.stem, t, np.deg2rad(lat), np.deg2rad(lon), alt, vel)
 
 
@@ -134,6 +142,7 @@ __all__ = [
     "DataFormatError",
     "Flight",
     "check_increasing",
+    "ground_velocity",
     "numeric_column",
     "read_flight_csv",
     "read_table",

@@ -200,15 +200,14 @@ def _radar_reference_loglik(  # type: ignore[no-untyped-def]
     h = np.zeros((2, 4))
     nu = np.zeros(2)
     r = np.zeros((2, 2))
+    phi, qd = np.eye(4), np.zeros((4, 4))  # refilled for each step's length
     total = 0.0
     prev = t[0]
     for k in range(t.size):
         dt = t[k] - prev
         prev = t[k]
         if dt > 0.0:
-            phi = np.eye(4)
             phi[0, 2] = phi[1, 3] = dt
-            qd = np.zeros((4, 4))
             for a in range(2):
                 qd[a, a] = q * dt**3 / 3.0
                 qd[a, a + 2] = qd[a + 2, a] = q * dt**2 / 2.0

@@ -21,6 +21,7 @@ from ..filters.run import kalman_filter
 from ..io.tables import (
     DataFormatError,
     check_increasing,
+    ground_velocity,
     numeric_column,
     read_table,
     require_columns,
@@ -111,7 +112,7 @@ def _velocity_reports(
         speed = numeric_column(frame, "groundspeed_mps", path, allow_nan=True)
         track = np.deg2rad(numeric_column(frame, "track_deg", path, allow_nan=True))
         used: tuple[str, ...] = ("groundspeed_mps", "track_deg")
-        parts = [speed * np.sin(track), speed * np.cos(track)]
+        up = None
         if k == 3:
             has_up = "vertical_rate_mps" in frame.columns
             up = (
@@ -119,9 +120,8 @@ def _velocity_reports(
                 if has_up
                 else np.full(speed.size, np.nan)
             )
-            parts.append(up)
             used += ("vertical_rate_mps",) if has_up else ()
-        return np.stack(parts, axis=-1), used
+        return ground_velocity(speed, track, up), used
     return None, ()
 
 
