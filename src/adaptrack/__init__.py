@@ -13,10 +13,12 @@ from .analysis.observability import (
     unobservable_directions,
 )
 from .filters.dead_reckoning import DeadReckoningResult, dead_reckoning_filter
+from .filters.ekf import ekf_filter
 from .filters.kalman import CovarianceError, kalman_step, predict, update
 from .filters.online import OnlineFilter, StreamEstimates
 from .filters.run import kalman_filter
 from .filters.shared_gain import SharedGainResult, shared_gain_filter
+from .filters.ukf import SigmaPoints, ukf_filter
 from .models.discretize import Discretization, control_offset, discretize
 from .smoothers.rts import rts_smooth
 from .types import FilterResult, GaussianState, StepInfo
@@ -31,12 +33,14 @@ __all__ = [
     "GaussianState",
     "OnlineFilter",
     "SharedGainResult",
+    "SigmaPoints",
     "StepInfo",
     "StreamEstimates",
     "__version__",
     "control_offset",
     "dead_reckoning_filter",
     "discretize",
+    "ekf_filter",
     "is_observable",
     "kalman_filter",
     "kalman_step",
@@ -47,6 +51,7 @@ __all__ = [
     "rts_smooth",
     "shared_gain_filter",
     "simulation",
+    "ukf_filter",
     "unobservable_directions",
     "update",
 ]

@@ -143,71 +143,16 @@ def kalman_filter(
     if nan_policy not in ("raise", "missing"):
         raise ValueError(f"nan_policy must be 'raise' or 'missing'; got {nan_policy!r}")
     n = model.state_dim
-    t = as_float_array(times, "times", min_ndim=1)
-    if t.ndim > 2:
-        raise ValueError(f"times must have shape (T,) or (N, T); got {t.shape}")
-    z = as_float_array(measurements, "measurements", min_ndim=2, allow_nan=True)
-    if z.ndim > 3:
-        raise ValueError(f"measurements must have shape (T, m) or (N, T, m); got {z.shape}")
-    batch = z.shape[:-2]
-    n_steps = z.shape[-2]
-    if t.shape not in ((n_steps,), batch + (n_steps,)):
-        raise ValueError(
-            f"times must have shape ({n_steps},) or {batch + (n_steps,)} to match "
-            f"measurements {z.shape}; got {t.shape}"
-        )
-    if n_steps == 0:
-        raise ValueError("measurements must hold at least one time step; got T = 0")
-    check_times(t, "times")
-    m = z.shape[-1]
+    t, z = check_sequence(times, measurements)
+    batch, n_steps, m = z.shape[:-2], z.shape[-2], z.shape[-1]
     h = measurement_matrix_for(measurement_matrix, m, n)
-    r = as_float_array(measurement_cov, "measurement_cov", min_ndim=2)
-    r_per_step = r.shape == batch + (n_steps, m, m) and r.shape != (m, m)
-    if r.shape not in ((m, m), batch + (m, m), batch + (n_steps, m, m)):
-        raise ValueError(
-            f"measurement_cov must have shape ({m}, {m}), {batch + (m, m)} or "
-            f"{batch + (n_steps, m, m)}; got {r.shape}"
-        )
-    check_symmetric_pd(r, "measurement_cov")
-    if initial.dim != n:
-        raise ValueError(
-            f"initial.mean must have shape (..., {n}) to match the model "
-            f"{model.state_names}; got {initial.mean.shape}"
-        )
-    if initial.batch_shape not in ((), batch):
-        raise ValueError(
-            f"initial must have batch shape () or {batch} to match measurements; "
-            f"got {initial.batch_shape}"
-        )
-    check_symmetric_pd(initial.cov, "initial.cov", semidefinite=True)
-    t0 = t[..., 0]
-    late = np.broadcast_to(initial.time, batch) > np.broadcast_to(t0, batch)
-    if np.any(late):
-        idx = tuple(int(i) for i in np.argwhere(late)[0]) if batch else ()
-        raise ValueError(
-            f"initial.time must not be after the first measurement time; track "
-            f"{idx}: {np.broadcast_to(initial.time, batch)[idx]} > "
-            f"{np.broadcast_to(t0, batch)[idx]}"
-        )
+    r, r_per_step = check_measurement_cov(measurement_cov, batch, n_steps, m)
+    check_initial(initial, model, t, batch)
     if measurement_noise_mean is not None:
         mu = as_float_array(measurement_noise_mean, "measurement_noise_mean")
         if mu.shape not in ((), (m,)):
             raise ValueError(f"measurement_noise_mean must have shape ({m},); got {mu.shape}")
-    mk = np.array(_component_mask(mask, z.shape, "mask"))
-    nan = np.isnan(z) & mk
-    if np.any(nan):
-        if nan_policy == "raise":
-            idx = tuple(int(i) for i in np.argwhere(nan)[0])
-            where = (
-                f"track {idx[0]}, step {idx[1]}, component {idx[2]}"
-                if batch
-                else f"step {idx[0]}, component {idx[1]}"
-            )
-            raise ValueError(
-                f"measurements is NaN at {where} where it is marked present; pass "
-                "mask=... or nan_policy='missing' to treat NaN as missing"
-            )
-        mk = mk & ~nan
+    mk = present_mask(mask, z, nan_policy)
     batch = z.shape[:-2]
     n_tracks = int(np.prod(batch, dtype=int))
     compiled = use_compiled(backend, z.size // max(m, 1)) and (
@@ -237,6 +182,90 @@ def kalman_filter(
         return result, worst_joseph_ratio(result)
 
     return auto_form(joseph, lambda: _solve(replace(problem, form="sqrt"), compiled), r)
+
+
+def check_sequence(times: ArrayLike, measurements: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    """Validate times (T,) or (N, T) and measurements (T, m) or (N, T, m) of a filter run."""
+    t = as_float_array(times, "times", min_ndim=1)
+    if t.ndim > 2:
+        raise ValueError(f"times must have shape (T,) or (N, T); got {t.shape}")
+    z = as_float_array(measurements, "measurements", min_ndim=2, allow_nan=True)
+    if z.ndim > 3:
+        raise ValueError(f"measurements must have shape (T, m) or (N, T, m); got {z.shape}")
+    batch = z.shape[:-2]
+    n_steps = z.shape[-2]
+    if t.shape not in ((n_steps,), batch + (n_steps,)):
+        raise ValueError(
+            f"times must have shape ({n_steps},) or {batch + (n_steps,)} to match "
+            f"measurements {z.shape}; got {t.shape}"
+        )
+    if n_steps == 0:
+        raise ValueError("measurements must hold at least one time step; got T = 0")
+    check_times(t, "times")
+    return t, z
+
+
+def check_measurement_cov(
+    value: ArrayLike, batch: tuple[int, ...], n_steps: int, m: int
+) -> tuple[FloatArray, bool]:
+    """Validate ``R``: shared (m, m), per track or per step; return it and whether per step."""
+    r = as_float_array(value, "measurement_cov", min_ndim=2)
+    r_per_step = r.shape == batch + (n_steps, m, m) and r.shape != (m, m)
+    if r.shape not in ((m, m), batch + (m, m), batch + (n_steps, m, m)):
+        raise ValueError(
+            f"measurement_cov must have shape ({m}, {m}), {batch + (m, m)} or "
+            f"{batch + (n_steps, m, m)}; got {r.shape}"
+        )
+    check_symmetric_pd(r, "measurement_cov")
+    return r, r_per_step
+
+
+def check_initial(
+    initial: GaussianState, model: MotionModel, t: FloatArray, batch: tuple[int, ...]
+) -> None:
+    """Check the prior's size, batch shape, covariance and time against the run."""
+    n = model.state_dim
+    if initial.dim != n:
+        raise ValueError(
+            f"initial.mean must have shape (..., {n}) to match the model "
+            f"{model.state_names}; got {initial.mean.shape}"
+        )
+    if initial.batch_shape not in ((), batch):
+        raise ValueError(
+            f"initial must have batch shape () or {batch} to match measurements; "
+            f"got {initial.batch_shape}"
+        )
+    check_symmetric_pd(initial.cov, "initial.cov", semidefinite=True)
+    t0 = t[..., 0]
+    late = np.broadcast_to(initial.time, batch) > np.broadcast_to(t0, batch)
+    if np.any(late):
+        idx = tuple(int(i) for i in np.argwhere(late)[0]) if batch else ()
+        raise ValueError(
+            f"initial.time must not be after the first measurement time; track "
+            f"{idx}: {np.broadcast_to(initial.time, batch)[idx]} > "
+            f"{np.broadcast_to(t0, batch)[idx]}"
+        )
+
+
+def present_mask(mask: ArrayLike | None, z: FloatArray, nan_policy: NanPolicy) -> BoolArray:
+    """Return the components to use (..., T, m): ``mask``, with NaN an error or missing."""
+    batch = z.shape[:-2]
+    mk = np.array(_component_mask(mask, z.shape, "mask"))
+    nan = np.isnan(z) & mk
+    if np.any(nan):
+        if nan_policy == "raise":
+            idx = tuple(int(i) for i in np.argwhere(nan)[0])
+            where = (
+                f"track {idx[0]}, step {idx[1]}, component {idx[2]}"
+                if batch
+                else f"step {idx[0]}, component {idx[1]}"
+            )
+            raise ValueError(
+                f"measurements is NaN at {where} where it is marked present; pass "
+                "mask=... or nan_policy='missing' to treat NaN as missing"
+            )
+        mk = mk & ~nan
+    return mk
 
 
 def auto_form(

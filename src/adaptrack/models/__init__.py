@@ -2,7 +2,9 @@
 
 Models: :class:`ConstantVelocity`, :class:`ConstantAcceleration`, :class:`Singer` (seed 000),
 :class:`InverseDynamics` (M1) and :class:`ShapingFilter` (M2) of seed 001, and a generic
-:class:`LinearSDE`. State order: all positions, then velocities, then higher states.
+:class:`LinearSDE`. Measurement models for the EKF and UKF: :class:`RadarMeasurement`,
+:class:`GeodeticMeasurement`, :class:`PositionMeasurement`, :class:`FunctionMeasurement`.
+State order: all positions, then velocities, then higher states.
 """
 
 from .adaptive import InverseDynamics, ShapingFilter, singer_accel_std
@@ -20,14 +22,26 @@ from .continuous import (
     seed000_permutation,
 )
 from .discretize import Discretization, control_offset, discretize, discretize_with_input
+from .measurement import (
+    FunctionMeasurement,
+    GeodeticMeasurement,
+    MeasurementModel,
+    PositionMeasurement,
+    RadarMeasurement,
+)
 
 __all__ = [
     "ConstantAcceleration",
     "ConstantVelocity",
     "Discretization",
+    "FunctionMeasurement",
+    "GeodeticMeasurement",
     "InverseDynamics",
     "LinearSDE",
+    "MeasurementModel",
     "MotionModel",
+    "PositionMeasurement",
+    "RadarMeasurement",
     "ShapingFilter",
     "Singer",
     "control_offset",

@@ -1,0 +1,115 @@
+"""The time loop shared by the EKF and the UKF: linear prediction, a nonlinear update.
+
+Both filters predict with the exact discretisation of a linear motion model (the unscented
+transform of a linear map is exact, so the UKF loses nothing) and differ only in the
+update; the loop runs every track of the batch at once, each on its own time grid.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from .._typing import ArrayLike, BoolArray, FloatArray
+from ..models.continuous import MotionModel, as_motion_model
+from ..models.discretize import Method, Noise
+from ..models.measurement import MeasurementModel, state_indices
+from ..types import FilterResult, GaussianState, StepInfo, _trusted, as_gaussian_state
+from .kalman import CovarianceError, predict
+from .run import (
+    NanPolicy,
+    _per_track,
+    _Recorder,
+    _transitions,
+    check_initial,
+    check_measurement_cov,
+    check_sequence,
+    present_mask,
+)
+
+Update = Callable[
+    [GaussianState, FloatArray, MeasurementModel, np.ndarray, FloatArray, BoolArray],
+    tuple[GaussianState, StepInfo, FloatArray],
+]
+
+
+def check_measurement_model(value: object) -> MeasurementModel:
+    """Return ``value`` if it implements :class:`~adaptrack.models.MeasurementModel`."""
+    if not isinstance(value, MeasurementModel):
+        raise TypeError(
+            "measurement_model must provide names, reads, angular, noise_cov, predict() and "
+            f"jacobian() (see adaptrack.models.MeasurementModel); got {type(value).__name__}"
+        )
+    return value
+
+
+def run_nonlinear(
+    times: ArrayLike,
+    measurements: ArrayLike,
+    model: MotionModel,
+    measurement_model: MeasurementModel,
+    initial: GaussianState,
+    measurement_cov: ArrayLike | None,
+    mask: ArrayLike | None,
+    nan_policy: NanPolicy,
+    method: Method,
+    noise: Noise,
+    order: int,
+    update: Update,
+) -> FilterResult:
+    """Validate a run's inputs, then predict and ``update`` step by step over the batch."""
+    model = as_motion_model(model)
+    mm = check_measurement_model(measurement_model)
+    initial = as_gaussian_state(initial, "initial")
+    idx = state_indices(mm, model.state_names)
+    t, z = check_sequence(times, measurements)
+    batch, n_steps, m = z.shape[:-2], z.shape[-2], z.shape[-1]
+    if m != len(mm.names):
+        raise ValueError(
+            f"measurements must have {len(mm.names)} components {mm.names} per step; "
+            f"got shape {z.shape}"
+        )
+    r, r_per_step = check_measurement_cov(
+        mm.noise_cov if measurement_cov is None else measurement_cov, batch, n_steps, m
+    )
+    check_initial(initial, model, t, batch)
+    mk = present_mask(mask, z, nan_policy)
+    n = model.state_dim
+    t_init = np.broadcast_to(initial.time, batch)
+    phi, qd, u = _transitions(
+        model, np.broadcast_to(t, batch + (n_steps,)), t_init, method, noise, order
+    )
+    tb, phi_b, qd_b, u_b = _per_track(batch, t, phi, qd, u)
+    out = _Recorder(batch, n_steps, n, m)
+    h_all = np.empty(batch + (n_steps, m, n))
+    x = np.broadcast_to(initial.mean, batch + (n,))
+    p = np.broadcast_to(initial.cov, batch + (n, n))
+    for k in range(n_steps):
+        sv = (slice(None),) * len(batch) + (k,)
+        state = _trusted(GaussianState, mean=x, cov=p, time=tb[sv])
+        prior = predict(state, phi_b[sv], qd_b[sv], time=tb[sv], control=u_b[sv])
+        rk = r[sv] if r_per_step else r
+        try:
+            post, info, h_all[sv] = update(prior, z[sv], mm, idx, rk, mk[sv])
+        except np.linalg.LinAlgError:
+            raise CovarianceError(
+                f"a covariance is not positive definite at step {k}; check the model, "
+                "measurement_cov and the prior"
+            ) from None
+        x, p = post.mean, post.cov
+        out.store(sv, prior.mean, prior.cov, x, p, info)
+    r_b = np.broadcast_to(r, batch + ((n_steps,) if r_per_step else ()) + (m, m))
+    return out.result(tb, phi_b, qd_b, u_b, mk, h_all, r_b)
+
+
+def observed(z: FloatArray, z_pred: FloatArray, mask: BoolArray) -> FloatArray:
+    """Measurements with the missing components replaced by their prediction."""
+    return np.where(mask, z, z_pred)
+
+
+def full_jacobian(part: FloatArray, idx: np.ndarray, n: int) -> FloatArray:
+    """Scatter ``dh/ds`` (..., m, k) over the read states into ``H`` (..., m, n)."""
+    h = np.zeros(part.shape[:-1] + (n,))
+    h[..., idx] = part
+    return h

@@ -1,0 +1,187 @@
+"""EKF and UKF: linear oracle, missing components, consistency, smoothing, bad input."""
+
+import numpy as np
+import pytest
+from scipy import stats
+
+import adaptrack as at
+from adaptrack.filters.ekf import ekf_update_step
+from adaptrack.models import (
+    ConstantAcceleration,
+    ConstantVelocity,
+    FunctionMeasurement,
+    PositionMeasurement,
+    RadarMeasurement,
+)
+from adaptrack.types import GaussianState
+from tests.cv_truth import cv_states
+
+
+def irregular_times(rng, n_tracks, n_steps):
+    return np.cumsum(rng.uniform(0.2, 2.0, (n_tracks, n_steps)), axis=1)
+
+
+@pytest.mark.parametrize("run", [at.ekf_filter, at.ukf_filter])
+def test_linear_measurement_reproduces_the_kalman_filter(run):
+    """With h linear the EKF is the Kalman filter and the unscented transform is exact."""
+    rng = np.random.default_rng(5)
+    model = ConstantAcceleration(jerk_psd=[0.3, 0.1], n_axes=2)
+    t = irregular_times(rng, 3, 40)
+    z = rng.normal(0, 50, (3, 40, 2))
+    mask = rng.random((3, 40, 2)) > 0.2
+    r = np.array([[4.0, 1.0], [1.0, 9.0]])
+    prior = GaussianState(np.zeros(6), np.diag([100, 100, 25, 25, 4, 4.0]), 0.0)
+    ours = run(t, z, model, PositionMeasurement(r), prior, mask=mask)
+    ref = at.kalman_filter(t, z, model, ["x", "y"], r, prior, mask=mask, form="joseph",
+                           backend="numpy")  # fmt: skip
+    tol = 1e-12 if run is at.ekf_filter else 1e-8
+    for a, b in [(ours.filtered.mean, ref.filtered.mean), (ours.filtered.cov, ref.filtered.cov),
+                 (ours.predicted.cov, ref.predicted.cov)]:  # fmt: skip
+        np.testing.assert_allclose(a, b, rtol=tol, atol=tol * np.abs(b).max())
+    np.testing.assert_allclose(ours.log_likelihood, ref.log_likelihood, rtol=tol)
+    np.testing.assert_array_equal(ours.info.n_observed, ref.info.n_observed)
+
+
+def test_a_missing_component_is_the_update_without_it():
+    rng = np.random.default_rng(11)
+    full = RadarMeasurement(noise_cov=[4.0, 1e-6])
+    range_only = RadarMeasurement(noise_cov=[4.0], components=("range",))
+    a = rng.normal(size=(4, 4))
+    prior = GaussianState(
+        np.array([800.0, 1500.0, 10.0, -5.0]), a @ a.T + np.diag([50, 50, 4, 4.0]), 1.0
+    )
+    z = np.array([1700.0, np.nan])
+    idx = np.arange(2)
+    got, info, _ = ekf_update_step(prior, z, full, idx, full.noise_cov, np.array([True, False]))
+    ref, ref_info, _ = ekf_update_step(prior, z[:1], range_only, idx, range_only.noise_cov,
+                                       np.array([True]))  # fmt: skip
+    np.testing.assert_allclose(got.mean, ref.mean, rtol=1e-13)
+    np.testing.assert_allclose(got.cov, ref.cov, rtol=1e-12, atol=1e-12)
+    assert info.log_likelihood == pytest.approx(ref_info.log_likelihood, rel=1e-13)
+    assert info.n_observed == 1
+
+
+def test_azimuth_wraps_when_a_target_passes_due_south():
+    """A target crossing the radar's +-pi azimuth cut keeps a sub-metre track."""
+    rng = np.random.default_rng(3)
+    radar = RadarMeasurement(noise_cov=[1.0, (0.5e-3) ** 2])
+    t = np.arange(0.0, 60.0, 1.0)
+    truth = np.stack([-300.0 + 10.0 * t, np.full_like(t, -3000.0)], -1)
+    z = radar.predict(truth) + rng.normal(0, 1, (60, 2)) * [1.0, 0.5e-3]
+    assert np.any(z[:, 1] > 3.0) and np.any(z[:, 1] < -3.0)
+    prior = GaussianState([-300.0, -3000.0, 0.0, 0.0], np.diag([100, 100, 400, 400.0]), 0.0)
+    model = ConstantVelocity(0.01, n_axes=2)
+    for run in (at.ekf_filter, at.ukf_filter):
+        res = run(t, z, model, radar, prior)
+        err = np.linalg.norm(res.filtered.mean[10:, :2] - truth[10:], axis=-1)
+        assert err.max() < 3.0, run.__name__
+        assert np.all(np.abs(res.info.innovation[:, 1]) < 0.01)
+
+
+def simulate_radar_runs(rng, n_runs, n_steps, radar, q, start):
+    """CV truth (own closed form) and 3-D radar measurements, irregular steps, per run."""
+    t = np.cumsum(rng.uniform(0.5, 1.5, (n_runs, n_steps)), axis=1)
+    states = np.empty((n_runs, n_steps, 6))
+    for i in range(n_runs):
+        s = np.array(start, dtype=float)
+        dt = np.diff(t[i], prepend=0.0)
+        for k in range(n_steps):
+            s = cv_states(rng, s, dt[k], q, 1)[0]
+            states[i, k] = np.concatenate([s[:, 0], s[:, 1]])
+    noise = rng.multivariate_normal(np.zeros(4), radar.noise_cov, (n_runs, n_steps))
+    return t, states, radar.predict(states) + noise
+
+
+@pytest.mark.statistical
+@pytest.mark.parametrize("run", [at.ekf_filter, at.ukf_filter])
+def test_filters_are_consistent_on_a_3d_radar_with_range_rate(run):
+    """Average NEES over 200 runs inside its two-sided 99.9 % chi-square band.
+
+    Truth: CV drawn from its own closed form; radar 8-15 km away, 1 mrad angles, so the
+    linearisation error is far below the noise. At each of the last 20 steps the summed
+    NEES of 200 runs is chi-square(1200) under consistency; one band per filter and step,
+    Bonferroni over 20 steps (false-failure probability below 2 %).
+    """
+    rng = np.random.default_rng(1127)
+    radar = RadarMeasurement(
+        noise_cov=np.diag([25.0, 1e-6, 1e-6, 0.25]),
+        components=("range", "azimuth", "elevation", "range_rate"), n_axes=3,
+        sensor_position=[0.0, 0.0, 10.0],
+    )  # fmt: skip
+    q = 0.5
+    start = [[8000.0, -60.0], [9000.0, 40.0], [3000.0, 0.0]]
+    t, states, z = simulate_radar_runs(rng, 200, 40, radar, q, start)
+    prior = GaussianState(
+        states[:, 0] + rng.normal(0, 1, (200, 6)) * [30, 30, 30, 20, 20, 5],
+        np.broadcast_to(np.diag([900.0, 900, 900, 400, 400, 25]), (200, 6, 6)), t[:, 0],
+    )  # fmt: skip
+    res = run(t, z, ConstantVelocity(q, n_axes=3), radar, prior)
+    err = res.filtered.mean - states
+    whitened = np.linalg.solve(res.filtered.cov, err[..., None])[..., 0]
+    nees = np.einsum("...i,...i->...", err, whitened)
+    total = nees[:, -20:].sum(axis=0)
+    alpha = 1e-3 / 20
+    lo, hi = stats.chi2.ppf([alpha / 2, 1 - alpha / 2], 200 * 6)
+    assert np.all((total > lo) & (total < hi)), (total.min(), total.max(), lo, hi)
+
+
+def test_ekf_result_smooths_and_the_smoother_helps():
+    rng = np.random.default_rng(8)
+    radar = RadarMeasurement(noise_cov=np.diag([25.0, 1e-6, 1e-6, 0.25]),
+                             components=("range", "azimuth", "elevation", "range_rate"),
+                             n_axes=3)  # fmt: skip
+    t, states, z = simulate_radar_runs(
+        rng, 30, 60, radar, 0.5, [[8000.0, -60.0], [9000.0, 40.0], [3000.0, 0.0]]
+    )
+    cov0 = np.broadcast_to(np.diag([900.0, 900, 900, 400, 400, 25]), (30, 6, 6))
+    prior = GaussianState(states[:, 0], cov0, t[:, 0])
+    res = at.ekf_filter(t, z, ConstantVelocity(0.5, n_axes=3), radar, prior)
+    smooth = at.rts_smooth(res)
+    filt_rms = np.sqrt(np.mean((res.filtered.mean[:, :, :3] - states[:, :, :3]) ** 2))
+    smooth_rms = np.sqrt(np.mean((smooth.mean[:, :, :3] - states[:, :, :3]) ** 2))
+    assert smooth_rms < 0.8 * filt_rms
+    assert np.all(np.linalg.eigvalsh(res.filtered.cov - smooth.cov) > -1e-6)
+
+
+def test_user_function_without_jacobian_runs_in_both_filters():
+    rng = np.random.default_rng(2)
+    radar = RadarMeasurement(noise_cov=[4.0, 1e-6])
+    user = FunctionMeasurement(radar.predict, radar.reads, radar.names, radar.noise_cov,
+                               angular=radar.angular)  # fmt: skip
+    t = np.arange(20.0)
+    truth = np.stack([2000.0 + 5 * t, 1000.0 - 3 * t], -1)
+    z = radar.predict(truth) + rng.normal(0, 1, (20, 2)) * [2.0, 1e-3]
+    prior = GaussianState([2000.0, 1000.0, 0.0, 0.0], np.diag([100, 100, 100, 100.0]), 0.0)
+    model = ConstantVelocity(0.1, n_axes=2)
+    for run in (at.ekf_filter, at.ukf_filter):
+        a = run(t, z, model, radar, prior)
+        b = run(t, z, model, user, prior)
+        np.testing.assert_allclose(b.filtered.mean, a.filtered.mean, rtol=1e-7)
+
+
+def test_bad_input_is_named():
+    radar = RadarMeasurement(noise_cov=[4.0, 1e-6])
+    model = ConstantVelocity(0.1, n_axes=2)
+    prior = GaussianState([100.0, 100.0, 0.0, 0.0], np.eye(4), 0.0)
+    t = np.arange(3.0)
+    z = np.full((3, 2), 100.0)
+    with pytest.raises(ValueError, match="2 components"):
+        at.ekf_filter(t, z[:, :1], model, radar, prior)
+    with pytest.raises(ValueError, match="strictly increasing"):
+        at.ekf_filter(t[::-1], z, model, radar, prior)
+    bad = z.copy()
+    bad[1, 1] = np.nan
+    with pytest.raises(ValueError, match="NaN at step 1, component 1"):
+        at.ukf_filter(t, bad, model, radar, prior)
+    res = at.ukf_filter(t, bad, model, radar, prior, nan_policy="missing")
+    assert res.info.n_observed.tolist() == [2, 1, 2]
+    with pytest.raises(ValueError, match=r"reads state\(s\) \['z'\]"):
+        at.ekf_filter(t, np.zeros((3, 3)), model,
+                      RadarMeasurement([1, 1, 1], ("range", "azimuth", "elevation"), n_axes=3),
+                      prior)  # fmt: skip
+    with pytest.raises(TypeError, match="measurement_model must provide"):
+        at.ekf_filter(t, z, model, [[1.0, 0.0, 0.0, 0.0]], prior)
+    with pytest.raises(ValueError, match="measurement_cov"):
+        at.ekf_filter(t, z, model, radar, prior, measurement_cov=-np.eye(2))
+    with pytest.raises(ValueError, match="form must be"):
+        at.ekf_filter(t, z, model, radar, prior, form="sqrt")
