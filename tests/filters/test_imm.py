@@ -351,3 +351,137 @@ def test_switching_rates_bad_input(rng, kwargs, message):
     priors = [at.GaussianState([0.0, 0.0], 100 * np.eye(2), t[0])] * 2
     with pytest.raises(ValueError, match=message):
         imm_filter(t, z[0], models, ("x",), [[4.0]], priors, initial_probs=[0.5, 0.5], **kwargs)
+
+
+def test_imm_with_a_linear_measurement_model_is_the_linear_imm(rng):
+    """IMM-EKF and IMM-UKF with h linear: the linear IMM (models of different sizes)."""
+    from adaptrack.models import PositionMeasurement
+
+    t = np.cumsum(rng.uniform(0.5, 1.5, 40))
+    z = rng.normal(0, 20, (2, 40, 2)) + np.stack([30 * t, 0.5 * t**2], -1)
+    models = [ConstantVelocity(1.0, n_axes=2), ConstantAcceleration(0.5, n_axes=2)]
+    priors = [
+        at.GaussianState(np.c_[z[:, 0], np.zeros((2, 2))],
+                         np.broadcast_to(np.diag([400.0, 400, 900, 900]), (2, 4, 4)), t[0]),
+        at.GaussianState(np.c_[z[:, 0], np.zeros((2, 4))],
+                         np.broadcast_to(np.diag([400.0, 400, 900, 900, 25, 25]), (2, 6, 6)),
+                         t[0]),
+    ]  # fmt: skip
+    r = np.array([[400.0, 50.0], [50.0, 300.0]])
+    rates = [[-0.05, 0.05], [0.1, -0.1]]
+    ref = imm_filter(t, z, models, ("x", "y"), r, priors, initial_probs=[0.7, 0.3],
+                     switching_rates=rates, form="joseph", backend="numpy")  # fmt: skip
+    for kind in ("ekf", "ukf"):
+        res = imm_filter(t, z, models, PositionMeasurement(r), None, priors,
+                         initial_probs=[0.7, 0.3], switching_rates=rates,
+                         nonlinear=kind)  # fmt: skip
+        tol = 1e-10 if kind == "ekf" else 1e-7
+        np.testing.assert_allclose(res.filtered.mean, ref.filtered.mean, rtol=tol, atol=tol)
+        np.testing.assert_allclose(res.mode_probabilities, ref.mode_probabilities, atol=tol)
+        np.testing.assert_allclose(res.log_likelihood, ref.log_likelihood, rtol=tol)
+
+
+@pytest.mark.crosscheck
+def test_imm_ekf_matches_filterpy_imm_of_extended_filters(rng):
+    """Two CV radar EKFs (quiet and agile) in FilterPy's IMMEstimator, identical inputs."""
+    from filterpy.common import Q_continuous_white_noise
+    from filterpy.kalman import ExtendedKalmanFilter
+
+    from adaptrack.models import RadarMeasurement
+
+    radar = RadarMeasurement(noise_cov=np.diag([25.0, 4e-6]))
+    dt, n = 1.0, 60
+    t = dt * np.arange(n)
+    turn = np.where(t > 30, (t - 30) ** 2 * 0.8, 0.0)
+    truth = np.stack([3000.0 + 80 * t, 6000.0 - 20 * t + turn], -1)
+    z = radar.predict(truth) + rng.normal(size=(n, 2)) * [5.0, 2e-3]
+    qs = (0.1, 30.0)
+    models = [ConstantVelocity(q, n_axes=2) for q in qs]
+    pi = np.array([[0.95, 0.05], [0.1, 0.9]])
+    mu0 = np.array([0.8, 0.2])
+    prior = at.GaussianState([3000.0, 6000.0, 70.0, -10.0], np.diag([400.0, 400, 400, 400]), 0.0)
+    res = imm_filter(t, z, models, radar, None, [prior, prior], pi, mu0 @ pi)
+    perm, inv = [0, 2, 1, 3], np.argsort([0, 2, 1, 3])
+
+    def wrapped(a, b):
+        return np.r_[a[0] - b[0], (a[1] - b[1] + np.pi) % (2 * np.pi) - np.pi]
+
+    class RadarEKF(ExtendedKalmanFilter):
+        def predict(self, u=None):  # IMMEstimator passes u=None, which EKF.predict cannot take
+            super().predict(0)
+
+        def update(self, z):
+            super().update(
+                z, lambda x: radar.jacobian(x[inv][:2]) @ np.eye(4)[:2][:, perm],
+                lambda x: radar.predict(x[inv]),
+                residual=wrapped,
+            )  # fmt: skip
+
+    filters = []
+    for q in qs:
+        f = RadarEKF(dim_x=4, dim_z=2)
+        f.F = np.kron(np.eye(2), [[1.0, dt], [0.0, 1.0]])
+        f.Q = Q_continuous_white_noise(2, dt, q, block_size=2)
+        f.R = radar.noise_cov.copy()
+        f.x, f.P = prior.mean[perm].copy(), prior.cov[np.ix_(perm, perm)].copy()
+        filters.append(f)
+    imm = IMMEstimator(filters, mu0.copy(), pi.copy())
+    for k in range(n):
+        if k:
+            imm.predict()
+        imm.update(z[k].copy())
+        np.testing.assert_allclose(res.filtered.mean[k], imm.x[inv], rtol=1e-9, atol=1e-7)
+        np.testing.assert_allclose(res.mode_probabilities[k], imm.mu, atol=1e-9)
+
+
+@pytest.mark.statistical
+@pytest.mark.crosscheck
+def test_mixing_of_cv_and_ca_is_at_least_as_good_as_filterpy_with_a_padded_cv():
+    """CV (2 states) + CA (3 states) against FilterPy's IMMEstimator, whose CV is padded to
+    three states (acceleration held at zero), on identical parameters and measurements.
+
+    Manoeuvring 1-D truths (three acceleration bursts of 5-15 s), 60 seeded runs. The test
+    fails if our mean squared position error exceeds FilterPy's by more than 3 standard
+    errors of the paired difference (false failure below 0.2 % if they were equal; measured:
+    ours 0.2-0.4 % lower in RMSE on three seeds).
+    """
+    from filterpy.kalman import IMMEstimator, KalmanFilter
+
+    rng = np.random.default_rng(27)
+    dt, n, runs, r = 1.0, 150, 60, 100.0
+    cv, ca = ConstantVelocity(0.05), ConstantAcceleration(1.0)
+    pi, mu0 = np.array([[0.95, 0.05], [0.05, 0.95]]), np.array([0.5, 0.5])
+    t = dt * np.arange(n)
+    f_cv, q_cv = np.zeros((3, 3)), np.zeros((3, 3))
+    f_cv[:2, :2], q_cv[:2, :2] = discretize(cv, dt)
+    f_ca, q_ca = discretize(ca, dt)
+    diff = []
+    for _ in range(runs):
+        acc = np.zeros(n)
+        for s in rng.choice(n - 20, 3, replace=False):
+            acc[s : s + rng.integers(5, 15)] = rng.normal(0, 4)
+        x = np.cumsum(np.cumsum(acc) * dt + 50.0) * dt
+        z = x + rng.normal(0, 10, n)
+        p_cv = at.GaussianState([z[0], 50.0], np.diag([100.0, 400.0]), t[0])
+        p_ca = at.GaussianState([z[0], 50.0, 0.0], np.diag([100.0, 400.0, 25.0]), t[0])
+        ours = imm_filter(t, z[:, None], [cv, ca], ("x",), [[r]], [p_cv, p_ca], pi, mu0 @ pi)
+        filters = []
+        for f, q, p0 in ((f_cv, q_cv, [100.0, 400.0, 0.0]), (f_ca, q_ca, [100.0, 400.0, 25.0])):
+            kf = KalmanFilter(dim_x=3, dim_z=1)
+            kf.F, kf.Q, kf.H, kf.R = f, q, np.array([[1.0, 0.0, 0.0]]), np.array([[r]])
+            kf.x, kf.P = np.array([z[0], 50.0, 0.0]), np.diag(p0)
+            filters.append(kf)
+        imm = IMMEstimator(filters, mu0.copy(), pi.copy())
+        theirs = []
+        for k in range(n):
+            if k:
+                imm.predict()
+            imm.update(z[k : k + 1])
+            theirs.append(imm.x[0])
+        warm = slice(20, None)
+        diff.append(
+            np.mean((ours.filtered.mean[warm, 0] - x[warm]) ** 2)
+            - np.mean((np.array(theirs)[warm] - x[warm]) ** 2)
+        )
+    diff = np.array(diff)
+    assert diff.mean() < 3 * diff.std(ddof=1) / np.sqrt(runs)

@@ -26,7 +26,9 @@ from .._typing import ArrayLike, FloatArray
 from .._validation import as_float_array, check_symmetric_pd, check_times
 from ..models.continuous import MotionModel, as_motion_model
 from ..models.discretize import Method, Noise, discretize_with_input
+from ..models.measurement import MeasurementModel, state_indices
 from ..types import GaussianState, _trusted
+from .ekf import ekf_update_step
 from .kalman import (
     CovarianceError,
     _component_mask,
@@ -35,8 +37,10 @@ from .kalman import (
 )
 from .run import auto_form
 from .square_root import covariance, lower_factor, sqrt_predict, sqrt_update, triangularize
+from .ukf import SigmaPoints, ukf_update_step
 
 IMMForm = Literal["auto", "joseph", "standard", "sqrt"]
+NonlinearUpdate = Literal["ekf", "ukf"]
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -75,13 +79,14 @@ def imm_filter(
     times: ArrayLike,
     measurements: ArrayLike,
     models: Sequence[MotionModel],
-    measured_states: Sequence[str],
-    measurement_cov: ArrayLike,
+    measured_states: Sequence[str] | MeasurementModel,
+    measurement_cov: ArrayLike | None,
     initial: Sequence[GaussianState],
     transition_probs: ArrayLike | None = None,
     initial_probs: ArrayLike | None = None,
     *,
     switching_rates: ArrayLike | None = None,
+    nonlinear: NonlinearUpdate = "ekf",
     mask: ArrayLike | None = None,
     method: Method = "expm",
     noise: Noise = "white",
@@ -98,10 +103,14 @@ def imm_filter(
         Measured values of ``measured_states`` (in that order).
     models : sequence of MotionModel, length M
         Each must have every state in ``measured_states``.
-    measured_states : sequence of str, length m
-        Names of the measured states, e.g. ``("x", "y")``.
-    measurement_cov : array_like, shape (m, m) or (..., T, m, m)
-        Measurement noise covariance, shared or per step.
+    measured_states : sequence of str, length m, or MeasurementModel
+        Names of the measured states, e.g. ``("x", "y")``; or a nonlinear measurement model
+        (e.g. :class:`~adaptrack.models.RadarMeasurement`), which every model's update
+        linearises at its own prediction (IMM-EKF) or passes its own sigma points through
+        (IMM-UKF, ``nonlinear="ukf"``). Each model must have the states the model reads.
+    measurement_cov : array_like, shape (m, m) or (..., T, m, m), or None
+        Measurement noise covariance, shared or per step; None: the measurement model's
+        ``noise_cov``.
     initial : sequence of GaussianState, length M
         Prior of each model at the first measurement time (or earlier).
     transition_probs : array_like, shape (M, M), optional
@@ -115,6 +124,8 @@ def imm_filter(
         (``L[i, j] >= 0`` the rate of switching from model i to j, rows summing to 0); each
         step of length ``dt`` switches with ``expm(L dt)``. Exactly one of
         ``transition_probs`` and ``switching_rates`` is given.
+    nonlinear : {"ekf", "ukf"}
+        Update of every model with a measurement model (ignored for ``measured_states``).
     mask : array_like of bool, shape (..., T) or (..., T, m), optional
         True where a measurement (component) is present.
     method, noise : discretisation options.
@@ -140,11 +151,14 @@ def imm_filter(
     if n_models == 0:
         raise ValueError("models must hold at least one model")
     names = [m.state_names for m in models]
-    measured = tuple(measured_states)
+    mm = measured_states if isinstance(measured_states, MeasurementModel) else None
+    measured = tuple(measured_states) if mm is None else mm.names  # type: ignore[arg-type]
     for i, nm in enumerate(names):
-        missing = [s for s in measured if s not in nm]
+        missing = [s for s in (measured if mm is None else mm.reads) if s not in nm]
         if missing:
             raise ValueError(f"models[{i}] has no state(s) {missing}; its states are {nm}")
+    if nonlinear not in ("ekf", "ukf"):
+        raise ValueError(f"nonlinear must be 'ekf' or 'ukf'; got {nonlinear!r}")
     t = as_float_array(times, "times", min_ndim=1)
     z = as_float_array(measurements, "measurements", min_ndim=2, allow_nan=True)
     batch, n_steps, m = z.shape[:-2], z.shape[-2], z.shape[-1]
@@ -154,7 +168,13 @@ def imm_filter(
             f"match measured_states; got {z.shape} and {t.shape}"
         )
     check_times(t, "times")
-    r = as_float_array(measurement_cov, "measurement_cov", min_ndim=2)
+    if measurement_cov is None and mm is None:
+        raise ValueError("measurement_cov is required with measured_states")
+    r = as_float_array(
+        mm.noise_cov if measurement_cov is None else measurement_cov,  # type: ignore[union-attr]
+        "measurement_cov",
+        min_ndim=2,
+    )
     if r.shape not in ((m, m), batch + (n_steps, m, m)):
         raise ValueError(
             f"measurement_cov must have shape ({m}, {m}) or "
@@ -204,10 +224,16 @@ def imm_filter(
         pis, step_pi = pi[None], np.zeros(dt.shape, dtype=np.int64)
     else:
         pis, step_pi = _switching_probs(rates, dt)
-    run = _imm_compiled if use_compiled(backend, z.size // m) else _imm_numpy
+    compiled = mm is None and use_compiled(backend, z.size // m)
+    run = _imm_compiled if compiled else _imm_numpy
     problem = _Problem(
-        tb, dt, z, mk, models, measured, r, initial, pis, step_pi, mu0, method, noise
-    )
+        tb, dt, z, mk, models, measured, r, initial, pis, step_pi, mu0, method, noise,
+        None if mm is None else (mm, nonlinear),
+    )  # fmt: skip
+    if mm is not None:
+        if form not in ("auto", "joseph"):
+            raise ValueError("with a measurement model the IMM updates in Joseph form")
+        return run(problem, "joseph")[0]
     if form != "auto":
         return run(problem, form)[0]
     return auto_form(lambda: run(problem, "joseph"), lambda: run(problem, "sqrt")[0], r)
@@ -263,6 +289,7 @@ class _Problem:
     mu0: FloatArray
     method: Method
     noise: Noise
+    nonlinear: tuple[MeasurementModel, NonlinearUpdate] | None = None
 
 
 def _imm_numpy(problem: _Problem, form: str) -> tuple[IMMResult, float]:
@@ -282,10 +309,14 @@ def _imm_numpy(problem: _Problem, form: str) -> tuple[IMMResult, float]:
     worst = 0.0
     disc = [discretize_with_input(mdl, dt, method, noise=noise) for mdl in models]
     noise_factors = [lower_factor(d[1]) if form == "sqrt" else None for d in disc]
-    hs = [
-        np.eye(mdl.state_dim)[[nm.index(s) for s in measured]]
-        for mdl, nm in zip(models, names, strict=True)
-    ]
+    nonlinear = problem.nonlinear
+    if nonlinear is None:
+        hs = [
+            np.eye(mdl.state_dim)[[nm.index(s) for s in measured]]
+            for mdl, nm in zip(models, names, strict=True)
+        ]
+    else:
+        reads = [state_indices(nonlinear[0], nm) for nm in names]
     out_names = tuple(s for s in names[0] if all(s in nm for nm in names))
     out_idx = [[nm.index(s) for s in out_names] for nm in names]
     emb = [[_embed(names[i], names[j]) for j in range(n_models)] for i in range(n_models)]
@@ -332,7 +363,16 @@ def _imm_numpy(problem: _Problem, form: str) -> tuple[IMMResult, float]:
             else:
                 prior = predict(mixed[j], phi, qd, time=tb[..., k], control=u)
                 try:
-                    states[j], info = _update(prior, zk, hs[j], rk, mask_k, form)
+                    if nonlinear is None:
+                        states[j], info = _update(prior, zk, hs[j], rk, mask_k, form)
+                    elif nonlinear[1] == "ekf":
+                        states[j], info, _ = ekf_update_step(
+                            prior, zk, nonlinear[0], reads[j], rk, mask_k
+                        )
+                    else:
+                        states[j], info, _ = ukf_update_step(
+                            prior, zk, nonlinear[0], reads[j], rk, mask_k, SigmaPoints()
+                        )
                 except np.linalg.LinAlgError:
                     raise _indefinite(k) from None
                 s_obs = np.einsum("...aa,...a->...", info.innovation_cov, mask_k)
