@@ -7,7 +7,13 @@ Models may have different states (e.g. constant velocity ``x, vx``, constant acc
 ``x, vx, ax`` and M2 ``x, vx, xi_x``). States are matched by name. When mixing into model j,
 a component i contributes its own values for the states it shares with j; the states of j
 that i lacks are taken from model j's own estimate (mean and covariance block, uncorrelated
-with i's states). The combined output covers the states common to all models.
+with i's states). The combined output covers the states common to all models. Against
+FilterPy's ``IMMEstimator`` with its CV padded to the CA state (acceleration held at zero)
+this mixing is as good or slightly better on identical parameters (a seeded test in
+``tests/filters/test_imm.py``).
+
+The measurement may be linear (named measured states) or a measurement model such as a
+radar's: then every model updates as an EKF linearised at its own prediction, or as a UKF.
 """
 
 from __future__ import annotations
