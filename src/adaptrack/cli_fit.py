@@ -1,4 +1,4 @@
-"""The ``adaptrack fit`` and ``adaptrack filter`` commands: a recorded position log, no truth."""
+"""The ``adaptrack fit`` and ``adaptrack filter`` commands: a recorded log, no truth."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from .analysis.consistency import innovation_consistency
 from .io.tables import DataFormatError, write_table_atomic, write_text_atomic
 from .smoothers import rts_smooth
 from .tuning.position_log import (
-    MEASUREMENTS,
+    ALL_MEASUREMENTS,
     MODELS,
     MotionFit,
     PositionLog,
@@ -24,14 +24,19 @@ from .tuning.position_log import (
     fit_toml,
     read_position_log,
 )
+from .tuning.radar_log import RADAR_LAYOUTS, RadarLog, read_radar_log
 
 
-def _read(path: Path, measurement: str) -> PositionLog:
+def _read(path: Path, measurement: str) -> PositionLog | RadarLog:
     """Read the log (errors as one line); say which of its columns are not used."""
-    if measurement not in MEASUREMENTS:
-        raise typer.BadParameter(f"--measurement must be one of {', '.join(MEASUREMENTS)}")
+    if measurement not in ALL_MEASUREMENTS:
+        raise typer.BadParameter(f"--measurement must be one of {', '.join(ALL_MEASUREMENTS)}")
     try:
-        log = read_position_log(path, measurement)  # type: ignore[arg-type]
+        log: PositionLog | RadarLog = (
+            read_radar_log(path, measurement)  # type: ignore[arg-type]
+            if measurement in RADAR_LAYOUTS
+            else read_position_log(path, measurement)  # type: ignore[arg-type]
+        )
     except (DataFormatError, ValueError, OSError) as exc:
         fail(str(exc))
     if log.unused:
@@ -44,8 +49,9 @@ def fit(
     measurement: str = typer.Option(
         ...,
         "--measurement",
-        help="gnss (time_s, lat_deg, lon_deg[, alt_m]) or position "
-        "(time_s, east_m, north_m[, up_m]); t_s is taken for time_s.",
+        help="gnss (time_s, lat_deg, lon_deg[, alt_m]), position "
+        "(time_s, east_m, north_m[, up_m]), radar2d (time_s, range_m, azimuth_deg"
+        "[, range_rate_mps]) or radar3d (with elevation_deg); t_s is taken for time_s.",
     ),
     model: str = typer.Option("cv", "--model", help="cv (white acceleration) or ca (jerk)."),
     clock_offset: bool = typer.Option(
@@ -56,7 +62,11 @@ def fit(
     ),
     out: Path = typer.Option(..., "--out", help="Output TOML (input of `adaptrack filter`)."),
 ) -> None:
-    """Fit motion PSD and noise variances to a log by maximum likelihood (no truth needed)."""
+    """Fit motion PSD and noise variances to a log by maximum likelihood (no truth needed).
+
+    A radar plot list is one target's plots in the radar's frame (EKF; estimates in metres
+    east and north of the antenna).
+    """
     check_outputs(out)
     if model not in MODELS:
         raise typer.BadParameter(f"--model must be one of {', '.join(MODELS)}")

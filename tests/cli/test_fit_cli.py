@@ -123,3 +123,49 @@ def test_a_clock_offset_needs_velocity_reports(tmp_path, cli):
         tmp_path / "fit.toml",
     )  # fmt: skip
     assert code == 1 and "needs the log's velocity reports" in err, err
+
+
+def test_fit_and_filter_a_radar_plot_list(tmp_path, cli):
+    """`fit --measurement radar3d` then `filter --smooth`: metres east/north/up of the radar,
+    closer to the truth than the plots themselves."""
+    from tests.tuning.test_radar_log import radar_plot_list
+
+    truth = radar_plot_list(tmp_path / "plots.csv", seed=4, n=200)
+    code, out, err = cli(
+        "fit", tmp_path / "plots.csv", "--measurement", "radar3d", "--out", tmp_path / "fit.toml"
+    )
+    assert code == 0, err
+    assert "r_range_rate" in out and "columns not used: snr_db" in err
+    code, out, err = cli(
+        "filter", tmp_path / "plots.csv", "--config", tmp_path / "fit.toml", "--smooth", "--out",
+        tmp_path / "est.csv",
+    )  # fmt: skip
+    assert code == 0, err
+    assert "innovations: mean NIS" in out
+    est = pd.read_csv(tmp_path / "est.csv")
+    assert {"east_m", "north_m", "up_m", "velocity_east_mps", "cov_e_n"} <= set(est.columns)
+    plots = pd.read_csv(tmp_path / "plots.csv")
+    az, el = np.radians(plots.azimuth_deg), np.radians(plots.elevation_deg)
+    raw = (
+        plots.range_m.to_numpy()[:, None]
+        * np.c_[np.cos(el) * np.sin(az), np.cos(el) * np.cos(az), np.sin(el)]
+    )
+    est_pos = est[["east_m", "north_m", "up_m"]].to_numpy()
+    err_est = np.sqrt(np.mean(np.sum((est_pos - truth[:, :3]) ** 2, axis=1)))
+    err_raw = np.sqrt(np.mean(np.sum((raw - truth[:, :3]) ** 2, axis=1)))
+    assert err_est < 0.6 * err_raw, (err_est, err_raw)
+    pd.read_csv(tmp_path / "plots.csv").drop(columns="range_rate_mps").to_csv(
+        tmp_path / "no_rate.csv", index=False
+    )
+    code, _, err = cli(
+        "filter", tmp_path / "no_rate.csv", "--config", tmp_path / "fit.toml", "--out",
+        tmp_path / "e2.csv",
+    )  # fmt: skip
+    assert code == 0, err  # a fit with range-rate filters plots without it
+    pd.read_csv(tmp_path / "plots.csv").drop(columns="elevation_deg").to_csv(
+        tmp_path / "flat.csv", index=False
+    )
+    code, _, err = cli(
+        "fit", tmp_path / "flat.csv", "--measurement", "radar3d", "--out", tmp_path / "f2.toml"
+    )
+    assert code == 1 and "elevation_deg" in err and len(err.strip().splitlines()) == 1, err

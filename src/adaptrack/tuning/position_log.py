@@ -1,9 +1,11 @@
-"""A recorded position log (GNSS or local): read it, fit its motion and noise, filter it.
+"""A recorded log (GNSS, local positions, radar plots): read, fit motion and noise, filter.
 
 Truth-free: the motion model's PSD and the measurement noise variances are the maximum of the
 innovations' log-likelihood (:func:`adaptrack.tuning.fit_by_likelihood`), separately for the
 horizontal axes and the vertical one. GNSS fixes are filtered in a local east-north-up frame
-at the log's first fix and converted back to latitude, longitude and altitude.
+at the log's first fix and converted back to latitude, longitude and altitude; radar plot
+lists (:mod:`adaptrack.tuning.radar_log`) with an EKF in the radar's frame, one noise
+variance per measured component.
 """
 
 from __future__ import annotations
@@ -31,10 +33,12 @@ from ..smoothers import rts_smooth
 from ..types import FilterResult, GaussianState
 from .calibration import fit_clock_offset
 from .likelihood import LikelihoodFit, fit_by_likelihood
+from .radar_log import RADAR_LAYOUTS, RadarLog, radar_parameters, run_radar
 
 Measurement = Literal["gnss", "position"]
 Model = Literal["cv", "ca"]
 MEASUREMENTS: tuple[str, ...] = ("gnss", "position")
+ALL_MEASUREMENTS: tuple[str, ...] = MEASUREMENTS + RADAR_LAYOUTS  # what `adaptrack fit` reads
 MODELS: tuple[str, ...] = ("cv", "ca")
 _AXES = ("x", "y", "z")
 _COLUMNS = {  # measured columns of each layout (the last is optional: a planar log)
@@ -155,29 +159,36 @@ class MotionFit:
         est = rts_smooth(res) if smooth else res.filtered
         return est.mean, est.cov
 
-    def run(self, log: PositionLog) -> FilterResult:
-        """Return the Kalman filter's full result on ``log`` (its innovations included)."""
+    def run(self, log: PositionLog | RadarLog) -> FilterResult:
+        """Return the filter's full result on ``log`` (its innovations included)."""
         if log.n_axes != self.n_axes:
             raise ValueError(f"the fit is {self.n_axes}-D; the log has {log.n_axes} axes")
+        if isinstance(log, RadarLog):
+            missing = [c for c in log.components if f"r_{c}" not in self.fit.names]
+            if missing:
+                raise ValueError(
+                    f"the fit has no noise variance for the log's {missing}: fit this layout"
+                )
         return _run(log, self.model, {name: self.fit.value(name) for name in self.fit.names})
 
 
-def _parameters(values: dict[str, float], n_axes: int) -> tuple[list[float], list[float]]:
-    """Per-axis PSDs and noise variances from the horizontal / vertical parameters."""
-    q = [values["q_horizontal"]] * 2 + ([values["q_vertical"]] if n_axes == 3 else [])
-    r = [values["r_horizontal"]] * 2 + ([values["r_vertical"]] if n_axes == 3 else [])
-    return q, r
+def _psds(values: dict[str, float], n_axes: int) -> list[float]:
+    """Per-axis PSDs from the horizontal / vertical parameters."""
+    return [values["q_horizontal"]] * 2 + ([values["q_vertical"]] if n_axes == 3 else [])
 
 
-def _run(log: PositionLog, model: str, values: dict[str, float]) -> FilterResult:
-    """Kalman filter of ``log`` with these parameters (first fix as the prior's mean)."""
+def _run(log: PositionLog | RadarLog, model: str, values: dict[str, float]) -> FilterResult:
+    """Filter ``log`` with these parameters (prior from the first fix or plot)."""
     k = log.n_axes
-    q, r = _parameters(values, k)
+    q = _psds(values, k)
     motion = (
         ConstantVelocity(accel_psd=q, n_axes=k)
         if model == "cv"
         else ConstantAcceleration(jerk_psd=q, n_axes=k)
     )
+    if isinstance(log, RadarLog):
+        return run_radar(log, motion, values)
+    r = [values["r_horizontal"]] * 2 + ([values["r_vertical"]] if k == 3 else [])
     n = len(motion.state_names)
     mean = np.zeros(n)
     mean[:k] = log.enu[0]
@@ -189,18 +200,21 @@ def _run(log: PositionLog, model: str, values: dict[str, float]) -> FilterResult
     )
 
 
-def fit_motion(log: PositionLog, model: Model = "cv", clock_offset: bool = False) -> MotionFit:
+def fit_motion(
+    log: PositionLog | RadarLog, model: Model = "cv", clock_offset: bool = False
+) -> MotionFit:
     """Fit the motion PSD and the noise variances of ``log`` by maximum likelihood.
 
     Horizontal and vertical parameters are separate (a GNSS receiver's vertical noise is
-    larger; a vehicle's vertical motion smaller). Standard errors come from the curvature of
+    larger; a vehicle's vertical motion smaller); a radar log has one noise variance per
+    measured component. Standard errors come from the curvature of
     the log-likelihood (they assume independent measurement noise). ``clock_offset``: also
     fit how late the fixes are stamped against the log's velocity reports (horizontal
     components; epochs with a report), which the log must have.
     """
     clock = None
     if clock_offset:
-        if log.velocity is None:
+        if isinstance(log, RadarLog) or log.velocity is None:
             raise ValueError(
                 "a clock offset needs the log's velocity reports (velocity_east_mps, "
                 "velocity_north_mps or groundspeed_mps, track_deg columns)"
@@ -214,9 +228,11 @@ def fit_motion(log: PositionLog, model: Model = "cv", clock_offset: bool = False
         raise ValueError(f"model must be one of {MODELS}; got {model!r}")
     if log.times.size < 10:
         raise ValueError(f"a fit needs at least 10 fixes; the log has {log.times.size}")
-    initial = {"q_horizontal": 1.0, "r_horizontal": 1.0}
-    if log.n_axes == 3:
-        initial |= {"q_vertical": 0.1, "r_vertical": 1.0}
+    initial = {"q_horizontal": 1.0} | ({"q_vertical": 0.1} if log.n_axes == 3 else {})
+    if isinstance(log, RadarLog):
+        initial |= radar_parameters(log)
+    else:
+        initial |= {"r_horizontal": 1.0} | ({"r_vertical": 1.0} if log.n_axes == 3 else {})
 
     def loglik(values: dict[str, float]) -> float:
         return float(_run(log, model, values).info.log_likelihood.sum())
@@ -225,7 +241,7 @@ def fit_motion(log: PositionLog, model: Model = "cv", clock_offset: bool = False
 
 
 def estimates_table(
-    log: PositionLog, mean: FloatArray, cov: FloatArray, offset_s: float = 0.0
+    log: PositionLog | RadarLog, mean: FloatArray, cov: FloatArray, offset_s: float = 0.0
 ) -> pd.DataFrame:
     """Estimates as a table: position, velocity, their sigmas, the position covariance.
 
@@ -288,6 +304,15 @@ def fit_toml(fit: MotionFit, measurement: str, source: str) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _parameter_names(measurement: str, axes: int, range_rate: bool) -> set[str]:
+    """Return the parameters a fit of this layout has (``range_rate``: radar range-rates)."""
+    names = {"q_horizontal"} | ({"q_vertical"} if axes == 3 else set())
+    if measurement in RADAR_LAYOUTS:
+        comps = ["range", "azimuth"] + (["elevation"] if axes == 3 else [])
+        return names | {f"r_{c}" for c in comps + (["range_rate"] if range_rate else [])}
+    return names | {"r_horizontal"} | ({"r_vertical"} if axes == 3 else set())
+
+
 def _toml_string(text: str) -> str:
     return '"' + text.replace("\\", "\\\\").replace('"', '\\"') + '"'
 
@@ -304,13 +329,11 @@ def fit_from_toml(data: dict[str, object], where: str) -> tuple[MotionFit, str]:
         values = np.array([float(params[n]["value"]) for n in names])
     except (KeyError, TypeError, ValueError) as exc:
         raise ValueError(f"{where}: incomplete [fit] table ({exc})") from None
-    expected = {"q_horizontal", "r_horizontal"} | (
-        {"q_vertical", "r_vertical"} if axes == 3 else set()
-    )
-    if measurement not in MEASUREMENTS or model not in MODELS or set(names) != expected:
+    expected = _parameter_names(str(measurement), axes, "r_range_rate" in names)
+    if measurement not in ALL_MEASUREMENTS or model not in MODELS or set(names) != expected:
         raise ValueError(
-            f"{where}: [fit] must name a measurement in {MEASUREMENTS}, a model in {MODELS} and "
-            f"parameters {sorted(expected)}; got {measurement!r}, {model!r}, {sorted(names)}"
+            f"{where}: [fit] must name a measurement in {ALL_MEASUREMENTS}, a model in {MODELS} "
+            f"and parameters {sorted(expected)}; got {measurement!r}, {model!r}, {sorted(names)}"
         )
     if not np.all(np.isfinite(values) & (values > 0)):
         raise ValueError(f"{where}: fit parameters must be positive and finite; got {values}")
@@ -329,6 +352,7 @@ def fit_from_toml(data: dict[str, object], where: str) -> tuple[MotionFit, str]:
 
 
 __all__ = [
+    "ALL_MEASUREMENTS",
     "MEASUREMENTS",
     "MODELS",
     "MotionFit",
