@@ -24,7 +24,15 @@ from ._cli_errors import err_console
 from ._cli_errors import fail as _fail
 from ._progress import progress
 from .analysis.evaluation import Evaluation, evaluate_scenario
-from .analysis.flights import FlightRow, evaluate_flight, smooth_kalman, smooth_lsq
+from .analysis.flights import (
+    FlightRow,
+    RadarSigmas,
+    evaluate_flight,
+    smooth_kalman,
+    smooth_lsq,
+    smooth_record_kalman,
+    smooth_record_lsq,
+)
 from .cli_site import site_app
 from .coords.geodetic import enu_to_ecef, enu_to_ecef_rotation
 from .crossing.compliance import (
@@ -58,7 +66,7 @@ from .crossing.selection import (
 )
 from .crossing.site import Site, load_site, site_from_mapping
 from .crossing.trackers import RoadTracker, Tracker
-from .io.navigation import read_navigation_measurements
+from .io.navigation import read_navigation_measurements, read_radar_record
 from .io.tables import (
     DataFormatError,
     read_flight_csv,
@@ -233,6 +241,7 @@ def demo(
     raise typer.Exit(VERDICT_EXIT[verdict])
 
 
+SMOOTH_SINGER = Singer(time_constant_s=20.0, accel_std_mps2=2.0, n_axes=3)  # `smooth --method rts`
 VERDICT_EXIT = {"pass": 0, "fail": 4, "undecided": 5}  # the demo's exit status by verdict
 
 
@@ -779,14 +788,36 @@ def smooth(
     azimuth_std_deg: float = typer.Option(0.08, "--azimuth-std-deg"),
     elevation_std_deg: float = typer.Option(0.1, "--elevation-std-deg"),
     velocity_std_mps: float = typer.Option(1.0, "--velocity-std-mps"),
+    range_rate_std_mps: float = typer.Option(0.5, "--range-rate-std-mps"),
+    range_accel_std_mps2: float = typer.Option(1.0, "--range-accel-std-mps2"),
     out: Path = typer.Option(..., "--out", help="Output CSV or Parquet."),
 ) -> None:
-    """Smooth radar (and velocity) measurements; write ENU and ECEF estimates with covariance."""
+    """Smooth radar (and velocity) measurements; write ENU and ECEF estimates with covariance.
+
+    A file with range_rate_mps (and optionally range_accel_mps2) is one radar's record: lsq
+    fits its triple nodes (position, velocity and acceleration of each sample, the angle rates
+    from sliding fits, spec D.2) with the honest sandwich covariance; rts runs an EKF over
+    range, azimuth, elevation and range-rate, then the RTS smoother.
+    """
     _outputs(out)
     lat, lon, alt = _parse_site(site)
     if method not in ("lsq", "rts"):
         raise typer.BadParameter("--method must be 'lsq' or 'rts'")
+    sigmas = RadarSigmas(
+        range_std_m, math.radians(azimuth_std_deg), math.radians(elevation_std_deg),
+        range_rate_std_mps, range_accel_std_mps2,
+    )  # fmt: skip
     try:
+        if "range_rate_mps" in read_table(measurements).columns:
+            record = read_radar_record(measurements)
+            est = (
+                smooth_record_lsq(record, sigmas, degree=degree, window_s=window)
+                if method == "lsq"
+                else smooth_record_kalman(record, sigmas, SMOOTH_SINGER)
+            )
+            write_table_atomic(_estimates_frame(est.time, est.mean, est.cov, (lat, lon, alt)), out)
+            Console().print(f"wrote {out} ({est.time.size} epochs, range-rate used)")
+            return
         nodes = read_navigation_measurements(
             measurements,
             range_std_m=range_std_m,
@@ -797,7 +828,7 @@ def smooth(
         if method == "lsq":
             est = smooth_lsq(nodes, use_velocity=True, degree=degree, window_s=window)
         else:
-            est = smooth_kalman(nodes, Singer(time_constant_s=20.0, accel_std_mps2=2.0, n_axes=3))
+            est = smooth_kalman(nodes, SMOOTH_SINGER)
     except (DataFormatError, ValueError) as exc:
         _fail(str(exc))
     write_table_atomic(_estimates_frame(est.time, est.mean, est.cov, (lat, lon, alt)), out)

@@ -22,18 +22,25 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .._typing import FloatArray
 from ..coords.geodetic import ecef_to_enu, enu_to_ecef_rotation, geodetic_to_ecef
 from ..coords.radar import enu_to_polar, polar_to_enu, polar_to_enu_cov
+from ..filters.ekf import ekf_filter
 from ..filters.run import kalman_filter
 from ..io.tables import Flight
 from ..models.continuous import Singer
+from ..models.measurement import RadarMeasurement
 from ..smoothers.batch_ls import smooth_polynomial
 from ..smoothers.rts import rts_smooth
+from ..smoothers.triple_nodes import radar_triple_nodes, smooth_triple_nodes
 from ..types import GaussianState
+
+if TYPE_CHECKING:
+    from ..io.navigation import RadarRecord
 
 RANGE_STD_M = 30.0
 AZIMUTH_STD_RAD = math.radians(0.08)
@@ -210,6 +217,52 @@ def smooth_kalman(nodes: NavigationNodes, model: Singer, *, smooth: bool = True)
     res = kalman_filter(t, z, model, h, r, prior, mask=mask)
     est = rts_smooth(res) if smooth else res.filtered
     return GaussianState(est.mean[ir], est.cov[ir], t[ir])
+
+
+@dataclass(frozen=True)
+class RadarSigmas:
+    """A radar's noise sigmas.
+
+    Range [m], azimuth, elevation [rad], range-rate [m/s], range acceleration [m/s^2].
+    """
+
+    range_m: float
+    azimuth_rad: float
+    elevation_rad: float
+    range_rate_mps: float
+    range_accel_mps2: float
+
+
+def smooth_record_lsq(
+    record: RadarRecord, sigmas: RadarSigmas, *, degree: int = 2, window_s: float = 20.0
+) -> GaussianState:
+    """Sliding polynomial LSQ of a radar record's triple nodes (spec D.2, D.6), at its epochs."""
+    nodes = radar_triple_nodes(
+        record.times, *record.polar.T, range_std_m=sigmas.range_m,
+        azimuth_std_rad=sigmas.azimuth_rad, elevation_std_rad=sigmas.elevation_rad,
+        range_rate=record.range_rate, range_rate_std_mps=sigmas.range_rate_mps,
+        range_accel=record.range_accel,
+        range_accel_std_mps2=None if record.range_accel is None else sigmas.range_accel_mps2,
+    )  # fmt: skip
+    return smooth_triple_nodes(nodes, record.times, degree=degree, window_s=window_s)
+
+
+def smooth_record_kalman(
+    record: RadarRecord, sigmas: RadarSigmas, model: Singer, *, smooth: bool = True
+) -> GaussianState:
+    """EKF over range, azimuth, elevation and range-rate (and its RTS smoother), Singer model."""
+    radar = RadarMeasurement(
+        np.array([sigmas.range_m, sigmas.azimuth_rad, sigmas.elevation_rad,
+                  sigmas.range_rate_mps]) ** 2,
+        ("range", "azimuth", "elevation", "range_rate"), n_axes=3,
+    )  # fmt: skip
+    first = record.polar[0]
+    p0 = np.diag([RANGE_STD_M**2] * 3 + [300.0**2] * 3 + [10.0**2] * 3)
+    p0[:3, :3] = polar_to_enu_cov(first, np.diag(radar.noise_cov.diagonal()[:3]))
+    prior = GaussianState(np.r_[polar_to_enu(first), np.zeros(6)], p0, record.times[0])
+    z = np.c_[record.polar, record.range_rate]
+    res = ekf_filter(record.times, z, model, radar, prior)
+    return rts_smooth(res) if smooth else res.filtered
 
 
 def evaluate_flight(

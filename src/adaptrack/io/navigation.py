@@ -7,23 +7,35 @@ One row per node, ``time_s`` plus one complete group:
 * velocity (a second source): ``velocity_east_mps``, ``velocity_north_mps``,
   ``velocity_up_mps`` in the radar's ENU frame.
 
-Degrees are converted once, here. Times must be strictly increasing within each group.
+A radar that measures range-rate (``range_rate_mps``, optionally ``range_accel_mps2``) is
+read as a radar record (:func:`read_radar_record`): its samples become triple nodes (spec
+D.2), not converted positions. Degrees are converted once, here. Times must be strictly
+increasing within each group.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 
 from ..analysis.flights import NavigationNodes
 from ..coords.radar import polar_to_enu, polar_to_enu_cov
-from .tables import DataFormatError, check_increasing, numeric_column, read_table
+from .tables import (
+    DataFormatError,
+    check_increasing,
+    numeric_column,
+    read_table,
+    require_columns,
+)
 
 VELOCITY_COLUMNS = ["velocity_east_mps", "velocity_north_mps", "velocity_up_mps"]
+RATE_COLUMNS = ["range_rate_mps", "range_accel_mps2"]
 KNOWN_COLUMNS = {
     "time_s", "range_m", "azimuth_deg", "azimuth_rad", "elevation_deg", "elevation_rad",
-    *VELOCITY_COLUMNS,
+    *VELOCITY_COLUMNS, *RATE_COLUMNS,
 }  # fmt: skip
 
 
@@ -57,14 +69,11 @@ def read_navigation_measurements(
     """Read a measurement table into ENU position and velocity nodes with covariances."""
     p = Path(path)
     frame = read_table(p)
-    if "time_s" not in frame.columns:
-        raise DataFormatError(f"{p}: missing column 'time_s'; found {list(frame.columns)}")
-    unknown = [str(c) for c in frame.columns if c not in KNOWN_COLUMNS]
-    if unknown:
+    _check_columns(frame, p)
+    if any(c in frame.columns for c in RATE_COLUMNS):
         raise DataFormatError(
-            f"{p}: unknown column(s) {unknown}: the smoother would not use them (it reads "
-            f"{sorted(KNOWN_COLUMNS)}); drop or rename them"
-            + ("; range rate is not used by the smoother" if "range_rate_mps" in unknown else "")
+            f"{p}: a radar with range-rate is read as a record (read_radar_record: triple "
+            "nodes), not as converted position nodes"
         )
     t = numeric_column(frame, "time_s", p)
     has_radar = "range_m" in frame.columns
@@ -116,4 +125,66 @@ def read_navigation_measurements(
     )
 
 
-__all__ = ["read_navigation_measurements"]
+def _check_columns(frame: pd.DataFrame, p: Path) -> None:
+    """Name the columns no smoother reads (never ignored silently) and require ``time_s``."""
+    if "time_s" not in frame.columns:
+        raise DataFormatError(f"{p}: missing column 'time_s'; found {list(frame.columns)}")
+    unknown = [str(c) for c in frame.columns if c not in KNOWN_COLUMNS]
+    if unknown:
+        raise DataFormatError(
+            f"{p}: unknown column(s) {unknown}: the smoother would not use them (it reads "
+            f"{sorted(KNOWN_COLUMNS)}); drop or rename them"
+        )
+
+
+def read_radar_record(path: str | Path) -> RadarRecord:
+    """Read one target's radar samples with range-rate: every row a complete radar sample.
+
+    ``time_s, range_m, azimuth_*, elevation_*, range_rate_mps[, range_accel_mps2]``; velocity
+    rows of a second source are refused (not combined with triple nodes).
+    """
+    p = Path(path)
+    frame = read_table(p)
+    _check_columns(frame, p)
+    require_columns(frame, ["range_m", "range_rate_mps"], p)
+    if any(c in frame.columns for c in VELOCITY_COLUMNS):
+        raise DataFormatError(
+            f"{p}: velocity rows of a second source are not combined with a radar's triple "
+            "nodes; smooth them in a file without range_rate_mps"
+        )
+    t = numeric_column(frame, "time_s", p)
+    check_increasing(t, p, "time_s")
+    polar = np.stack(
+        [numeric_column(frame, "range_m", p), _angle(frame, "azimuth", p, 2 * np.pi),
+         _angle(frame, "elevation", p, np.pi / 2)], -1,
+    )  # fmt: skip
+    if not np.all(np.isfinite(polar)):
+        row = int(np.argmax(~np.all(np.isfinite(polar), -1)))
+        raise DataFormatError(f"{p}: row {row + 1}: an incomplete radar sample")
+    if np.any(polar[:, 0] <= 0):
+        row = int(np.argmax(polar[:, 0] <= 0))
+        raise DataFormatError(f"{p}: row {row + 1}, column 'range_m': must be > 0")
+    rate = numeric_column(frame, "range_rate_mps", p)
+    accel = (
+        numeric_column(frame, "range_accel_mps2", p)
+        if "range_accel_mps2" in frame.columns
+        else None
+    )
+    return RadarRecord(t, polar, rate, accel)
+
+
+@dataclass(frozen=True)
+class RadarRecord:
+    """One target's radar samples.
+
+    Times [s], (range [m], azimuth, elevation [rad]) (n, 3), range-rate [m/s] and, if
+    measured, range acceleration [m/s^2].
+    """
+
+    times: np.ndarray
+    polar: np.ndarray
+    range_rate: np.ndarray
+    range_accel: np.ndarray | None
+
+
+__all__ = ["RadarRecord", "read_navigation_measurements", "read_radar_record"]

@@ -110,6 +110,7 @@ def fit_polynomial(
     joint: bool = True,
     full_cov: ArrayLike | None = None,
     basis: Basis = "monomial",
+    weight_cov: ArrayLike | None = None,
 ) -> PolynomialFit:
     """Fit a 3-axis polynomial to position/velocity/acceleration nodes (spec D.6).
 
@@ -136,6 +137,11 @@ def fit_polynomial(
         gives the honest sandwich covariance.
     basis : {"monomial", "legendre"}
         Polynomial basis (estimates do not depend on it).
+    weight_cov : array_like, shape (3 K, 3 K), optional
+        The covariance whose inverse weights the nodes (``weights="full"``, joint), node-major
+        like ``full_cov``: e.g. radar triple nodes, whose position, velocity and acceleration
+        at one epoch are correlated (:meth:`~adaptrack.smoothers.triple_nodes.
+        RadarTripleNodes.weight_cov`). Default: the per-node ``covs``.
 
     Returns
     -------
@@ -195,7 +201,18 @@ def fit_polynomial(
     for axis in range(3):
         phi[:, axis, axis * n_coef : (axis + 1) * n_coef] = rows
     phi2 = phi.reshape(3 * k, 3 * n_coef)
-    if weights == "full":
+    wh_full = None
+    if weight_cov is not None:
+        if weights != "full" or not joint:
+            raise ValueError("weight_cov needs weights='full' and joint=True")
+        wc = as_float_array(weight_cov, "weight_cov", min_ndim=2)
+        if wc.shape != (3 * k, 3 * k):
+            raise ValueError(f"weight_cov must have shape ({3 * k}, {3 * k}); got {wc.shape}")
+        check_symmetric_pd(wc, "weight_cov")
+        s3 = np.repeat(scale, 3)
+        wh_full = np.linalg.inv(np.linalg.cholesky(wc * s3[:, None] * s3[None, :]))
+        a, b = wh_full @ phi2, wh_full @ yt.reshape(-1)
+    elif weights == "full":
         chol = np.linalg.cholesky(rt)  # whitening per node
         a = np.linalg.solve(chol, phi).reshape(3 * k, 3 * n_coef)
         b = np.linalg.solve(chol, yt[..., None]).reshape(3 * k)
@@ -222,7 +239,7 @@ def fit_polynomial(
     if full_cov is not None or not optimal:
         rt_full = _scaled_full_cov(full_cov, rt, r, scale, k, joint)
         # sandwich: D = inv(N) A^T (Wh Rt_full Wh^T) A inv(N), with whitened rows A = Wh Phi
-        wh = _whitening(rt, r, weights, scale, k)
+        wh = _whitening(rt, r, weights, scale, k) if wh_full is None else wh_full
         m_mat = wh @ rt_full @ wh.T
         coef_cov = n_inv @ a.T @ m_mat @ a @ n_inv
     else:
