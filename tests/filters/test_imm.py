@@ -485,3 +485,27 @@ def test_mixing_of_cv_and_ca_is_at_least_as_good_as_filterpy_with_a_padded_cv():
         )
     diff = np.array(diff)
     assert diff.mean() < 3 * diff.std(ddof=1) / np.sqrt(runs)
+
+
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+def test_jittered_per_track_times_take_the_series_tables_with_the_same_result(rng, backend):
+    """600 distinct step lengths (series tables) against each track alone (200 steps: one
+    matrix exponential per step), CV + CA."""
+    from adaptrack.filters.run import SERIES_MIN_STEPS
+
+    n_tr, n_st = 3, 200
+    t = np.cumsum(rng.uniform(0.05, 0.3, (n_tr, n_st)), axis=1)
+    assert n_tr * n_st >= SERIES_MIN_STEPS > n_st
+    z = rng.normal(size=(n_tr, n_st, 1)) * 2 + (5 * t + 0.3 * t**2)[..., None]
+    models = [ConstantVelocity(accel_psd=2.0), ConstantAcceleration(jerk_psd=0.5)]
+    priors = [at.GaussianState([0.0, 1.0], np.diag([100.0, 10.0]), 0.0),
+              at.GaussianState([0.0, 1.0, 0.0], np.diag([100.0, 10.0, 4.0]), 0.0)]  # fmt: skip
+    kw = dict(initial_probs=[0.5, 0.5], switching_rates=[[-0.2, 0.2], [0.3, -0.3]],
+              form="joseph", backend=backend)  # fmt: skip
+    whole = imm_filter(t, z, models, ("x",), [[4.0]], priors, **kw)
+    for i in range(n_tr):
+        alone = imm_filter(t[i], z[i], models, ("x",), [[4.0]], priors, **kw)
+        np.testing.assert_allclose(whole.filtered.mean[i], alone.filtered.mean, rtol=1e-10,
+                                   atol=1e-9)  # fmt: skip
+        np.testing.assert_allclose(whole.filtered.cov[i], alone.filtered.cov, rtol=1e-9,
+                                   atol=1e-10)  # fmt: skip

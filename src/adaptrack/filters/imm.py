@@ -31,7 +31,7 @@ from .._linalg import symmetrize
 from .._typing import ArrayLike, FloatArray
 from .._validation import as_float_array, check_symmetric_pd, check_times
 from ..models.continuous import MotionModel, as_motion_model
-from ..models.discretize import Method, Noise, discretize_with_input
+from ..models.discretize import Method, Noise
 from ..models.measurement import MeasurementModel, state_indices
 from ..types import GaussianState, _trusted
 from .ekf import ekf_update_step
@@ -41,7 +41,7 @@ from .kalman import (
     _update,
     predict,
 )
-from .run import auto_form
+from .run import auto_form, step_transitions
 from .square_root import covariance, lower_factor, sqrt_predict, sqrt_update, triangularize
 from .ukf import SigmaPoints, ukf_update_step
 
@@ -313,7 +313,7 @@ def _imm_numpy(problem: _Problem, form: str) -> tuple[IMMResult, float]:
     names = [m.state_names for m in models]
     r_min = np.linalg.eigvalsh(r)[..., 0]
     worst = 0.0
-    disc = [discretize_with_input(mdl, dt, method, noise=noise) for mdl in models]
+    disc = [step_transitions(mdl, dt, method, noise) for mdl in models]
     noise_factors = [lower_factor(d[1]) if form == "sqrt" else None for d in disc]
     nonlinear = problem.nonlinear
     if nonlinear is None:
@@ -452,8 +452,8 @@ def _imm_compiled(problem: _Problem, form: str) -> tuple[IMMResult, float]:
     out_idx = np.array([[nm.index(s) for s in out_names] for nm in names], dtype=np.int64)
     for j, mdl in enumerate(models):
         nj = mdl.state_dim
-        phi[j, :, :nj, :nj], qd[j, :, :nj, :nj], u[j, :, :nj] = discretize_with_input(
-            mdl, uniq, method, noise=noise
+        phi[j, :, :nj, :nj], qd[j, :, :nj, :nj], u[j, :, :nj] = step_transitions(
+            mdl, uniq, method, noise
         )
         if form == "sqrt":
             qd[j, :, :nj, :nj] = lower_factor(qd[j, :, :nj, :nj])

@@ -448,7 +448,15 @@ def _run_compiled(p: _Problem) -> FilterResult:
 def _transitions(
     model: MotionModel, t: FloatArray, t_init: FloatArray, method: Method, noise: Noise, order: int
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Phi, Qd and control offsets per step (entry k maps step k-1 -> k).
+    """Phi, Qd and control offsets per step (entry k maps step k-1 -> k)."""
+    prev = np.concatenate([np.broadcast_to(t_init, t.shape[:-1])[..., None], t[..., :-1]], axis=-1)
+    return step_transitions(model, t - prev, method, noise, order)
+
+
+def step_transitions(
+    model: MotionModel, dt: FloatArray, method: Method, noise: Noise, order: int = 2
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Phi, Qd and control offsets for every step length in ``dt`` (any shape).
 
     Each distinct step is discretised once, unless there are at least
     :data:`SERIES_MIN_STEPS` distinct ones (jittered sampling: every step length new): then
@@ -456,8 +464,6 @@ def _transitions(
     every step by the model's series table, compiled (:mod:`adaptrack.models.series_table`:
     exact to rounding), not by one matrix exponential per distinct step.
     """
-    prev = np.concatenate([np.broadcast_to(t_init, t.shape[:-1])[..., None], t[..., :-1]], axis=-1)
-    dt = t - prev
     exact = method in ("expm", "analytic", "auto") and noise == "white"
     if exact and dt.size >= SERIES_MIN_STEPS and np.unique(dt).size >= SERIES_MIN_STEPS:
         from ..models.series_table import model_series_table, shortened
