@@ -1,0 +1,133 @@
+"""IMM smoother: one model is RTS; against the exact (enumerated) posterior; Monte Carlo."""
+
+import itertools
+
+import numpy as np
+import pytest
+
+import adaptrack as at
+from adaptrack.filters.imm import imm_filter
+from adaptrack.models import ConstantAcceleration, ConstantVelocity
+from adaptrack.smoothers.imm_smoother import imm_smooth
+
+
+def test_one_model_is_the_rts_smoother(rng):
+    t = np.cumsum(rng.uniform(0.2, 1.5, (3, 30)), axis=1)
+    z = rng.normal(size=(3, 30, 1)) * 2 + (4 * t)[..., None]
+    model = ConstantAcceleration(jerk_psd=0.3)
+    prior = at.GaussianState([0.0, 4.0, 0.0], np.diag([100.0, 10.0, 1.0]), 0.0)
+    res = imm_filter(t, z, [model], ("x",), [[4.0]], [prior], [[1.0]], [1.0], form="joseph")
+    ours = imm_smooth(res, [model], [[1.0]])
+    ref = at.rts_smooth(at.kalman_filter(t, z, model, ["x"], [[4.0]], prior, form="joseph"))
+    np.testing.assert_allclose(ours.smoothed.mean, ref.mean, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(ours.smoothed.cov, ref.cov, rtol=1e-8, atol=1e-10)
+    np.testing.assert_array_equal(ours.mode_probabilities, 1.0)
+
+
+def exact_switching_posterior(t, z, models, r, prior, pi, mu0):
+    """Enumerate every mode sequence: each is a linear Gaussian model (KF + RTS); weight by
+    its likelihood and prior. Returns the posterior mean (T, 2) and mode marginals (T, M)."""
+    n = len(t)
+    means, weights, modes = [], [], []
+    for seq in itertools.product(range(len(models)), repeat=n):
+        x, p = np.array(prior.mean), np.array(prior.cov)
+        log_w = np.log(mu0[seq[0]]) + sum(np.log(pi[a, b]) for a, b in itertools.pairwise(seq))
+        xs, ps, xp_l, pp_l, phis = [], [], [], [], []
+        for k in range(n):
+            if k:
+                phi, qd = at.discretize(models[seq[k]], t[k] - t[k - 1])
+                x, p = phi @ x, phi @ p @ phi.T + qd
+                phis.append(phi)
+            xp_l.append(x)
+            pp_l.append(p)
+            s = p[0, 0] + r
+            nu = z[k] - x[0]
+            log_w += -0.5 * (np.log(2 * np.pi * s) + nu**2 / s)
+            gain = p[:, 0] / s
+            x, p = x + gain * nu, p - np.outer(gain, p[0])
+            xs.append(x)
+            ps.append(p)
+        sm = [xs[-1]]
+        for k in range(n - 2, -1, -1):
+            g = ps[k] @ phis[k].T @ np.linalg.inv(pp_l[k + 1])
+            sm.insert(0, xs[k] + g @ (sm[0] - xp_l[k + 1]))
+        means.append(np.array(sm))
+        weights.append(log_w)
+        modes.append(seq)
+    w = np.exp(np.array(weights) - max(weights))
+    w /= w.sum()
+    mean = np.einsum("s,stn->tn", w, np.array(means))
+    marg = np.stack([(w[:, None] * (np.array(modes) == j)).sum(0) for j in range(len(models))], -1)
+    return mean, marg
+
+
+@pytest.mark.parametrize("q_quiet", [0.5, 0.01])
+def test_close_to_the_exact_posterior_of_a_small_switching_system(q_quiet):
+    """Two CV models (quiet, agile), 9 steps: 512 mode sequences enumerated. The smoother is
+    an approximation. With q 0.5 / 5 it stays within 0.1 posterior sigma of the exact mean
+    and 0.1 of the exact mode marginals (measured 0.03 and 0.04; Kim's approximation alone:
+    0.20 and 0.22); with a nearly deterministic quiet model (q 0.01) it is still closer to
+    the exact mean than the IMM filter (measured: total error 2.2 against 4.7)."""
+    t = np.arange(9.0)
+    z = np.array([0.0, 1.1, 1.9, 3.2, 6.0, 10.1, 15.2, 19.8, 25.1])
+    models = [ConstantVelocity(accel_psd=q_quiet), ConstantVelocity(accel_psd=5.0)]
+    pi, mu0 = np.array([[0.9, 0.1], [0.2, 0.8]]), np.array([0.7, 0.3])
+    prior = at.GaussianState([0.0, 1.0], np.diag([1.0, 1.0]), 0.0)
+    res = imm_filter(t, z[:, None], models, ("x",), [[0.25]], [prior, prior], pi, mu0,
+                     form="joseph")  # fmt: skip
+    sm = imm_smooth(res, models, pi)
+    exact_mean, exact_modes = exact_switching_posterior(t, z, models, 0.25, prior, pi, mu0)
+    error = np.abs(sm.smoothed.mean - exact_mean)
+    assert error.sum() < 0.6 * np.abs(res.filtered.mean - exact_mean).sum()
+    if q_quiet == 0.5:
+        assert np.all(error < 0.1 * np.sqrt(sm.smoothed.cov[:, [0, 1], [0, 1]]))
+        assert np.all(np.abs(sm.mode_probabilities - exact_modes) < 0.1)
+
+
+@pytest.mark.statistical
+def test_smoothing_cv_and_ca_beats_the_filter_on_manoeuvres():
+    """CV (2 states) + CA (3): smoothed position and velocity errors below the filter's over
+    40 manoeuvring runs (the mean of the paired differences more than 3 standard errors).
+    Measured: position MSE 11.2 -> 4.2 m^2, velocity 3.0 -> 1.1 (m/s)^2; a single CA's RTS
+    smoother reaches 4.7 m^2 in position."""
+    rng = np.random.default_rng(7)
+    n = 120
+    t = np.cumsum(rng.uniform(0.5, 1.5, (40, n)), axis=1)
+    acc = np.zeros((40, n))
+    for run in range(40):
+        for s in rng.choice(n - 15, 2, replace=False):
+            acc[run, s : s + 10] = rng.normal(0, 3)
+    dt = np.diff(t, prepend=0.0, axis=1)
+    v = 20 + np.cumsum(acc * dt, axis=1)
+    x = np.cumsum(v * dt, axis=1)
+    z = x + rng.normal(0, 5, x.shape)
+    models = [ConstantVelocity(0.05), ConstantAcceleration(1.0)]
+    priors = [at.GaussianState(np.c_[z[:, 0], np.full(40, 20.0)], np.broadcast_to(
+                  np.diag([25.0, 100.0]), (40, 2, 2)), t[:, 0]),
+              at.GaussianState(np.c_[z[:, 0], np.full(40, 20.0), np.zeros(40)], np.broadcast_to(
+                  np.diag([25.0, 100.0, 9.0]), (40, 3, 3)), t[:, 0])]  # fmt: skip
+    rates = [[-0.05, 0.05], [0.1, -0.1]]
+    res = imm_filter(t, z[..., None], models, ("x",), [[25.0]], priors, initial_probs=[0.5, 0.5],
+                     switching_rates=rates)  # fmt: skip
+    sm = imm_smooth(res, models, switching_rates=rates)
+    for axis, truth in ((0, x), (1, v)):
+        e_f = np.mean((res.filtered.mean[..., axis] - truth) ** 2, axis=1)
+        e_s = np.mean((sm.smoothed.mean[..., axis] - truth) ** 2, axis=1)
+        d = e_f - e_s
+        assert d.mean() > 3 * d.std(ddof=1) / np.sqrt(d.size), (axis, e_f.mean(), e_s.mean())
+
+
+def test_bad_arguments_are_named(rng):
+    t = np.arange(5.0)
+    z = rng.normal(size=(5, 1))
+    models = [ConstantVelocity(1.0), ConstantAcceleration(1.0)]
+    priors = [at.GaussianState([0.0, 0.0], np.eye(2), 0.0),
+              at.GaussianState([0.0, 0.0, 0.0], np.eye(3), 0.0)]  # fmt: skip
+    pi = [[0.9, 0.1], [0.1, 0.9]]
+    res = imm_filter(t, z, models, ("x",), [[1.0]], priors, pi, [0.5, 0.5])
+    with pytest.raises(ValueError, match="the filter's models"):
+        imm_smooth(res, models[::-1], pi)
+    with pytest.raises(ValueError, match="give one of"):
+        imm_smooth(res, models)
+    with pytest.raises(TypeError, match="IMMResult"):
+        imm_smooth(res.filtered, models, pi)
