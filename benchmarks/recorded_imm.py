@@ -2,11 +2,11 @@
 
 ``python -m benchmarks.recorded_imm [--data DIR] [--scan 4.8] [--seed 1]`` reads every
 ``air_*.csv`` flight of ``DIR`` (default ``../shared/data``, else ``docs/data``) as truth.
-Radars are placed along each flight (a new one 60 km ahead of the first point that no radar
-covers, 5 km to the side of the track; 111 km coverage), each scan of each flight is seen
-by its nearest radar (30 m range, 0.08 deg azimuth, 0.1 deg elevation noise, every ``--scan``
-seconds), and every contiguous stretch seen by one radar is one track: the whole flight is
-scored.
+Radars are placed along each flight as ``adaptrack evaluate flights`` places them (a new one
+60 km ahead of the first point no radar covers, 5 km to the side; 111 km coverage; a handover
+when the aircraft leaves a radar's coverage), with 30 m range, 0.08 deg azimuth and 0.1 deg
+elevation noise, every ``--scan`` seconds; every stretch one radar sees is one track: the
+whole flight is scored.
 
 Leave one flight out: both estimators are tuned on the other flights and scored on it.
 
@@ -32,9 +32,15 @@ from pathlib import Path
 import numpy as np
 
 import adaptrack as at
-from adaptrack.analysis.flights import AZIMUTH_STD_RAD, ELEVATION_STD_RAD, MAX_RANGE_M
+from adaptrack.analysis.flights import (
+    AZIMUTH_STD_RAD,
+    ELEVATION_STD_RAD,
+    radar_sites,
+    radar_stretches,
+    sub_flight,
+)
 from adaptrack.analysis.flights import RANGE_STD_M as RANGE_STD
-from adaptrack.coords.geodetic import ecef_to_enu, ecef_to_geodetic, enu_to_ecef, geodetic_to_ecef
+from adaptrack.coords.geodetic import ecef_to_enu, geodetic_to_ecef
 from adaptrack.coords.radar import polar_to_enu, polar_to_enu_cov
 from adaptrack.filters.imm import imm_filter
 from adaptrack.io.tables import read_flight_csv
@@ -43,7 +49,6 @@ from adaptrack.tuning.likelihood import fit_by_likelihood
 
 R_POLAR = np.diag([RANGE_STD**2, AZIMUTH_STD_RAD**2, ELEVATION_STD_RAD**2])
 WARM_UP = 3  # scans of each track not scored
-SITE_AHEAD_M, SITE_SIDE_M = 60_000.0, 5_000.0
 
 
 @dataclass(frozen=True)
@@ -56,51 +61,25 @@ class Track:
     truth: np.ndarray  # (T, 3) east, north, up [m]
 
 
-def radar_sites(lat: np.ndarray, lon: np.ndarray, alt: np.ndarray) -> list[tuple[float, ...]]:
-    """Radar sites (lat, lon [rad], 0 m) along a track until every fix is covered."""
-    origin = (float(lat[0]), float(lon[0]), 0.0)
-    ecef = geodetic_to_ecef(lat, lon, alt)
-    sites: list[tuple[float, ...]] = []
-    covered = np.zeros(lat.size, dtype=bool)
-    while not covered.all():
-        first = int(np.argmax(~covered))
-        p = ecef_to_enu(ecef, *origin)
-        d = np.linalg.norm(p[:, :2] - p[first, :2], axis=1)
-        ahead = np.flatnonzero((np.arange(lat.size) >= first) & (d <= SITE_AHEAD_M))
-        j = int(ahead.max())
-        heading = p[min(j + 1, lat.size - 1), :2] - p[max(j - 1, 0), :2]
-        side = np.array([heading[1], -heading[0]]) / max(np.linalg.norm(heading), 1e-9)
-        at_site = np.r_[p[j, :2] + SITE_SIDE_M * side, 0.0]
-        s_lat, s_lon, _ = ecef_to_geodetic(enu_to_ecef(at_site, *origin))
-        site = (float(s_lat), float(s_lon), 0.0)
-        sites.append(site)
-        covered |= np.linalg.norm(ecef_to_enu(ecef, *site), axis=1) <= MAX_RANGE_M
-    return sites
-
-
 def flight_tracks(path: Path, scan_s: float, rng: np.random.Generator) -> list[Track]:
-    """Every radar stretch of one flight, with noisy plots."""
+    """Every radar stretch of one flight (:func:`~adaptrack.analysis.flights.radar_stretches`),
+    with noisy plots."""
     fl = read_flight_csv(path)
     scan = np.floor((fl.times - fl.times[0]) / scan_s)
-    idx = np.flatnonzero(np.diff(np.concatenate([[-1.0], scan])) > 0)
-    lat, lon, alt, t = fl.lat[idx], fl.lon[idx], fl.alt[idx], fl.times[idx]
-    sites = radar_sites(lat, lon, alt)
-    ecef = geodetic_to_ecef(lat, lon, alt)
-    local = np.stack([ecef_to_enu(ecef, *s) for s in sites])  # (S, T, 3)
-    nearest = np.argmin(np.linalg.norm(local, axis=-1), axis=0)
+    scans = sub_flight(fl, np.flatnonzero(np.diff(np.concatenate([[-1.0], scan])) > 0))
     tracks = []
-    cuts = np.flatnonzero(np.diff(nearest)) + 1
-    for part in np.split(np.arange(t.size), cuts):
-        if part.size < 10:
+    for site, rows in radar_stretches(scans, radar_sites(scans)):
+        if rows.size < 10:
             continue
-        truth = local[nearest[part[0]], part]
+        truth = ecef_to_enu(geodetic_to_ecef(scans.lat[rows], scans.lon[rows], scans.alt[rows]),
+                            *site)  # fmt: skip
         horiz = np.hypot(truth[:, 0], truth[:, 1])
         polar = np.stack(
             [np.linalg.norm(truth, axis=1), np.arctan2(truth[:, 0], truth[:, 1]),
              np.arctan2(truth[:, 2], horiz)], -1,
         )  # fmt: skip
         plots = polar + rng.standard_normal(polar.shape) * np.sqrt(np.diag(R_POLAR))
-        tracks.append(Track(path.stem, t[part], plots, truth))
+        tracks.append(Track(path.stem, scans.times[rows], plots, truth))
     return tracks
 
 
@@ -228,15 +207,17 @@ def main() -> None:
         pooled["ours"].append(e_ours)
         pooled["filterpy"].append(e_fp)
         ro, rf = math.sqrt(e_ours.mean()), math.sqrt(e_fp.mean())
+        ours_txt = ", ".join(f"{k} {v:.3g}" for k, v in ours_p.items())
+        fp_txt = ", ".join(f"{k} {v:g}" for k, v in fp_p.items())
         print(
-            f"held out {name}: ours {ro:.1f} m ({', '.join(f'{k} {v:.3g}' for k, v in ours_p.items())})"
-            f"; FilterPy {rf:.1f} m ({', '.join(f'{k} {v:g}' for k, v in fp_p.items())}); "
+            f"held out {name}: ours {ro:.1f} m ({ours_txt}); FilterPy {rf:.1f} m ({fp_txt}); "
             f"ours / FilterPy {ro / rf:.3f}"
         )
     ro = math.sqrt(np.concatenate(pooled["ours"]).mean())
     rf = math.sqrt(np.concatenate(pooled["filterpy"]).mean())
     print(f"pooled over held-out flights: ours {ro:.1f} m, FilterPy {rf:.1f} m, "
-          f"ratio {ro / rf:.3f} ({100 * (1 - ro / rf):+.1f} % lower)")  # fmt: skip
+          f"ratio {ro / rf:.3f} (ours {abs(100 * (1 - ro / rf)):.1f} % "
+          f"{'lower' if ro < rf else 'higher'})")  # fmt: skip
 
 
 if __name__ == "__main__":

@@ -749,7 +749,8 @@ def _evaluate_flights(files: list[Path], seed: int, json_path: Path | None) -> N
         "method",
         "position RMSE [m]",
         "velocity RMSE [m/s]",
-        "scored scans",
+        "scored / scans",
+        "radars",
     ):
         table.add_column(col, justify="left" if col in ("flight", "method") else "right")
     for r in rows:
@@ -759,7 +760,8 @@ def _evaluate_flights(files: list[Path], seed: int, json_path: Path | None) -> N
             r.method,
             f"{r.position_rmse_m:.2f}",
             f"{r.velocity_rmse_mps:.2f}",
-            str(r.n_scored),
+            f"{r.n_scored} / {r.n_scans}",
+            str(r.n_radars),
         )
     console.print(table)
     if json_path is not None:

@@ -228,3 +228,61 @@ def test_smooth_uses_a_measured_range_rate(tmp_path, method):
         errors[name] = np.sqrt(np.mean(np.sum((v[ok] - vel[ok]) ** 2, axis=1)))
     assert "range-rate used" in proc.stdout or name == "plain"
     assert errors["record"] < 0.9 * errors["plain"], errors
+
+
+def straight_flight(length_km=500.0, speed=200.0, alt=9000.0):
+    """A synthetic airliner on a straight line (east in the tangent plane at its start) at
+    constant speed; each fix's velocity in its own east-north-up frame, by pymap3d."""
+    import pymap3d
+
+    from adaptrack.io.tables import Flight
+
+    t = np.arange(0.0, length_km * 1e3 / speed, 1.0)
+    lat, lon, h = pymap3d.enu2geodetic(speed * t, 0.0 * t, alt + 0 * t, 45.0, 2.0, 0.0)
+    ecef_v = pymap3d.enu2uvw(speed, 0.0, 0.0, 45.0, 2.0)
+    vel = np.stack(pymap3d.uvw2enu(*ecef_v, lat, lon), -1)
+    return Flight("straight", t, np.radians(lat), np.radians(lon), h, vel)
+
+
+def test_radars_cover_a_long_flight_and_every_scan_is_scored():
+    """500 km: several radars, every fix within 111 km of its stretch's radar, handovers only
+    when leaving coverage, and every scan scored by every method."""
+    from adaptrack.analysis.flights import (
+        MAX_RANGE_M,
+        radar_sites,
+        radar_stretches,
+    )
+    from adaptrack.coords.geodetic import ecef_to_enu, geodetic_to_ecef
+
+    fl = straight_flight()
+    sites = radar_sites(fl)
+    assert 2 <= len(sites) <= 5
+    stretches = radar_stretches(fl, sites)
+    assert np.concatenate([rows for _, rows in stretches]).tolist() == list(range(fl.times.size))
+    ecef = geodetic_to_ecef(fl.lat, fl.lon, fl.alt)
+    for site, rows in stretches:
+        local = ecef_to_enu(ecef[rows], *site)
+        assert np.linalg.norm(local, axis=1).max() <= MAX_RANGE_M
+        assert np.hypot(local[:, 0], local[:, 1]).min() > 4000.0  # never right overhead
+    rows = evaluate_flight(fl, seed=3, scans_s=(4.8,))
+    for r in rows:
+        assert r.n_scored >= r.n_scans - 2 and r.n_radars == len(stretches), r
+        assert r.position_rmse_m < 150.0, r
+
+
+def test_velocity_reports_carry_their_quantisation_and_lag():
+    from adaptrack.analysis.flights import (
+        GROUNDSPEED_STEP_MPS,
+        VELOCITY_LAG_STD_S,
+        VELOCITY_STD_MPS,
+        velocity_report_cov,
+    )
+
+    t = np.arange(10.0)
+    steady = np.tile([0.0, 100.0, 0.0], (10, 1))  # due north
+    cov = velocity_report_cov(steady, t)
+    assert cov[5, 1, 1] == pytest.approx(VELOCITY_STD_MPS**2 + GROUNDSPEED_STEP_MPS**2 / 12)
+    assert cov[5, 0, 0] == pytest.approx(VELOCITY_STD_MPS**2)
+    turning = steady + np.c_[3.0 * t, 0 * t, 0 * t]  # 3 m/s^2 east
+    extra = velocity_report_cov(turning, t)[5, 0, 0] - VELOCITY_STD_MPS**2
+    assert extra == pytest.approx((VELOCITY_LAG_STD_S * 3.0) ** 2, rel=1e-3)

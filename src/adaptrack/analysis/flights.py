@@ -27,7 +27,13 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .._typing import FloatArray
-from ..coords.geodetic import ecef_to_enu, enu_to_ecef_rotation, geodetic_to_ecef
+from ..coords.geodetic import (
+    ecef_to_enu,
+    ecef_to_geodetic,
+    enu_to_ecef,
+    enu_to_ecef_rotation,
+    geodetic_to_ecef,
+)
 from ..coords.radar import enu_to_polar, polar_to_enu, polar_to_enu_cov
 from ..filters.ekf import ekf_filter
 from ..filters.run import kalman_filter
@@ -47,6 +53,10 @@ AZIMUTH_STD_RAD = math.radians(0.08)
 ELEVATION_STD_RAD = math.radians(0.1)
 VELOCITY_STD_MPS = 1.0
 MAX_RANGE_M = 111_120.0  # 60 nmi, terminal surveillance radar coverage (DOMAIN 4)
+SITE_AHEAD_M, SITE_SIDE_M = 60_000.0, 5_000.0  # a new radar: this far along, this far aside
+GROUNDSPEED_STEP_MPS = 0.5144  # ADS-B reports: 1 kt steps
+VERTICAL_RATE_STEP_MPS = 0.3251  # 64 ft/min steps
+VELOCITY_LAG_STD_S = 0.5  # the velocity reports lag the positions by up to about 1 s
 
 
 @dataclass(frozen=True)
@@ -59,6 +69,8 @@ class FlightRow:
     position_rmse_m: float
     velocity_rmse_mps: float
     n_scored: int
+    n_scans: int = 0  # radar scans of the whole flight
+    n_radars: int = 1  # radars (stretches) the flight was seen by
 
 
 @dataclass(frozen=True, eq=False)
@@ -93,6 +105,82 @@ class FlightMeasurements:
     truth_velocity: FloatArray
     radar_index: np.ndarray
     nodes: NavigationNodes
+
+
+def radar_sites(flight: Flight) -> list[tuple[float, float, float]]:
+    """Radar sites along a flight until every fix is within :data:`MAX_RANGE_M` of one.
+
+    From the first fix no radar covers, the next radar stands :data:`SITE_AHEAD_M` further
+    along the track (the last fix within that distance), :data:`SITE_SIDE_M` to its right,
+    on the ellipsoid (so that no radar looks straight up at the track). Latitude,
+    longitude [rad], height [m].
+    """
+    origin = (float(flight.lat[0]), float(flight.lon[0]), 0.0)
+    ecef = geodetic_to_ecef(flight.lat, flight.lon, flight.alt)
+    p = ecef_to_enu(ecef, *origin)
+    sites: list[tuple[float, float, float]] = []
+    covered = np.zeros(flight.times.size, dtype=bool)
+    while not covered.all():
+        first = int(np.argmax(~covered))
+        near = np.linalg.norm(p[:, :2] - p[first, :2], axis=1) <= SITE_AHEAD_M
+        j = int(np.flatnonzero(near & (np.arange(p.shape[0]) >= first)).max())
+        heading = p[min(j + 1, p.shape[0] - 1), :2] - p[max(j - 1, 0), :2]
+        side = np.array([heading[1], -heading[0]]) / max(float(np.linalg.norm(heading)), 1e-9)
+        at_site = np.r_[p[j, :2] + SITE_SIDE_M * side, 0.0]
+        lat, lon, _ = ecef_to_geodetic(enu_to_ecef(at_site, *origin))
+        sites.append((float(lat), float(lon), 0.0))
+        covered |= np.linalg.norm(ecef_to_enu(ecef, *sites[-1]), axis=1) <= MAX_RANGE_M
+    return sites
+
+
+def radar_stretches(
+    flight: Flight, sites: list[tuple[float, float, float]]
+) -> list[tuple[tuple[float, float, float], np.ndarray]]:
+    """Split a flight's fixes between radars: (site, fix indices) per contiguous stretch.
+
+    A fix stays with the current radar while that radar covers it (a handover only when the
+    aircraft leaves its coverage, to the nearest radar), so stretches are long.
+    """
+    ecef = geodetic_to_ecef(flight.lat, flight.lon, flight.alt)
+    dist = np.stack([np.linalg.norm(ecef_to_enu(ecef, *s), axis=1) for s in sites])
+    owner = np.empty(flight.times.size, dtype=int)
+    current = int(np.argmin(dist[:, 0]))
+    for k in range(flight.times.size):
+        if dist[current, k] > MAX_RANGE_M:
+            current = int(np.argmin(dist[:, k]))
+        owner[k] = current
+    cuts = np.flatnonzero(np.diff(owner)) + 1
+    return [(sites[owner[part[0]]], part) for part in np.split(np.arange(owner.size), cuts)]
+
+
+def sub_flight(flight: Flight, rows: np.ndarray) -> Flight:
+    """Return the fixes ``rows`` of a flight."""
+    return Flight(flight.name, flight.times[rows], flight.lat[rows], flight.lon[rows],
+                  flight.alt[rows], flight.velocity_enu[rows])  # fmt: skip
+
+
+def velocity_report_cov(velocity_enu: FloatArray, times: FloatArray) -> FloatArray:
+    """Covariance (n, 3, 3) of velocity reports against the true velocity [m^2/s^2].
+
+    The simulated sensor's :data:`VELOCITY_STD_MPS` plus the reports' own errors (ADS-B):
+    groundspeed steps along the track and vertical-rate steps (uniform, ``step^2 / 12``),
+    and their lag behind the positions (:data:`VELOCITY_LAG_STD_S` times the acceleration,
+    from the reports' own differences).
+    """
+    n = velocity_enu.shape[0]
+    accel = np.zeros((n, 3))
+    ok = np.all(np.isfinite(velocity_enu), axis=1)
+    if ok.sum() >= 2:
+        accel[ok] = np.gradient(velocity_enu[ok], times[ok], axis=0)
+    horiz = velocity_enu[:, :2] / np.maximum(np.linalg.norm(velocity_enu[:, :2], axis=1),
+                                             1e-9)[:, None]  # fmt: skip
+    along = np.zeros((n, 3))
+    along[:, :2] = np.nan_to_num(horiz)
+    cov = np.broadcast_to(VELOCITY_STD_MPS**2 * np.eye(3), (n, 3, 3)).copy()
+    cov += GROUNDSPEED_STEP_MPS**2 / 12 * along[:, :, None] * along[:, None, :]
+    cov[:, 2, 2] += VERTICAL_RATE_STEP_MPS**2 / 12
+    lag = VELOCITY_LAG_STD_S * np.nan_to_num(accel)
+    return cov + lag[:, :, None] * lag[:, None, :]
 
 
 def radar_site(flight: Flight) -> tuple[float, float, float]:
@@ -136,33 +224,27 @@ def simulate_flight_measurements(
         meas, np.diag([RANGE_STD_M**2, AZIMUTH_STD_RAD**2, ELEVATION_STD_RAD**2])
     )
     vmeas = vel[vel_idx] + rng.standard_normal((vel_idx.size, 3)) * VELOCITY_STD_MPS
+    in_span = (flight.times[vel_idx] >= flight.times[radar_idx[0]]) & (
+        flight.times[vel_idx] <= flight.times[radar_idx[-1]]
+    )  # velocity reports only while the radar sees the aircraft
+    vel_idx, vmeas = vel_idx[in_span], vmeas[in_span]
     nodes = NavigationNodes(
         flight.times[radar_idx],
         polar_to_enu(meas),
         cov,
         flight.times[vel_idx],
         vmeas,
-        np.broadcast_to(VELOCITY_STD_MPS**2 * np.eye(3), (vel_idx.size, 3, 3)),
+        velocity_report_cov(vel, flight.times)[vel_idx],
     )
     return FlightMeasurements(site, flight.times, pos, vel, radar_idx, nodes)
 
 
-def _score(
-    name: str, method: str, est: GaussianState, m: FlightMeasurements, scan_s: float
-) -> FlightRow:
+def _squared_errors(est: GaussianState, m: FlightMeasurements) -> tuple[FloatArray, FloatArray]:
+    """Squared position and velocity errors at the radar scans (NaN estimates left out)."""
     idx = m.radar_index
-    ep = est.mean[:, :3] - m.truth_position[idx]
-    ev = est.mean[:, 3:6] - m.truth_velocity[idx]
-    okp = np.all(np.isfinite(ep), axis=-1)
-    okv = np.all(np.isfinite(ev), axis=-1)
-    return FlightRow(
-        name,
-        method,
-        scan_s,
-        math.sqrt(float(np.mean(np.sum(ep[okp] ** 2, -1)))),
-        math.sqrt(float(np.mean(np.sum(ev[okv] ** 2, -1)))),
-        int(okp.sum()),
-    )
+    ep = np.sum((est.mean[:, :3] - m.truth_position[idx]) ** 2, -1)
+    ev = np.sum((est.mean[:, 3:6] - m.truth_velocity[idx]) ** 2, -1)
+    return ep[np.isfinite(ep)], ev[np.isfinite(ev)]
 
 
 def smooth_lsq(
@@ -265,6 +347,9 @@ def smooth_record_kalman(
     return rts_smooth(res) if smooth else res.filtered
 
 
+METHODS = ("lsq_triple", "lsq_position", "kf", "rts")
+
+
 def evaluate_flight(
     flight: Flight,
     *,
@@ -273,33 +358,44 @@ def evaluate_flight(
     degree: int = 2,
     window_s: float = 20.0,
 ) -> list[FlightRow]:
-    """RMSE of ``lsq_triple``, ``lsq_position``, ``kf`` and ``rts`` on one flight.
+    """RMSE of ``lsq_triple``, ``lsq_position``, ``kf`` and ``rts`` over a whole flight.
 
+    Radars stand along the flight (:func:`radar_sites`); each stretch one radar sees is a
+    track of its own (:func:`radar_stretches`), and the rows pool every scan of every
+    stretch (a stretch of fewer than 10 scans cannot be smoothed: counted, not scored).
     One set of rows per radar scan period (default: the ASR-11's 4.8 s and a 1 s variant).
     """
     model = Singer(time_constant_s=20.0, accel_std_mps2=2.0, n_axes=3)
+    stretches = radar_stretches(flight, radar_sites(flight))
     rows = []
     for scan in scans_s:
-        m = simulate_flight_measurements(flight, seed=seed, scan_s=scan)
-        n = flight.name
-        rows += [
-            _score(
-                n,
-                "lsq_triple",
-                smooth_lsq(m.nodes, use_velocity=True, degree=degree, window_s=window_s),
-                m,
-                scan,
-            ),
-            _score(
-                n,
-                "lsq_position",
-                smooth_lsq(m.nodes, use_velocity=False, degree=degree, window_s=window_s),
-                m,
-                scan,
-            ),
-            _score(n, "kf", smooth_kalman(m.nodes, model, smooth=False), m, scan),
-            _score(n, "rts", smooth_kalman(m.nodes, model, smooth=True), m, scan),
-        ]
+        errors: dict[str, list[tuple[FloatArray, FloatArray]]] = {k: [] for k in METHODS}
+        n_scans = 0
+        for k, (site, fixes) in enumerate(stretches):
+            part = sub_flight(flight, fixes)
+            n_scans += int(np.unique(np.floor((part.times - part.times[0]) / scan)).size)
+            try:
+                m = simulate_flight_measurements(part, seed=seed + k, scan_s=scan, site=site)
+            except ValueError:  # fewer than 10 scans in this stretch
+                continue
+            estimates = {
+                "lsq_triple": smooth_lsq(m.nodes, use_velocity=True, degree=degree,
+                                         window_s=window_s),
+                "lsq_position": smooth_lsq(m.nodes, use_velocity=False, degree=degree,
+                                           window_s=window_s),
+                "kf": smooth_kalman(m.nodes, model, smooth=False),
+                "rts": smooth_kalman(m.nodes, model, smooth=True),
+            }  # fmt: skip
+            for name, est in estimates.items():
+                errors[name].append(_squared_errors(est, m))
+        for name in METHODS:
+            ep = np.concatenate([e[0] for e in errors[name]] or [np.zeros(0)])
+            ev = np.concatenate([e[1] for e in errors[name]] or [np.zeros(0)])
+            rows.append(FlightRow(
+                flight.name, name, scan, math.sqrt(float(np.mean(ep))) if ep.size else math.nan,
+                math.sqrt(float(np.mean(ev))) if ev.size else math.nan, int(ep.size), n_scans,
+                len(stretches),
+            ))  # fmt: skip
     return rows
 
 
@@ -309,6 +405,8 @@ __all__ = [
     "NavigationNodes",
     "evaluate_flight",
     "radar_site",
+    "radar_sites",
+    "radar_stretches",
     "simulate_flight_measurements",
     "smooth_kalman",
     "smooth_lsq",
