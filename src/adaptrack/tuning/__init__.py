@@ -1,6 +1,7 @@
 """Design-time adaptation (spec B.7); truth-free ML tuning and clock-offset calibration."""
 
 from .calibration import fit_clock_offset, fit_radar_bias
+from .em import EMFit, em_fit
 from .likelihood import LikelihoodFit, fit_by_likelihood
 from .optimize import (
     TrackingData,
@@ -14,9 +15,11 @@ from .optimize import (
 )
 
 __all__ = [
+    "EMFit",
     "LikelihoodFit",
     "TrackingData",
     "TuningResult",
+    "em_fit",
     "fit_by_likelihood",
     "fit_clock_offset",
     "fit_radar_bias",
