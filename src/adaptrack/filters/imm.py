@@ -24,7 +24,6 @@ from typing import Literal
 
 import numpy as np
 from scipy.linalg import expm
-from scipy.special import logsumexp
 
 from .._backend import Backend, use_compiled
 from .._linalg import symmetrize
@@ -72,6 +71,22 @@ class IMMResult:
     mode_probabilities: FloatArray
     components: tuple[GaussianState, ...]
     log_likelihood: FloatArray
+
+
+def log_sum_exp(a: FloatArray, axis: int) -> FloatArray:
+    """``log(sum(exp(a)))`` along ``axis``, without overflow (-inf where every term is)."""
+    top = np.max(a, axis=axis, keepdims=True)
+    safe = np.where(np.isfinite(top), top, 0.0)
+    with np.errstate(divide="ignore"):
+        out = np.log(np.sum(np.exp(a - safe), axis=axis, keepdims=True)) + safe
+    return np.squeeze(out, axis=axis)
+
+
+def complement(idx: np.ndarray, n: int) -> np.ndarray:
+    """Return the indices of ``range(n)`` not in ``idx``, in order."""
+    keep = np.ones(n, dtype=bool)
+    keep[idx] = False
+    return np.flatnonzero(keep)
 
 
 def _embed(src_names: tuple[str, ...], dst_names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
@@ -387,7 +402,7 @@ def _imm_numpy(problem: _Problem, form: str) -> tuple[IMMResult, float]:
             comp_mean[j][..., k, :], comp_cov[j][..., k, :, :] = states[j].mean, states[j].cov
         ll = np.stack(lls, axis=-1)
         joint = ll + log_c
-        ll_mix[..., k] = logsumexp(joint, axis=-1)
+        ll_mix[..., k] = log_sum_exp(joint, axis=-1)
         log_mu = joint - ll_mix[..., k][..., None]
         mu = np.exp(log_mu)
         total = mu.sum(axis=-1, keepdims=True)  # 1 up to the rounding of large log-likelihoods
@@ -550,7 +565,7 @@ def _mix(
     """
     n_models = len(states)
     log_joint = log_mu[..., :, None] + log_pi  # (..., i, j)
-    log_c = logsumexp(log_joint, axis=-2)  # (..., j)
+    log_c = log_sum_exp(log_joint, axis=-2)  # (..., j)
     w = np.exp(log_joint - log_c[..., None, :])  # mixing probabilities mu_{i|j}
     mixed = []
     for j in range(n_models):
@@ -565,7 +580,7 @@ def _mix(
                 cov[..., dst[:, None], dst[None, :]] = states[i].cov[
                     ..., src[:, None], src[None, :]
                 ]
-                rest = np.setdiff1d(np.arange(own.dim), dst)
+                rest = complement(dst, own.dim)
                 cov[..., dst[:, None], rest[None, :]] = 0.0
                 cov[..., rest[:, None], dst[None, :]] = 0.0
             embedded_m.append(mean)
@@ -605,7 +620,7 @@ def _mixed_factor(
     blocks = []
     for i, fi in enumerate(factors):
         dst, src = emb[i][j]
-        rest = np.setdiff1d(np.arange(n_j), dst)
+        rest = complement(dst, n_j)
         e = np.zeros(own.shape[:-2] + (n_j, fi.shape[-1] + n_j))
         e[..., dst, : fi.shape[-1]] = fi[..., src, :]
         e[..., rest, fi.shape[-1] :] = own[..., rest, :]

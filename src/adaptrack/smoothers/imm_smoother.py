@@ -32,7 +32,14 @@ import numpy as np
 
 from .._linalg import matvec, mT, symmetrize
 from .._typing import ArrayLike, FloatArray
-from ..filters.imm import IMMResult, _check_rates, _embed, _mix, _switching_probs
+from ..filters.imm import (
+    IMMResult,
+    _check_rates,
+    _embed,
+    _mix,
+    _switching_probs,
+    complement,
+)
 from ..filters.run import step_transitions
 from ..models.continuous import MotionModel, as_motion_model
 from ..models.discretize import Method, Noise
@@ -157,7 +164,7 @@ def _pair_step(
     x_i, p_i = own
     x_e, p_e = np.array(other[0]), np.array(other[1])  # model j's states, i's where shared
     dst, src = into_other
-    rest = np.setdiff1d(np.arange(x_e.shape[-1]), dst)
+    rest = complement(dst, x_e.shape[-1])
     x_e[..., dst] = x_i[..., src]
     p_e[..., dst[:, None], dst[None, :]] = p_i[..., src[:, None], src[None, :]]
     p_e[..., dst[:, None], rest[None, :]] = 0.0
@@ -173,7 +180,7 @@ def _pair_step(
     out_x[..., shared_i] = xs[..., shared_j]
     s_p = ps[..., shared_j[:, None], shared_j[None, :]]
     out_p[..., shared_i[:, None], shared_i[None, :]] = s_p
-    only = np.setdiff1d(np.arange(x_i.shape[-1]), shared_i)
+    only = complement(shared_i, x_i.shape[-1])
     if only.size:  # i's states that j lacks: conditioned on the shared ones
         p_ss = p_i[..., shared_i[:, None], shared_i[None, :]]
         p_us = p_i[..., only[:, None], shared_i[None, :]]
