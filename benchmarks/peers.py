@@ -310,3 +310,76 @@ def filterpy_imm(t: np.ndarray, z: np.ndarray) -> np.ndarray:
         return IMMEstimator(filters, IMM_MU0.copy(), IMM_PI.copy())
 
     return _filterpy_means(make, z, 2)
+
+
+RADAR_Q = 0.5  # white acceleration PSD of the radar workload's CV model [m^2/s^3]
+RADAR = at.models.RadarMeasurement(
+    np.diag([25.0, 1e-6, 1e-6, 0.25]), ("range", "azimuth", "elevation", "range_rate"), n_axes=3
+)
+RADAR_P0 = np.diag([400.0, 400.0, 400.0, 400.0, 400.0, 100.0])
+
+
+def radar_data(n_tracks: int, n_steps: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """1 s scans of straight-flying targets 5-20 km out: plots (N, T, 4) with noise."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n_steps, dtype=float)
+    p0 = rng.uniform([-20e3, 5e3, 500.0], [20e3, 20e3, 3000.0], (n_tracks, 3))
+    v0 = rng.uniform([-150.0, -150.0, -2.0], [150.0, 150.0, 2.0], (n_tracks, 3))
+    pos = p0[:, None] + v0[:, None] * t[None, :, None]
+    states = np.concatenate([pos, np.broadcast_to(v0[:, None], pos.shape)], -1)
+    noise = rng.multivariate_normal(np.zeros(4), RADAR.noise_cov, (n_tracks, n_steps))
+    return t, RADAR.predict(states) + noise
+
+
+def _radar_prior(z0: np.ndarray) -> np.ndarray:
+    """Prior means (N, 6) at the first plots (velocity 0)."""
+    r, az, el = z0[..., 0], z0[..., 1], z0[..., 2]
+    pos = r[..., None] * np.stack(
+        [np.cos(el) * np.sin(az), np.cos(el) * np.cos(az), np.sin(el)], -1
+    )
+    return np.concatenate([pos, np.zeros_like(pos)], -1)
+
+
+def adaptrack_radar_ekf(t: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """``ekf_filter`` over every track at once; means (N, T, 6)."""
+    n = z.shape[0]
+    prior = at.GaussianState(_radar_prior(z[:, 0]), np.broadcast_to(RADAR_P0, (n, 6, 6)), t[0])
+    model = at.models.ConstantVelocity(RADAR_Q, n_axes=3)
+    return at.ekf_filter(t, z, model, RADAR, prior).filtered.mean
+
+
+def filterpy_radar_ekf(t: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """FilterPy's ``ExtendedKalmanFilter``, one track at a time; means (N, T, 6) in our order."""
+    from filterpy.common import Q_continuous_white_noise
+    from filterpy.kalman import ExtendedKalmanFilter
+
+    perm = np.array([0, 3, 1, 4, 2, 5])  # FilterPy (x, vx, y, vy, z, vz) of ours
+    inv = np.argsort(perm)
+    dt = float(t[1] - t[0])
+    f = np.kron(np.eye(3), [[1.0, dt], [0.0, 1.0]])
+    q = Q_continuous_white_noise(2, dt, RADAR_Q, block_size=3)
+    ang = np.array([False, True, True, False])
+
+    def residual(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        d = a - b
+        d[ang] = (d[ang] + np.pi) % (2 * np.pi) - np.pi
+        return d
+
+    out = np.empty(z.shape[:-1] + (6,))
+    x0 = _radar_prior(z[:, 0])
+    for i in range(z.shape[0]):
+        ekf = ExtendedKalmanFilter(dim_x=6, dim_z=4)
+        ekf.x, ekf.P, ekf.F, ekf.Q, ekf.R = (
+            x0[i][perm],
+            RADAR_P0[np.ix_(perm, perm)],
+            f,
+            q,
+            RADAR.noise_cov,
+        )
+        for k in range(z.shape[1]):
+            if k:
+                ekf.predict()
+            ekf.update(z[i, k], lambda x: RADAR.jacobian(x[inv])[:, perm],
+                       lambda x: RADAR.predict(x[inv]), residual=residual)  # fmt: skip
+            out[i, k] = ekf.x[inv]
+    return out

@@ -14,6 +14,8 @@ Workloads (full sizes; ``--quick`` shrinks them to a smoke test):
   default ``auto``;
 * ``imm``: a two-mode IMM over 1,000 tracks x 1,000 steps, the default ``auto`` beside the
   Joseph and square-root forms, against FilterPy's ``IMMEstimator``;
+* ``radar_ekf``: a 3-D radar (range, azimuth, elevation, range-rate) constant-velocity EKF
+  over 1,000 tracks x 200 scans, against FilterPy's ``ExtendedKalmanFilter``;
 * ``lx_mc``: the ``lx_default`` level-crossing compliance Monte Carlo;
 * ``memory``: peak traced memory of the batch filter over its input + output arrays.
 
@@ -70,6 +72,7 @@ def run(quick: bool, only: list[str] | None = None, workers: int = 2) -> list[Re
         "rts": lambda: workloads.rts(quick, repeats),
         "stream": lambda: workloads.streaming(quick, repeats),
         "imm": lambda: workloads.imm(quick, repeats),
+        "radar_ekf": lambda: workloads.radar_ekf(quick, repeats),
         "lx_mc": lambda: workloads.crossing(quick, workers),
         "scene": lambda: workloads.scene(quick),
         "memory": lambda: workloads.memory(quick),

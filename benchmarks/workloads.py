@@ -300,6 +300,23 @@ def imm(quick: bool, repeats: int) -> list[Result]:
     )
 
 
+def radar_ekf(quick: bool, repeats: int) -> list[Result]:
+    """3-D radar with range-rate, constant-velocity EKF over 1,000 tracks x 200 scans (20 x 50
+    ``quick``): adaptrack's batched ``ekf_filter`` and FilterPy's ``ExtendedKalmanFilter``."""
+    n_tracks, n_steps = (20, 50) if quick else (1_000, 200)
+    t, z = peers.radar_data(n_tracks, n_steps, seed=8)
+    return _compare(
+        "radar_ekf",
+        t,
+        z,
+        {
+            "adaptrack": (peers.adaptrack_radar_ekf, n_tracks, n_steps),
+            "filterpy": (peers.filterpy_radar_ekf, 2 if quick else 20, n_steps),
+        },
+        repeats,
+    )
+
+
 def crossing(quick: bool, workers: int) -> list[Result]:
     """``lx_default`` compliance Monte Carlo: the deployed estimator, and the demo's table.
 
