@@ -241,6 +241,7 @@ def demo(
     raise typer.Exit(VERDICT_EXIT[verdict])
 
 
+MAX_SCENE_S = 7 * 86400.0  # `simulate --scene --duration`: a week of detections at most
 SMOOTH_SINGER = Singer(time_constant_s=20.0, accel_std_mps2=2.0, n_axes=3)  # `smooth --method rts`
 VERDICT_EXIT = {"pass": 0, "fail": 4, "undecided": 5}  # the demo's exit status by verdict
 
@@ -436,7 +437,11 @@ def simulate(
         False, "--scene", help="Mixed traffic of the site's [scene]: detections without ids."
     ),
     duration: float | None = typer.Option(
-        None, "--duration", min=1.0, help="Scene length [s] (default: the site's)."
+        None,
+        "--duration",
+        min=1.0,
+        max=MAX_SCENE_S,
+        help="Scene length [s] (default: the site's; at most a week).",
     ),
     warnings: Path | None = typer.Option(
         None, "--warnings", help="Scene: also write when the lights flash or barriers are down."

@@ -46,6 +46,26 @@ DEFECTS = ("internal error", "traceback", "bad message", "partial output", "sile
 SITES = Path(__file__).parents[2] / "src" / "adaptrack" / "crossing" / "sites"
 
 
+FIT_TOML = """[fit]
+measurement = "radar3d"
+model = "cv"
+axes = 3
+source = "plots.csv"
+log_likelihood = 0.0
+converged = true
+""" + "".join(
+    f"\n[fit.parameters.{name}]\nvalue = {value!r}\nstd_error = 0.0\nlow_95 = 0.0\nhigh_95 = 0.0\n"
+    for name, value in (
+        ("q_horizontal", 1.0),
+        ("q_vertical", 0.1),
+        ("r_range", 900.0),
+        ("r_azimuth", 2e-6),
+        ("r_elevation", 3e-6),
+        ("r_range_rate", 0.25),
+    )
+)  # a radar3d fit, as `adaptrack fit` writes it
+
+
 class _Stop(KeyboardInterrupt):
     """The simulated Ctrl-C."""
 
@@ -223,6 +243,8 @@ class Fixtures:
     detections: str  # an object-list table (simulate)
     scene: str  # raw detections of a short scene (simulate --scene)
     navigation: str  # radar + velocity nodes (smooth)
+    record: str  # one radar's samples with range-rate (smooth: triple nodes, EKF)
+    plots: str  # a 3-D radar plot list (fit --measurement radar3d)
     site: str  # lx_default.toml
     summary: str  # a demo summary.json (report)
 
@@ -240,10 +262,13 @@ def make_fixtures(d: Path) -> Fixtures:
     det = pd.read_csv(d / "det.csv")
     det = det[det.object_id.isin(det.object_id.unique()[:3])]
     nav = _navigation(np.random.default_rng(0))
+    record = nav.assign(range_rate_mps=150.0 + np.random.default_rng(1).normal(0, 0.5, len(nav)))
     return Fixtures(
         det.to_csv(index=False),
         (d / "scene.csv").read_text(),
         nav.to_csv(index=False),
+        record.to_csv(index=False),
+        record.iloc[:30].to_csv(index=False),
         (SITES / "lx_default.toml").read_text(),
         json.dumps({"site": "lx_default", "rows": []}),
     )
@@ -255,7 +280,6 @@ def _navigation(rng: np.random.Generator) -> pd.DataFrame:
     return pd.DataFrame(
         {
             "time_s": t,
-            "kind": "radar",
             "range_m": 2e4 + 150.0 * t + rng.normal(0, 30, t.size),
             "azimuth_deg": 30.0 + 0.01 * t + rng.normal(0, 0.08, t.size),
             "elevation_deg": 5.0 + rng.normal(0, 0.1, t.size),
@@ -265,8 +289,9 @@ def _navigation(rng: np.random.Generator) -> pd.DataFrame:
 
 def invocation(fx: Fixtures, d: Path, rng: np.random.Generator) -> Invocation:
     """One spoiled command line, its inputs written into ``d``."""
-    command = str(rng.choice(["track", "track scene", "smooth", "simulate", "report", "tune",
-                              "evaluate", "demo", "options"]))  # fmt: skip
+    command = str(rng.choice(["track", "track scene", "smooth", "smooth record", "fit radar",
+                              "filter radar", "simulate", "report", "tune", "evaluate", "demo",
+                              "options"]))  # fmt: skip
     site = d / "site.toml"
     site.write_text(fx.site)
     spoil_site = rng.uniform() < 0.3
@@ -274,13 +299,28 @@ def invocation(fx: Fixtures, d: Path, rng: np.random.Generator) -> Invocation:
         text, how = mutate_toml(fx.site, rng)
         site.write_text(text)
     where = f"{command}: " + (f"site {how}" if spoil_site else "")
-    if command in ("track", "track scene", "smooth"):
-        source = {"track": fx.detections, "track scene": fx.scene, "smooth": fx.navigation}
+    if command in ("track", "track scene", "smooth", "smooth record", "fit radar", "filter radar"):
+        source = {
+            "track": fx.detections,
+            "track scene": fx.scene,
+            "smooth": fx.navigation,
+            "smooth record": fx.record,
+            "fit radar": fx.plots,
+            "filter radar": fx.plots,
+        }
         text, how = mutate_table(source[command], rng)
         (d / "in.csv").write_text(text)
         where += f" table {how}"
-        if command == "smooth":
-            return Invocation(["smooth", "in.csv", "--site", "50.4,30.5,180", "--out", "est.csv"],
+        if command.startswith("smooth"):
+            method = str(rng.choice(["lsq", "rts"]))
+            return Invocation(["smooth", "in.csv", "--site", "50.4,30.5,180", "--method", method,
+                               "--out", "est.csv"], ("est.csv",), where)  # fmt: skip
+        if command == "fit radar":
+            return Invocation(["fit", "in.csv", "--measurement", "radar3d", "--out", "fit.toml"],
+                              ("fit.toml",), where)  # fmt: skip
+        if command == "filter radar":
+            (d / "fit.toml").write_text(FIT_TOML)
+            return Invocation(["filter", "in.csv", "--config", "fit.toml", "--out", "est.csv"],
                               ("est.csv",), where)  # fmt: skip
         return Invocation(["track", "in.csv", "--site", "site.toml", "--out", "est.csv"],
                           ("est.csv", "est.events.csv"), where)  # fmt: skip

@@ -56,3 +56,24 @@ def test_fit_recovers_the_noise_and_motion_of_a_3d_radar_log(tmp_path):
             fit.fit.std_error(name) / fit.fit.value(name)
         )
         assert abs(z) < 3.3, (name, fit.fit.value(name), value, fit.fit.std_error(name))
+
+
+@pytest.mark.parametrize(
+    ("edit", "message"),
+    [
+        (lambda f: f.iloc[:0], "at least 2 plots"),
+        (lambda f: f.assign(range_m=f.range_m.where(f.index != 3, 1e300)),
+         r"row 4, column 'range_m': 1e\+300 m is not a radar range"),
+        (lambda f: f.assign(range_m=f.range_m.where(f.index != 5, -1.0)),
+         "row 6, column 'range_m'"),
+        (lambda f: f.assign(range_rate_mps=f.range_rate_mps.where(f.index != 2, 3e8)),
+         "row 3, column 'range_rate_mps'"),
+    ],
+)  # fmt: skip
+def test_implausible_plot_lists_are_named(tmp_path, edit, message):
+    from adaptrack.io.tables import DataFormatError
+
+    radar_plot_list(tmp_path / "plots.csv", n=20)
+    edit(pd.read_csv(tmp_path / "plots.csv")).to_csv(tmp_path / "bad.csv", index=False)
+    with pytest.raises(DataFormatError, match=message):
+        read_radar_log(tmp_path / "bad.csv", "radar3d")

@@ -26,6 +26,7 @@ from ..coords.radar import polar_to_enu, polar_to_enu_cov
 from .tables import (
     DataFormatError,
     check_increasing,
+    check_radar_values,
     numeric_column,
     read_table,
     require_columns,
@@ -103,9 +104,7 @@ def read_navigation_measurements(
     ):
         if bad.any():
             raise DataFormatError(f"{p}: row {int(np.argmax(bad)) + 1}: {what}")
-    if np.any(rng_m[r_full] <= 0):
-        row = int(np.flatnonzero(r_full & (rng_m <= 0))[0])
-        raise DataFormatError(f"{p}: row {row + 1}, column 'range_m': must be > 0")
+    check_radar_values(p, np.where(r_full, rng_m, 1.0))
     check_increasing(t[r_full], p, "time_s (radar rows)")
     check_increasing(t[v_full], p, "time_s (velocity rows)")
     if r_full.sum() < 3:
@@ -161,10 +160,10 @@ def read_radar_record(path: str | Path) -> RadarRecord:
     if not np.all(np.isfinite(polar)):
         row = int(np.argmax(~np.all(np.isfinite(polar), -1)))
         raise DataFormatError(f"{p}: row {row + 1}: an incomplete radar sample")
-    if np.any(polar[:, 0] <= 0):
-        row = int(np.argmax(polar[:, 0] <= 0))
-        raise DataFormatError(f"{p}: row {row + 1}, column 'range_m': must be > 0")
     rate = numeric_column(frame, "range_rate_mps", p)
+    check_radar_values(p, polar[:, 0], rate)
+    if t.size < 2:
+        raise DataFormatError(f"{p}: a radar record needs at least 2 samples; got {t.size}")
     accel = (
         numeric_column(frame, "range_accel_mps2", p)
         if "range_accel_mps2" in frame.columns

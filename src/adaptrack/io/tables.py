@@ -70,6 +70,35 @@ def numeric_column(
     return values
 
 
+PLAUSIBLE_RANGE_M = 1e7  # no radar reaches further (a bound that keeps the arithmetic finite)
+PLAUSIBLE_SPEED_MPS = 1e5  # no target is faster
+
+
+def check_radar_values(
+    path: Path, range_m: FloatArray, range_rate_mps: FloatArray | None = None
+) -> None:
+    """Raise DataFormatError for implausible radar values, naming the row and column.
+
+    A range must lie in (0, 1e7] m and a range-rate within 1e5 m/s; NaN entries (no radar
+    sample on that row) pass.
+    """
+    bad = (range_m <= 0) | (range_m > PLAUSIBLE_RANGE_M)
+    if np.any(bad):
+        row = int(np.argmax(bad))
+        raise DataFormatError(
+            f"{path}: row {row + 1}, column 'range_m': {range_m[row]:g} m is not a radar "
+            f"range (expected 0 < range <= {PLAUSIBLE_RANGE_M:g} m)"
+        )
+    if range_rate_mps is not None:
+        fast = np.abs(range_rate_mps) > PLAUSIBLE_SPEED_MPS
+        if np.any(fast):
+            row = int(np.argmax(fast))
+            raise DataFormatError(
+                f"{path}: row {row + 1}, column 'range_rate_mps': {range_rate_mps[row]:g} m/s "
+                f"is beyond any target (|range-rate| <= {PLAUSIBLE_SPEED_MPS:g} m/s)"
+            )
+
+
 def check_increasing(times: FloatArray, path: Path, column: str = "t_s") -> None:
     """Raise unless times are strictly increasing (names the first offending row)."""
     d = np.diff(times)

@@ -89,6 +89,8 @@ def read_position_log(path: str | Path, measurement: Measurement) -> PositionLog
     cols = [c for c in wanted if c in frame.columns]
     t = numeric_column(frame, time_col, p)
     check_increasing(t, p, time_col)
+    if t.size < 2:
+        raise DataFormatError(f"{p}: a position log needs at least 2 fixes; got {t.size}")
     values = np.stack([numeric_column(frame, c, p) for c in cols], axis=-1)
     velocity, vel_cols = _velocity_reports(frame, p, values.shape[1])
     unused = tuple(str(c) for c in frame.columns if c not in (time_col, *cols, *vel_cols))

@@ -18,7 +18,14 @@ import numpy as np
 from .._typing import FloatArray
 from ..coords.radar import polar_to_enu
 from ..filters.ekf import ekf_filter
-from ..io.tables import check_increasing, numeric_column, read_table, require_columns
+from ..io.tables import (
+    DataFormatError,
+    check_increasing,
+    check_radar_values,
+    numeric_column,
+    read_table,
+    require_columns,
+)
 from ..models.continuous import MotionModel
 from ..models.measurement import RadarMeasurement
 from ..types import FilterResult, GaussianState
@@ -80,9 +87,9 @@ def read_radar_log(path: str | Path, layout: RadarLayout) -> RadarLog:
     plots = np.stack(
         [numeric_column(frame, _COLUMNS[c][0], p) * _COLUMNS[c][1] for c in comps], axis=-1
     )
-    if np.any(plots[:, 0] <= 0):
-        row = int(np.argmax(plots[:, 0] <= 0))
-        raise ValueError(f"{p}: row {row + 1}, column 'range_m': a range must be positive")
+    check_radar_values(p, plots[:, 0], plots[:, -1] if "range_rate" in comps else None)
+    if t.size < 2:
+        raise DataFormatError(f"{p}: a radar log needs at least 2 plots; got {t.size}")
     used = {time_col, *(_COLUMNS[c][0] for c in comps)}
     unused = tuple(str(c) for c in frame.columns if c not in used)
     return RadarLog(t, plots, tuple(comps), unused)
