@@ -185,3 +185,19 @@ def test_bad_input_is_named():
         at.ekf_filter(t, z, model, radar, prior, measurement_cov=-np.eye(2))
     with pytest.raises(ValueError, match="form must be"):
         at.ekf_filter(t, z, model, radar, prior, form="sqrt")
+
+
+def test_a_known_state_component_is_kept_by_both_filters():
+    """A prior with a zero variance (a known component, PSD not PD): the UKF's sigma points
+    come from a factor of the correlation matrix, so it runs and keeps it, as the EKF."""
+    rng = np.random.default_rng(4)
+    radar = RadarMeasurement(noise_cov=[4.0, 1e-6])
+    t = np.arange(10.0)
+    truth = np.stack([2000.0 + 5 * t, 1000.0 + 0 * t], -1)
+    z = radar.predict(truth) + rng.normal(0, 1, (10, 2)) * [2.0, 1e-3]
+    prior = GaussianState([2000.0, 1000.0, 5.0, 0.0], np.diag([100.0, 100.0, 0.0, 0.0]), 0.0)
+    model = ConstantVelocity(0.0, n_axes=2)  # no process noise: the velocity stays known
+    for run in (at.ekf_filter, at.ukf_filter):
+        res = run(t, z, model, radar, prior)
+        np.testing.assert_allclose(res.filtered.mean[:, 2:], [[5.0, 0.0]] * 10, atol=1e-9)
+        assert np.all(np.linalg.eigvalsh(res.filtered.cov) > -1e-9)

@@ -22,6 +22,7 @@ from ..types import FilterResult, GaussianState, StepInfo, _trusted
 from ._nonlinear_run import observed, run_nonlinear
 from .kalman import _innovation_stats
 from .run import NanPolicy
+from .square_root import lower_factor
 
 
 @dataclass(frozen=True)
@@ -61,10 +62,14 @@ class SigmaPoints:
         return float(np.sqrt(n + lam)), wm, wc
 
     def points(self, mean: FloatArray, cov: FloatArray) -> FloatArray:
-        """Sigma points (..., 2n+1, n) of N(mean, cov); LinAlgError if cov is not PD."""
+        """Sigma points (..., 2n+1, n) of N(mean, cov), cov positive semi-definite.
+
+        The offsets are the columns of its Cholesky factor (taken on the correlation matrix;
+        an eigen factor where a component is known exactly).
+        """
         n = mean.shape[-1]
         scale, _, _ = self.weights(n)
-        cols = scale * np.swapaxes(np.linalg.cholesky(cov), -1, -2)  # rows = columns of L
+        cols = scale * np.swapaxes(lower_factor(cov), -1, -2)  # rows = columns of L
         return np.concatenate([mean[..., None, :], mean[..., None, :] + cols,
                                mean[..., None, :] - cols], -2)  # fmt: skip
 
@@ -106,6 +111,7 @@ def ukf_update_step(
     k = mT(np.linalg.solve(s_cov, mT(p_xz)))
     mean = prior.mean + matvec(k, nu)
     cov = symmetrize(prior.cov - k @ s_cov @ mT(k))
+    h = mT(np.linalg.pinv(prior.cov, hermitian=True) @ p_xz)  # statistical linearisation
     n_obs = mask.sum(axis=-1).astype(np.float64)
     nis, loglik = _innovation_stats(nu, s_cov, logdet, n_obs)
     post = _trusted(GaussianState, mean=mean, cov=cov, time=prior.time)
@@ -113,7 +119,6 @@ def ukf_update_step(
         StepInfo, innovation=nu, innovation_cov=s_cov, nis=nis, log_likelihood=loglik,
         gain=k, n_observed=n_obs,
     )  # fmt: skip
-    h = mT(np.linalg.solve(prior.cov, p_xz))
     return post, info, h
 
 
@@ -134,11 +139,15 @@ def ukf_filter(
 ) -> FilterResult:
     """Run an unscented Kalman filter over one track or a batch of tracks.
 
-    Arguments as :func:`adaptrack.filters.ekf.ekf_filter`; ``sigma_points`` sets the
+    Arguments as :func:`~adaptrack.filters.ekf.ekf_filter`; ``sigma_points`` sets the
     scaling (default ``alpha=1, beta=2, kappa=0``: no negative weight). No Jacobian is
     needed, so a :class:`~adaptrack.models.FunctionMeasurement` without one is used as is.
-    The covariance update is ``P - K S K^T``. ``measurement_matrix`` of the result holds
-    each step's statistical linearisation ``P_xz^T P^-1``; :func:`adaptrack.rts_smooth`
+    The covariance update is ``P - K S K^T``. On ill-conditioned problems it loses digits:
+    the API fuzzer (steps to 1e4 s, ``R`` of condition to 1e12, prior variances over 14
+    decades) finds it a few hundredths of a sigma from the Kalman filter, or indefinite by
+    rounding, on about 5 % of random linear problems, where the EKF (Joseph form)
+    agrees; no square-root UKF is built. ``measurement_matrix`` of the result holds each
+    step's statistical linearisation ``P_xz^T P^+``; :func:`adaptrack.rts_smooth`
     smooths the result (exact prediction, so the unscented RTS smoother is the RTS one).
 
     Examples
