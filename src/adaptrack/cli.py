@@ -815,8 +815,9 @@ def smooth(
         range_rate_std_mps, range_accel_std_mps2,
     )  # fmt: skip
     try:
-        if "range_rate_mps" in read_table(measurements).columns:
-            record = read_radar_record(measurements)
+        frame = read_table(measurements)
+        if "range_rate_mps" in frame.columns:
+            record = read_radar_record(measurements, frame)
             est = (
                 smooth_record_lsq(record, sigmas, degree=degree, window_s=window)
                 if method == "lsq"
@@ -831,6 +832,7 @@ def smooth(
             azimuth_std_rad=math.radians(azimuth_std_deg),
             elevation_std_rad=math.radians(elevation_std_deg),
             velocity_std_mps=velocity_std_mps,
+            frame=frame,
         )
         if method == "lsq":
             est = smooth_lsq(nodes, use_velocity=True, degree=degree, window_s=window)

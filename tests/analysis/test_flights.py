@@ -286,3 +286,26 @@ def test_velocity_reports_carry_their_quantisation_and_lag():
     turning = steady + np.c_[3.0 * t, 0 * t, 0 * t]  # 3 m/s^2 east
     extra = velocity_report_cov(turning, t)[5, 0, 0] - VELOCITY_STD_MPS**2
     assert extra == pytest.approx((VELOCITY_LAG_STD_S * 3.0) ** 2, rel=1e-3)
+
+
+def test_a_radar_record_with_bad_rows_is_named(tmp_path):
+    from adaptrack.io.navigation import read_radar_record
+    from adaptrack.io.tables import DataFormatError
+
+    path, _, _, _ = write_radar_record(tmp_path)
+    frame = pd.read_csv(path)
+    cases = [
+        (frame.drop(columns="range_rate_mps"), "range_rate_mps"),
+        (frame.assign(velocity_east_mps=1.0, velocity_north_mps=1.0, velocity_up_mps=0.0),
+         "velocity rows of a second source"),
+        (frame.assign(range_m=frame.range_m.where(frame.index != 4, np.nan)),
+         "row 5, column 'range_m'"),
+        (frame.iloc[[0, 2, 1, *range(3, len(frame))]], "row 3, column 'time_s': unsorted"),
+        (frame.assign(range_rate_mps=frame.range_rate_mps.where(frame.index != 6, np.inf)),
+         "row 7"),
+        (frame.iloc[:1], "at least 2 samples"),
+    ]  # fmt: skip
+    for bad, message in cases:
+        bad.to_csv(tmp_path / "bad.csv", index=False)
+        with pytest.raises(DataFormatError, match=message):
+            read_radar_record(tmp_path / "bad.csv")

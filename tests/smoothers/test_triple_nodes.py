@@ -129,3 +129,17 @@ def test_bad_records_are_named():
         radar_triple_nodes(t, r, az, el, range_rate=r * 0, **SIG)
     with pytest.raises(ValueError, match="strictly increasing"):
         radar_triple_nodes(t[::-1], r, az, el, **SIG)
+
+
+def test_fit_polynomial_weight_cov_is_checked():
+    t = np.arange(0.0, 12.0, 1.0)
+    p, _ = trajectory(t)
+    r, az, el = polar_of(p)
+    times, orders, values, covs = radar_triple_nodes(t, r, az, el, **SIG).as_nodes()
+    k = times.size
+    with pytest.raises(ValueError, match=r"weight_cov must have shape \(108, 108\)"):
+        fit_polynomial(times, orders, values, covs, weight_cov=np.eye(3 * k - 3))
+    with pytest.raises(ValueError, match="weight_cov"):
+        fit_polynomial(times, orders, values, covs, weight_cov=-np.eye(3 * k))
+    with pytest.raises(ValueError, match="weights='full' and joint=True"):
+        fit_polynomial(times, orders, values, covs, weight_cov=np.eye(3 * k), joint=False)

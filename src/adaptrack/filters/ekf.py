@@ -7,6 +7,7 @@ standard form. Prediction is exact (linear motion models).
 
 from __future__ import annotations
 
+from functools import partial
 from typing import Literal
 
 import numpy as np
@@ -123,19 +124,9 @@ def ekf_filter(
     if form not in ("joseph", "standard"):
         raise ValueError(f"form must be 'joseph' or 'standard'; got {form!r}")
 
-    def update(
-        prior: GaussianState,
-        z: FloatArray,
-        mm: MeasurementModel,
-        idx: np.ndarray,
-        r: FloatArray,
-        mk: BoolArray,
-    ) -> tuple[GaussianState, StepInfo, FloatArray]:
-        return ekf_update_step(prior, z, mm, idx, r, mk, form)
-
     return run_nonlinear(
         times, measurements, model, measurement_model, initial, measurement_cov, mask,
-        nan_policy, method, noise, order, update,
+        nan_policy, method, noise, order, partial(ekf_update_step, form=form),
     )  # fmt: skip
 
 

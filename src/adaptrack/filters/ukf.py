@@ -10,6 +10,7 @@ transform of a linear map is exact).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 
@@ -166,19 +167,9 @@ def ukf_filter(
     if not isinstance(sigma, SigmaPoints):
         raise TypeError(f"sigma_points must be a SigmaPoints; got {type(sigma).__name__}")
 
-    def update(
-        prior: GaussianState,
-        z: FloatArray,
-        mm: MeasurementModel,
-        idx: np.ndarray,
-        r: FloatArray,
-        mk: BoolArray,
-    ) -> tuple[GaussianState, StepInfo, FloatArray]:
-        return ukf_update_step(prior, z, mm, idx, r, mk, sigma)
-
     return run_nonlinear(
         times, measurements, model, measurement_model, initial, measurement_cov, mask,
-        nan_policy, method, noise, order, update,
+        nan_policy, method, noise, order, partial(ukf_update_step, sigma=sigma),
     )  # fmt: skip
 
 

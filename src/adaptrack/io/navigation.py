@@ -66,10 +66,14 @@ def read_navigation_measurements(
     azimuth_std_rad: float,
     elevation_std_rad: float,
     velocity_std_mps: float,
+    frame: pd.DataFrame | None = None,
 ) -> NavigationNodes:
-    """Read a measurement table into ENU position and velocity nodes with covariances."""
+    """Read a measurement table into ENU position and velocity nodes with covariances.
+
+    ``frame``: the table already read from ``path`` (it is not read again).
+    """
     p = Path(path)
-    frame = read_table(p)
+    frame = read_table(p) if frame is None else frame
     _check_columns(frame, p)
     if any(c in frame.columns for c in RATE_COLUMNS):
         raise DataFormatError(
@@ -136,14 +140,15 @@ def _check_columns(frame: pd.DataFrame, p: Path) -> None:
         )
 
 
-def read_radar_record(path: str | Path) -> RadarRecord:
+def read_radar_record(path: str | Path, frame: pd.DataFrame | None = None) -> RadarRecord:
     """Read one target's radar samples with range-rate: every row a complete radar sample.
 
     ``time_s, range_m, azimuth_*, elevation_*, range_rate_mps[, range_accel_mps2]``; velocity
-    rows of a second source are refused (not combined with triple nodes).
+    rows of a second source are refused (not combined with triple nodes). ``frame``: the
+    table already read from ``path``.
     """
     p = Path(path)
-    frame = read_table(p)
+    frame = read_table(p) if frame is None else frame
     _check_columns(frame, p)
     require_columns(frame, ["range_m", "range_rate_mps"], p)
     if any(c in frame.columns for c in VELOCITY_COLUMNS):
