@@ -7,7 +7,7 @@ import pytest
 
 import adaptrack as at
 from adaptrack.filters.imm import imm_filter
-from adaptrack.models import ConstantAcceleration, ConstantVelocity
+from adaptrack.models import ConstantAcceleration, ConstantVelocity, CoordinatedTurn
 from adaptrack.smoothers.imm_smoother import imm_smooth
 
 
@@ -131,3 +131,5 @@ def test_bad_arguments_are_named(rng):
         imm_smooth(res, models)
     with pytest.raises(TypeError, match="IMMResult"):
         imm_smooth(res.filtered, models, pi)
+    with pytest.raises(TypeError, match=r"models\[1\] is a nonlinear CoordinatedTurn"):
+        imm_smooth(res, [models[0], CoordinatedTurn()], pi)

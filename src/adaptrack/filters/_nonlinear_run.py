@@ -1,8 +1,10 @@
-"""The time loop shared by the EKF and the UKF: linear prediction, a nonlinear update.
+"""The time loop shared by the EKF and the UKF.
 
-Both filters predict with the exact discretisation of a linear motion model (the unscented
-transform of a linear map is exact, so the UKF loses nothing) and differ only in the
-update; the loop runs every track of the batch at once, each on its own time grid.
+A linear motion model is predicted with its exact discretisation (the unscented transform of
+a linear map is exact, so the UKF loses nothing); a
+:class:`~adaptrack.models.NonlinearMotionModel` with the filter's own prediction step
+(linearised or by sigma points). The update is the filter's; the loop runs every track of
+the batch at once, each on its own time grid.
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ from .._typing import ArrayLike, BoolArray, FloatArray
 from ..models.continuous import MotionModel, as_motion_model
 from ..models.discretize import Method, Noise
 from ..models.measurement import MeasurementModel, state_indices
+from ..models.turn import NonlinearMotionModel
 from ..types import FilterResult, GaussianState, StepInfo, _trusted, as_gaussian_state
 from .kalman import CovarianceError, predict
 from .run import (
@@ -27,6 +30,13 @@ from .run import (
     check_sequence,
     present_mask,
 )
+
+Predict = Callable[
+    [GaussianState, NonlinearMotionModel, FloatArray, FloatArray],
+    tuple[GaussianState, FloatArray, FloatArray],
+]
+"""Nonlinear prediction ``(state, model, dt, time) -> (prior, F, Q)``; ``F`` is the step's
+(statistical) linearisation, stored for the RTS smoother."""
 
 Update = Callable[
     [GaussianState, FloatArray, MeasurementModel, np.ndarray, FloatArray, BoolArray],
@@ -47,7 +57,7 @@ def check_measurement_model(value: object) -> MeasurementModel:
 def run_nonlinear(
     times: ArrayLike,
     measurements: ArrayLike,
-    model: MotionModel,
+    model: MotionModel | NonlinearMotionModel,
     measurement_model: MeasurementModel,
     initial: GaussianState,
     measurement_cov: ArrayLike | None,
@@ -57,9 +67,12 @@ def run_nonlinear(
     noise: Noise,
     order: int,
     update: Update,
+    predict_nonlinear: Predict,
 ) -> FilterResult:
     """Validate a run's inputs, then predict and ``update`` step by step over the batch."""
-    model = as_motion_model(model)
+    moving = model if isinstance(model, NonlinearMotionModel) else None
+    if moving is None:
+        model = as_motion_model(model)
     mm = check_measurement_model(measurement_model)
     initial = as_gaussian_state(initial, "initial")
     idx = state_indices(mm, model.state_names)
@@ -77,10 +90,17 @@ def run_nonlinear(
     mk = present_mask(mask, z, nan_policy)
     n = model.state_dim
     t_init = np.broadcast_to(initial.time, batch)
-    phi, qd, u = _transitions(
-        model, np.broadcast_to(t, batch + (n_steps,)), t_init, method, noise, order
-    )
-    tb, phi_b, qd_b, u_b = _per_track(batch, t, phi, qd, u)
+    if moving is None:
+        phi, qd, u = _transitions(
+            model,  # type: ignore[arg-type]
+            np.broadcast_to(t, batch + (n_steps,)), t_init, method, noise, order,
+        )  # fmt: skip
+        tb, phi_b, qd_b, u_b = _per_track(batch, t, phi, qd, u)
+    else:
+        tb = np.broadcast_to(t, batch + (n_steps,))
+        phi_b, qd_b = np.empty(batch + (n_steps, n, n)), np.empty(batch + (n_steps, n, n))
+        u_b = np.zeros(batch + (n_steps, n))
+        dt = np.diff(tb, axis=-1, prepend=t_init[..., None])
     out = _Recorder(batch, n_steps, n, m)
     h_all = np.empty(batch + (n_steps, m, n))
     x = np.broadcast_to(initial.mean, batch + (n,))
@@ -88,7 +108,10 @@ def run_nonlinear(
     for k in range(n_steps):
         sv = (slice(None),) * len(batch) + (k,)
         state = _trusted(GaussianState, mean=x, cov=p, time=tb[sv])
-        prior = predict(state, phi_b[sv], qd_b[sv], time=tb[sv], control=u_b[sv])
+        if moving is None:
+            prior = predict(state, phi_b[sv], qd_b[sv], time=tb[sv], control=u_b[sv])
+        else:
+            prior, phi_b[sv], qd_b[sv] = predict_nonlinear(state, moving, dt[sv], tb[sv])
         rk = r[sv] if r_per_step else r
         try:
             post, info, h_all[sv] = update(prior, z[sv], mm, idx, rk, mk[sv])

@@ -2,7 +2,9 @@
 
 The update linearises ``h`` at the predicted mean: ``H = dh/dx(x_pred)``,
 ``nu = z - h(x_pred)`` (angles wrapped), then the linear update with ``H`` in Joseph or
-standard form. Prediction is exact (linear motion models).
+standard form. Prediction is exact for a linear motion model; a nonlinear one
+(:class:`~adaptrack.models.CoordinatedTurn`) is linearised at the filtered mean:
+``x_pred = f(x)``, ``P_pred = F P F^T + Q`` with ``F = df/dx(x)``.
 """
 
 from __future__ import annotations
@@ -12,11 +14,12 @@ from typing import Literal
 
 import numpy as np
 
-from .._linalg import matvec
+from .._linalg import matvec, mT, symmetrize
 from .._typing import ArrayLike, BoolArray, FloatArray
 from ..models.continuous import MotionModel
 from ..models.discretize import Method, Noise
 from ..models.measurement import MeasurementModel, residual
+from ..models.turn import NonlinearMotionModel
 from ..types import FilterResult, GaussianState, StepInfo, _trusted
 from ._measurement import masked_model
 from ._nonlinear_run import full_jacobian, observed, run_nonlinear
@@ -58,10 +61,23 @@ def ekf_update_step(
     return post, info, hm
 
 
+def ekf_predict_step(
+    state: GaussianState, model: NonlinearMotionModel, dt: FloatArray, time: FloatArray
+) -> tuple[GaussianState, FloatArray, FloatArray]:
+    """Predict ``state`` through a nonlinear motion model, linearised at its mean.
+
+    ``dt`` (...) [s]; returns the prior, ``F`` and ``Q`` (..., n, n).
+    """
+    mean, f = model.propagate(state.mean, dt)
+    q = model.process_cov(dt)
+    cov = symmetrize(f @ state.cov @ mT(f) + q)
+    return _trusted(GaussianState, mean=mean, cov=cov, time=time), f, q
+
+
 def ekf_filter(
     times: ArrayLike,
     measurements: ArrayLike,
-    model: MotionModel,
+    model: MotionModel | NonlinearMotionModel,
     measurement_model: MeasurementModel,
     initial: GaussianState,
     *,
@@ -81,8 +97,10 @@ def ekf_filter(
         Measurement times [s], strictly increasing per track (per-track grids allowed).
     measurements : array_like, shape (T, m) or (N, T, m)
         Measured components in the order of ``measurement_model.names`` (angles [rad]).
-    model : MotionModel
-        Linear continuous-time motion model, discretised exactly for every step.
+    model : MotionModel or NonlinearMotionModel
+        Linear continuous-time motion model, discretised exactly for every step; or a
+        nonlinear one (e.g. :class:`~adaptrack.models.CoordinatedTurn`), linearised at each
+        filtered mean (``method``, ``noise``, ``order`` do not apply to it).
     measurement_model : MeasurementModel
         E.g. :class:`~adaptrack.models.RadarMeasurement`; it reads the motion model's
         states by name.
@@ -127,7 +145,8 @@ def ekf_filter(
     return run_nonlinear(
         times, measurements, model, measurement_model, initial, measurement_cov, mask,
         nan_policy, method, noise, order, partial(ekf_update_step, form=form),
+        ekf_predict_step,
     )  # fmt: skip
 
 
-__all__ = ["ekf_filter", "ekf_update_step"]
+__all__ = ["ekf_filter", "ekf_predict_step", "ekf_update_step"]

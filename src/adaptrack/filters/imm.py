@@ -20,7 +20,8 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Literal
+from functools import partial
+from typing import Literal, cast
 
 import numpy as np
 from scipy.linalg import expm
@@ -32,8 +33,9 @@ from .._validation import as_float_array, check_symmetric_pd, check_times
 from ..models.continuous import MotionModel, as_motion_model
 from ..models.discretize import Method, Noise
 from ..models.measurement import MeasurementModel, state_indices
+from ..models.turn import NonlinearMotionModel
 from ..types import GaussianState, _trusted
-from .ekf import ekf_update_step
+from .ekf import ekf_predict_step, ekf_update_step
 from .kalman import (
     CovarianceError,
     _component_mask,
@@ -42,7 +44,7 @@ from .kalman import (
 )
 from .run import auto_form, step_transitions
 from .square_root import covariance, lower_factor, sqrt_predict, sqrt_update, triangularize
-from .ukf import SigmaPoints, ukf_update_step
+from .ukf import SigmaPoints, ukf_predict_step, ukf_update_step
 
 IMMForm = Literal["auto", "joseph", "standard", "sqrt"]
 NonlinearUpdate = Literal["ekf", "ukf"]
@@ -99,7 +101,7 @@ def _embed(src_names: tuple[str, ...], dst_names: tuple[str, ...]) -> tuple[np.n
 def imm_filter(
     times: ArrayLike,
     measurements: ArrayLike,
-    models: Sequence[MotionModel],
+    models: Sequence[MotionModel | NonlinearMotionModel],
     measured_states: Sequence[str] | MeasurementModel,
     measurement_cov: ArrayLike | None,
     initial: Sequence[GaussianState],
@@ -122,8 +124,10 @@ def imm_filter(
         Strictly increasing measurement times [s].
     measurements : array_like, shape (T, m) or (N, T, m)
         Measured values of ``measured_states`` (in that order).
-    models : sequence of MotionModel, length M
-        Each must have every state in ``measured_states``.
+    models : sequence of MotionModel or NonlinearMotionModel, length M
+        Each must have every state in ``measured_states``. A nonlinear one (e.g.
+        :class:`~adaptrack.models.CoordinatedTurn`) is predicted as ``nonlinear`` says
+        (linearised, or by sigma points); the run is then in NumPy and Joseph form.
     measured_states : sequence of str, length m, or MeasurementModel
         Names of the measured states, e.g. ``("x", "y")``; or a nonlinear measurement model
         (e.g. :class:`~adaptrack.models.RadarMeasurement`), which every model's update
@@ -146,7 +150,8 @@ def imm_filter(
         step of length ``dt`` switches with ``expm(L dt)``. Exactly one of
         ``transition_probs`` and ``switching_rates`` is given.
     nonlinear : {"ekf", "ukf"}
-        Update of every model with a measurement model (ignored for ``measured_states``).
+        Update of every model with a measurement model, and prediction of the nonlinear
+        motion models.
     mask : array_like of bool, shape (..., T) or (..., T, m), optional
         True where a measurement (component) is present.
     method, noise : discretisation options.
@@ -167,7 +172,11 @@ def imm_filter(
     -------
     IMMResult
     """
-    models = [as_motion_model(m, f"models[{i}]") for i, m in enumerate(models)]
+    models = [
+        m if isinstance(m, NonlinearMotionModel) else as_motion_model(m, f"models[{i}]")
+        for i, m in enumerate(models)
+    ]
+    turning = any(isinstance(m, NonlinearMotionModel) for m in models)
     n_models = len(models)
     if n_models == 0:
         raise ValueError("models must hold at least one model")
@@ -227,6 +236,11 @@ def imm_filter(
     for i, (st, mdl) in enumerate(zip(initial, models, strict=True)):
         if not isinstance(st, GaussianState) or st.dim != mdl.state_dim:
             raise ValueError(f"initial[{i}] must be a GaussianState over {mdl.state_names}")
+        if st.batch_shape not in ((), batch):
+            raise ValueError(
+                f"initial[{i}] must have batch shape () or {batch} to match measurements; "
+                f"got {st.batch_shape}"
+            )
         check_symmetric_pd(st.cov, f"initial[{i}].cov", semidefinite=True)
     mk = np.array(_component_mask(mask, z.shape, "mask"))
     if np.any(np.isnan(z) & mk):
@@ -245,15 +259,18 @@ def imm_filter(
         pis, step_pi = pi[None], np.zeros(dt.shape, dtype=np.int64)
     else:
         pis, step_pi = _switching_probs(rates, dt)
-    compiled = mm is None and use_compiled(backend, z.size // m)
+    compiled = mm is None and not turning and use_compiled(backend, z.size // m)
     run = _imm_compiled if compiled else _imm_numpy
     problem = _Problem(
         tb, dt, z, mk, models, measured, r, initial, pis, step_pi, mu0, method, noise,
-        None if mm is None else (mm, nonlinear),
+        None if mm is None else (mm, nonlinear), nonlinear,
     )  # fmt: skip
-    if mm is not None:
+    if mm is not None or turning:
         if form not in ("auto", "joseph"):
-            raise ValueError("with a measurement model the IMM updates in Joseph form")
+            raise ValueError(
+                "with a measurement model or a nonlinear motion model the IMM updates in "
+                "Joseph form"
+            )
         return run(problem, "joseph")[0]
     if form != "auto":
         return run(problem, form)[0]
@@ -301,7 +318,7 @@ class _Problem:
     dt: FloatArray
     z: FloatArray
     mask: np.ndarray
-    models: list[MotionModel]
+    models: list[MotionModel | NonlinearMotionModel]
     measured: tuple[str, ...]
     r: FloatArray
     initial: Sequence[GaussianState]
@@ -311,6 +328,7 @@ class _Problem:
     method: Method
     noise: Noise
     nonlinear: tuple[MeasurementModel, NonlinearUpdate] | None = None
+    predict_mode: NonlinearUpdate = "ekf"
 
 
 def _imm_numpy(problem: _Problem, form: str) -> tuple[IMMResult, float]:
@@ -328,8 +346,16 @@ def _imm_numpy(problem: _Problem, form: str) -> tuple[IMMResult, float]:
     names = [m.state_names for m in models]
     r_min = np.linalg.eigvalsh(r)[..., 0]
     worst = 0.0
-    disc = [step_transitions(mdl, dt, method, noise) for mdl in models]
-    noise_factors = [lower_factor(d[1]) if form == "sqrt" else None for d in disc]
+    disc = [
+        None if isinstance(mdl, NonlinearMotionModel) else step_transitions(mdl, dt, method, noise)
+        for mdl in models
+    ]
+    noise_factors = [lower_factor(d[1]) if form == "sqrt" and d else None for d in disc]
+    predict_nonlinear = (
+        ekf_predict_step
+        if problem.predict_mode == "ekf"
+        else partial(ukf_predict_step, sigma=SigmaPoints())
+    )
     nonlinear = problem.nonlinear
     if nonlinear is None:
         hs = [
@@ -367,9 +393,11 @@ def _imm_numpy(problem: _Problem, form: str) -> tuple[IMMResult, float]:
             mixed, log_c = _mix(states, log_mu, log_pis[problem.step_pi[..., k]], emb)
         lls = []
         for j in range(n_models):
-            phi, qd, u = (
-                a[..., k, :, :] if a.ndim == dt.ndim + 2 else a[..., k, :] for a in disc[j]
-            )
+            d_j = disc[j]
+            if d_j is not None:
+                phi, qd, u = (
+                    a[..., k, :, :] if a.ndim == dt.ndim + 2 else a[..., k, :] for a in d_j
+                )
             rk = r if r.ndim == 2 else r[..., k, :, :]
             zk, mask_k = z[..., k, :], mk[..., k, :]
             if form == "sqrt":
@@ -382,7 +410,11 @@ def _imm_numpy(problem: _Problem, form: str) -> tuple[IMMResult, float]:
                     factor=factor,
                 )  # fmt: skip
             else:
-                prior = predict(mixed[j], phi, qd, time=tb[..., k], control=u)
+                if d_j is None:
+                    moving = cast(NonlinearMotionModel, models[j])
+                    prior = predict_nonlinear(mixed[j], moving, dt[..., k], tb[..., k])[0]
+                else:
+                    prior = predict(mixed[j], phi, qd, time=tb[..., k], control=u)
                 try:
                     if nonlinear is None:
                         states[j], info = _update(prior, zk, hs[j], rk, mask_k, form)
@@ -468,7 +500,7 @@ def _imm_compiled(problem: _Problem, form: str) -> tuple[IMMResult, float]:
     for j, mdl in enumerate(models):
         nj = mdl.state_dim
         phi[j, :, :nj, :nj], qd[j, :, :nj, :nj], u[j, :, :nj] = step_transitions(
-            mdl, uniq, method, noise
+            cast(MotionModel, mdl), uniq, method, noise
         )
         if form == "sqrt":
             qd[j, :, :nj, :nj] = lower_factor(qd[j, :, :nj, :nj])

@@ -25,6 +25,7 @@ from .._validation import (
 )
 from ..models.continuous import MotionModel, as_motion_model, named_measurement_matrix
 from ..models.discretize import Method, Noise, discretize_with_input
+from ..models.turn import NonlinearMotionModel
 from ..types import FilterResult, GaussianState, StepInfo, _trusted, as_gaussian_state
 from ._measurement import masked_model
 from .kalman import (
@@ -221,8 +222,9 @@ def check_measurement_cov(
 
 
 def check_initial(
-    initial: GaussianState, model: MotionModel, t: FloatArray, batch: tuple[int, ...]
-) -> None:
+    initial: GaussianState, model: MotionModel | NonlinearMotionModel, t: FloatArray,
+    batch: tuple[int, ...],
+) -> None:  # fmt: skip
     """Check the prior's size, batch shape, covariance and time against the run."""
     n = model.state_dim
     if initial.dim != n:

@@ -3,8 +3,9 @@
 The update draws the 2n + 1 scaled sigma points of Van der Merwe from the prediction
 (``x, x +- sqrt(n + lambda) L_i`` with ``L L^T = P``, ``lambda = alpha^2 (n + kappa) - n``),
 maps them through ``h``, and forms the measurement mean (circular for angles), ``S`` and
-the cross covariance ``P_xz``. Prediction is exact (linear motion models; the unscented
-transform of a linear map is exact).
+the cross covariance ``P_xz``. Prediction is exact for a linear motion model (the unscented
+transform of a linear map is exact); a nonlinear one (:class:`~adaptrack.models.CoordinatedTurn`)
+propagates the sigma points of the filtered belief.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from .._typing import ArrayLike, BoolArray, FloatArray
 from ..models.continuous import MotionModel
 from ..models.discretize import Method, Noise
 from ..models.measurement import MeasurementModel, residual, weighted_mean
+from ..models.turn import NonlinearMotionModel
 from ..types import FilterResult, GaussianState, StepInfo, _trusted
 from ._nonlinear_run import observed, run_nonlinear
 from .kalman import _innovation_stats
@@ -75,6 +77,32 @@ class SigmaPoints:
                                mean[..., None, :] - cols], -2)  # fmt: skip
 
 
+def ukf_predict_step(
+    state: GaussianState,
+    model: NonlinearMotionModel,
+    dt: FloatArray,
+    time: FloatArray,
+    sigma: SigmaPoints | None = None,
+) -> tuple[GaussianState, FloatArray, FloatArray]:
+    """Predict ``state`` through a nonlinear motion model over ``dt`` (...) [s] by sigma points.
+
+    Returns the prior, the statistical linearisation ``F = P_xy^T P^+`` (the cross covariance
+    of the state and its prediction; the RTS smoother's gain needs it) and ``Q``.
+    """
+    sigma = sigma or SigmaPoints()
+    _, wm, wc = sigma.weights(state.dim)
+    pts = sigma.points(state.mean, state.cov)
+    moved, _ = model.propagate(pts, np.asarray(dt)[..., None])
+    mean = np.einsum("p,...pi->...i", wm, moved)
+    dy = moved - mean[..., None, :]
+    dx = pts - state.mean[..., None, :]
+    q = model.process_cov(dt)
+    cov = symmetrize(np.einsum("p,...pi,...pj->...ij", wc, dy, dy) + q)
+    cross = np.einsum("p,...pi,...pj->...ij", wc, dx, dy)
+    f = mT(np.linalg.pinv(state.cov, hermitian=True) @ cross)
+    return _trusted(GaussianState, mean=mean, cov=cov, time=time), f, q
+
+
 def ukf_update_step(
     prior: GaussianState,
     z: FloatArray,
@@ -126,7 +154,7 @@ def ukf_update_step(
 def ukf_filter(
     times: ArrayLike,
     measurements: ArrayLike,
-    model: MotionModel,
+    model: MotionModel | NonlinearMotionModel,
     measurement_model: MeasurementModel,
     initial: GaussianState,
     *,
@@ -170,7 +198,8 @@ def ukf_filter(
     return run_nonlinear(
         times, measurements, model, measurement_model, initial, measurement_cov, mask,
         nan_policy, method, noise, order, partial(ukf_update_step, sigma=sigma),
+        partial(ukf_predict_step, sigma=sigma),
     )  # fmt: skip
 
 
-__all__ = ["SigmaPoints", "ukf_filter", "ukf_update_step"]
+__all__ = ["SigmaPoints", "ukf_filter", "ukf_predict_step", "ukf_update_step"]

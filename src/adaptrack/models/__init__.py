@@ -4,6 +4,7 @@ Models: :class:`ConstantVelocity`, :class:`ConstantAcceleration`, :class:`Singer
 :class:`InverseDynamics` (M1) and :class:`ShapingFilter` (M2) of seed 001, and a generic
 :class:`LinearSDE`. Measurement models for the EKF and UKF: :class:`RadarMeasurement`,
 :class:`GeodeticMeasurement`, :class:`PositionMeasurement`, :class:`FunctionMeasurement`.
+A nonlinear motion model for them: :class:`CoordinatedTurn` (a :class:`NonlinearMotionModel`).
 State order: all positions, then velocities, then higher states.
 """
 
@@ -29,10 +30,12 @@ from .measurement import (
     PositionMeasurement,
     RadarMeasurement,
 )
+from .turn import CoordinatedTurn, NonlinearMotionModel
 
 __all__ = [
     "ConstantAcceleration",
     "ConstantVelocity",
+    "CoordinatedTurn",
     "Discretization",
     "FunctionMeasurement",
     "GeodeticMeasurement",
@@ -40,6 +43,7 @@ __all__ = [
     "LinearSDE",
     "MeasurementModel",
     "MotionModel",
+    "NonlinearMotionModel",
     "PositionMeasurement",
     "RadarMeasurement",
     "ShapingFilter",

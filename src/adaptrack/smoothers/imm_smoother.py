@@ -43,6 +43,7 @@ from ..filters.imm import (
 from ..filters.run import step_transitions
 from ..models.continuous import MotionModel, as_motion_model
 from ..models.discretize import Method, Noise
+from ..models.turn import NonlinearMotionModel
 from ..types import GaussianState, _trusted
 
 
@@ -85,6 +86,12 @@ def imm_smooth(
     """
     if not isinstance(result, IMMResult):
         raise TypeError(f"result must be an IMMResult; got {type(result).__name__}")
+    for i, m in enumerate(models):
+        if isinstance(m, NonlinearMotionModel):
+            raise TypeError(
+                f"imm_smooth takes linear motion models; models[{i}] is a nonlinear "
+                f"{type(m).__name__} (smooth each mode with rts_smooth instead)"
+            )
     models = [as_motion_model(m, f"models[{i}]") for i, m in enumerate(models)]
     n_models = len(models)
     comps = result.components
