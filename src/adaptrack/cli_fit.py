@@ -53,7 +53,12 @@ def fit(
         "(time_s, east_m, north_m[, up_m]), radar2d (time_s, range_m, azimuth_deg"
         "[, range_rate_mps]) or radar3d (with elevation_deg); t_s is taken for time_s.",
     ),
-    model: str = typer.Option("cv", "--model", help="cv (white acceleration) or ca (jerk)."),
+    model: str = typer.Option(
+        "cv",
+        "--model",
+        help="cv (white acceleration), ca (jerk) or ct (coordinated turn: constant speed, "
+        "a wandering turn rate; EKF).",
+    ),
     clock_offset: bool = typer.Option(
         False,
         "--clock-offset",
@@ -111,7 +116,8 @@ def filter_log(
     except ValueError as exc:
         fail(f"{log_file}: {exc}")
     est = rts_smooth(run) if smooth else run.filtered
-    write_table_atomic(estimates_table(log, est.mean, est.cov, result.offset_s), out)
+    table = estimates_table(log, est.mean, est.cov, result.offset_s, result.model == "ct")
+    write_table_atomic(table, out)
     lo, hi = check.mean_nis_band
     Console().print(
         f"innovations: mean NIS {check.mean_nis:.2f} (95 % band {lo:.2f}-{hi:.2f} for "

@@ -169,3 +169,33 @@ def test_fit_and_filter_a_radar_plot_list(tmp_path, cli):
         "fit", tmp_path / "flat.csv", "--measurement", "radar3d", "--out", tmp_path / "f2.toml"
     )
     assert code == 1 and "elevation_deg" in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_fit_and_filter_a_coordinated_turn(tmp_path, cli):
+    """`--model ct`: the turn PSD in the fit, the turn rate and its sigma in the estimates."""
+    from tests.tuning.test_position_log import turning_drive
+
+    t, _pos, _rate, meas = turning_drive(7)
+    pd.DataFrame({"time_s": t, "east_m": meas[:, 0], "north_m": meas[:, 1]}).to_csv(
+        tmp_path / "drive.csv", index=False
+    )
+    code, out, err = cli(
+        "fit", tmp_path / "drive.csv", "--measurement", "position", "--model", "ct", "--out",
+        tmp_path / "fit.toml",
+    )  # fmt: skip
+    assert code == 0, err
+    assert "q_turn" in out and 'model = "ct"' in (tmp_path / "fit.toml").read_text()
+    code, out, err = cli(
+        "filter", tmp_path / "drive.csv", "--config", tmp_path / "fit.toml", "--out",
+        tmp_path / "est.csv",
+    )  # fmt: skip
+    assert code == 0, err
+    est = pd.read_csv(tmp_path / "est.csv")
+    assert {"turn_rate_radps", "turn_rate_std_radps", "velocity_east_mps"} <= set(est.columns)
+    bend = (est.time_s > 18) & (est.time_s <= 25)
+    assert est.turn_rate_radps[bend].mean() > 0.1  # a left bend of pi / 20 rad/s
+    code, _, err = cli(
+        "fit", tmp_path / "drive.csv", "--measurement", "position", "--model", "turn",
+        "--out", tmp_path / "f2.toml",
+    )  # fmt: skip
+    assert code != 0 and "cv, ca, ct" in err

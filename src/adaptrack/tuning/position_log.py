@@ -19,6 +19,7 @@ import pandas as pd
 
 from .._typing import FloatArray
 from ..coords.geodetic import ecef_to_enu, ecef_to_geodetic, enu_to_ecef, geodetic_to_ecef
+from ..filters.ekf import ekf_filter
 from ..filters.run import kalman_filter
 from ..io.tables import (
     DataFormatError,
@@ -28,18 +29,25 @@ from ..io.tables import (
     read_table,
     require_columns,
 )
-from ..models import ConstantAcceleration, ConstantVelocity
+from ..models import (
+    ConstantAcceleration,
+    ConstantVelocity,
+    CoordinatedTurn,
+    NonlinearMotionModel,
+    PositionMeasurement,
+)
+from ..models.continuous import MotionModel
 from ..smoothers import rts_smooth
 from ..types import FilterResult, GaussianState
 from .calibration import fit_clock_offset
 from .likelihood import LikelihoodFit, fit_by_likelihood
-from .radar_log import RADAR_LAYOUTS, RadarLog, radar_parameters, run_radar
+from .radar_log import RADAR_LAYOUTS, TURN_PRIOR_STD, RadarLog, radar_parameters, run_radar
 
 Measurement = Literal["gnss", "position"]
-Model = Literal["cv", "ca"]
+Model = Literal["cv", "ca", "ct"]
 MEASUREMENTS: tuple[str, ...] = ("gnss", "position")
 ALL_MEASUREMENTS: tuple[str, ...] = MEASUREMENTS + RADAR_LAYOUTS  # what `adaptrack fit` reads
-MODELS: tuple[str, ...] = ("cv", "ca")
+MODELS: tuple[str, ...] = ("cv", "ca", "ct")
 _AXES = ("x", "y", "z")
 _COLUMNS = {  # measured columns of each layout (the last is optional: a planar log)
     "gnss": ("lat_deg", "lon_deg", "alt_m"),
@@ -179,23 +187,36 @@ def _psds(values: dict[str, float], n_axes: int) -> list[float]:
     return [values["q_horizontal"]] * 2 + ([values["q_vertical"]] if n_axes == 3 else [])
 
 
+def motion_model(
+    model: str, values: dict[str, float], n_axes: int
+) -> MotionModel | NonlinearMotionModel:
+    """Return the fit's motion model: CV, CA or the coordinated turn (``q_turn`` [rad^2/s^3])."""
+    q = _psds(values, n_axes)
+    if model == "ct":
+        return CoordinatedTurn(q[0], values["q_turn"], q[-1], n_axes)
+    if model == "cv":
+        return ConstantVelocity(accel_psd=q, n_axes=n_axes)
+    return ConstantAcceleration(jerk_psd=q, n_axes=n_axes)
+
+
 def _run(log: PositionLog | RadarLog, model: str, values: dict[str, float]) -> FilterResult:
     """Filter ``log`` with these parameters (prior from the first fix or plot)."""
     k = log.n_axes
-    q = _psds(values, k)
-    motion = (
-        ConstantVelocity(accel_psd=q, n_axes=k)
-        if model == "cv"
-        else ConstantAcceleration(jerk_psd=q, n_axes=k)
-    )
+    motion = motion_model(model, values, k)
     if isinstance(log, RadarLog):
         return run_radar(log, motion, values)
     r = [values["r_horizontal"]] * 2 + ([values["r_vertical"]] if k == 3 else [])
-    n = len(motion.state_names)
+    n = motion.state_dim
     mean = np.zeros(n)
     mean[:k] = log.enu[0]
     prior_var = np.full(n, 100.0)  # velocity [m^2/s^2] (and acceleration): unknown at first
     prior_var[:k] = r
+    if isinstance(motion, NonlinearMotionModel):
+        prior_var[-1] = TURN_PRIOR_STD**2
+        prior = GaussianState(mean, np.diag(prior_var), np.asarray(log.times[0]))
+        return ekf_filter(
+            log.times, log.enu, motion, PositionMeasurement(np.array(r), _AXES[:k]), prior
+        )
     prior = GaussianState(mean, np.diag(prior_var), np.asarray(log.times[0]))
     return kalman_filter(
         log.times, log.enu, motion, list(_AXES[:k]), np.diag(r), prior, backend="numba"
@@ -231,6 +252,8 @@ def fit_motion(
     if log.times.size < 10:
         raise ValueError(f"a fit needs at least 10 fixes; the log has {log.times.size}")
     initial = {"q_horizontal": 1.0} | ({"q_vertical": 0.1} if log.n_axes == 3 else {})
+    if model == "ct":
+        initial |= {"q_turn": 1e-3}
     if isinstance(log, RadarLog):
         initial |= radar_parameters(log)
     else:
@@ -243,14 +266,19 @@ def fit_motion(
 
 
 def estimates_table(
-    log: PositionLog | RadarLog, mean: FloatArray, cov: FloatArray, offset_s: float = 0.0
+    log: PositionLog | RadarLog,
+    mean: FloatArray,
+    cov: FloatArray,
+    offset_s: float = 0.0,
+    turn_rate: bool = False,
 ) -> pd.DataFrame:
     """Estimates as a table: position, velocity, their sigmas, the position covariance.
 
     ``time_s, east_m, north_m(, up_m), velocity_east_mps, ...``, ``*_std_*``, ``cov_e_n`` (and
-    ``cov_e_u``, ``cov_n_u``); with a clock offset [s] (fixes stamped that late),
-    ``corrected_time_s``: when each fix was made; for a GNSS log also ``lat_deg, lon_deg,
-    alt_m``.
+    ``cov_e_u``, ``cov_n_u``); ``turn_rate_radps`` and its sigma if ``turn_rate`` (the
+    coordinated turn's last state, counter-clockwise positive); with a clock offset [s]
+    (fixes stamped that late), ``corrected_time_s``: when each fix was made; for a GNSS log
+    also ``lat_deg, lon_deg, alt_m``.
     """
     k = log.n_axes
     names = ("east", "north", "up")[:k]
@@ -266,6 +294,8 @@ def estimates_table(
     for a in range(k):
         for b in range(a + 1, k):
             cols[f"cov_{names[a][0]}_{names[b][0]}"] = cov[:, a, b]
+    if turn_rate:
+        cols["turn_rate_radps"], cols["turn_rate_std_radps"] = mean[:, -1], np.sqrt(cov[:, -1, -1])
     if offset_s:
         cols["corrected_time_s"] = log.times - offset_s
     if log.origin is not None:
@@ -306,9 +336,10 @@ def fit_toml(fit: MotionFit, measurement: str, source: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _parameter_names(measurement: str, axes: int, range_rate: bool) -> set[str]:
+def _parameter_names(measurement: str, model: str, axes: int, range_rate: bool) -> set[str]:
     """Return the parameters a fit of this layout has (``range_rate``: radar range-rates)."""
     names = {"q_horizontal"} | ({"q_vertical"} if axes == 3 else set())
+    names |= {"q_turn"} if model == "ct" else set()
     if measurement in RADAR_LAYOUTS:
         comps = ["range", "azimuth"] + (["elevation"] if axes == 3 else [])
         return names | {f"r_{c}" for c in comps + (["range_rate"] if range_rate else [])}
@@ -331,7 +362,7 @@ def fit_from_toml(data: dict[str, object], where: str) -> tuple[MotionFit, str]:
         values = np.array([float(params[n]["value"]) for n in names])
     except (KeyError, TypeError, ValueError) as exc:
         raise ValueError(f"{where}: incomplete [fit] table ({exc})") from None
-    expected = _parameter_names(str(measurement), axes, "r_range_rate" in names)
+    expected = _parameter_names(str(measurement), str(model), axes, "r_range_rate" in names)
     if measurement not in ALL_MEASUREMENTS or model not in MODELS or set(names) != expected:
         raise ValueError(
             f"{where}: [fit] must name a measurement in {ALL_MEASUREMENTS}, a model in {MODELS} "

@@ -28,6 +28,7 @@ from ..io.tables import (
 )
 from ..models.continuous import MotionModel
 from ..models.measurement import RadarMeasurement
+from ..models.turn import NonlinearMotionModel
 from ..types import FilterResult, GaussianState
 
 RadarLayout = Literal["radar2d", "radar3d"]
@@ -45,6 +46,7 @@ START_VARIANCE = {  # starting values of the noise variances for the fit
     "range_rate": 0.5**2,
 }
 VELOCITY_PRIOR_STD_MPS = 100.0  # unknown at the first plot
+TURN_PRIOR_STD = 0.3  # turn rate at the first plot or fix [rad/s]: unknown (17 deg/s)
 
 
 @dataclass(frozen=True)
@@ -100,7 +102,9 @@ def radar_parameters(log: RadarLog) -> dict[str, float]:
     return {f"r_{c}": START_VARIANCE[c] for c in log.components}
 
 
-def run_radar(log: RadarLog, motion: MotionModel, values: dict[str, float]) -> FilterResult:
+def run_radar(
+    log: RadarLog, motion: MotionModel | NonlinearMotionModel, values: dict[str, float]
+) -> FilterResult:
     """EKF of ``log`` with the given noise variances; prior at the first plot."""
     k = log.n_axes
     radar = RadarMeasurement(
@@ -116,6 +120,8 @@ def run_radar(log: RadarLog, motion: MotionModel, values: dict[str, float]) -> F
     cross = first[0] ** 2 * values["r_azimuth"]  # variance across the line of sight [m^2]
     var = np.full(n, VELOCITY_PRIOR_STD_MPS**2)
     var[:k] = values["r_range"] + cross
+    if isinstance(motion, NonlinearMotionModel):
+        var[-1] = TURN_PRIOR_STD**2
     prior = GaussianState(mean, np.diag(var), np.asarray(log.times[0]))
     return ekf_filter(log.times, log.plots, motion, radar, prior)
 
