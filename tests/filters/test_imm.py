@@ -354,8 +354,9 @@ def test_switching_rates_bad_input(rng, kwargs, message):
 
 
 def test_imm_with_a_linear_measurement_model_is_the_linear_imm(rng):
-    """IMM-EKF and IMM-UKF with h linear: the linear IMM (models of different sizes)."""
-    from adaptrack.models import PositionMeasurement
+    """IMM-EKF and IMM-UKF with h linear (a user's function): the linear IMM (models of
+    different sizes); a PositionMeasurement is run as that linear IMM."""
+    from adaptrack.models import FunctionMeasurement, PositionMeasurement
 
     t = np.cumsum(rng.uniform(0.5, 1.5, 40))
     z = rng.normal(0, 20, (2, 40, 2)) + np.stack([30 * t, 0.5 * t**2], -1)
@@ -371,8 +372,11 @@ def test_imm_with_a_linear_measurement_model_is_the_linear_imm(rng):
     rates = [[-0.05, 0.05], [0.1, -0.1]]
     ref = imm_filter(t, z, models, ("x", "y"), r, priors, initial_probs=[0.7, 0.3],
                      switching_rates=rates, form="joseph", backend="numpy")  # fmt: skip
-    for kind in ("ekf", "ukf"):
-        res = imm_filter(t, z, models, PositionMeasurement(r), None, priors,
+    linear = FunctionMeasurement(lambda s_: s_, ("x", "y"), ("x_m", "y_m"), r,
+                                 jacobian_function=lambda s_: np.broadcast_to(
+                                     np.eye(2), s_.shape[:-1] + (2, 2)))  # fmt: skip
+    for kind, sensor in (("ekf", linear), ("ukf", linear), ("ekf", PositionMeasurement(r))):
+        res = imm_filter(t, z, models, sensor, None, priors,
                          initial_probs=[0.7, 0.3], switching_rates=rates,
                          nonlinear=kind)  # fmt: skip
         tol = 1e-10 if kind == "ekf" else 1e-7
@@ -509,3 +513,44 @@ def test_jittered_per_track_times_take_the_series_tables_with_the_same_result(rn
                                    atol=1e-9)  # fmt: skip
         np.testing.assert_allclose(whole.filtered.cov[i], alone.filtered.cov, rtol=1e-9,
                                    atol=1e-10)  # fmt: skip
+
+
+@pytest.mark.parametrize("n_axes", [2, 3])
+def test_compiled_imm_ekf_of_a_radar_equals_the_numpy_reference(rng, n_axes):
+    """The kernel's radar geometry, Jacobian and wrapped innovation against the NumPy IMM-EKF:
+    a moving radar, range-rate, missing components, per-track irregular times, a pass
+    across the azimuth cut (due south of the radar)."""
+    from adaptrack.models import RadarMeasurement
+
+    comps = ("range", "azimuth") + (("elevation",) if n_axes == 3 else ()) + ("range_rate",)
+    radar = RadarMeasurement(
+        np.diag([25.0, 1e-6, 4e-6, 0.25][: len(comps) - 1] + [0.25]), comps, n_axes=n_axes,
+        sensor_position=[50.0, -20.0, 10.0][:n_axes], sensor_velocity=[1.0, 2.0, 0.5][:n_axes],
+        heading=0.3,
+    )  # fmt: skip
+    t = np.cumsum(rng.uniform(0.5, 1.5, (3, 80)), -1)
+    x0, v = np.array([-400.0, -3000.0, 500.0][:n_axes]), np.array([12.0, 1.0, 0.5][:n_axes])
+    truth = x0 + t[..., None] * v
+    full = np.concatenate([truth, np.broadcast_to(v, truth.shape)], -1)
+    z = radar.predict(full) + rng.normal(size=(3, 80, len(comps))) * np.sqrt(
+        np.diag(radar.noise_cov)
+    )
+    mask = rng.uniform(size=z.shape) > 0.1
+    k = n_axes
+    models = [ConstantVelocity(0.5, n_axes=k), ConstantAcceleration(0.1, n_axes=k)]
+    priors = [at.GaussianState(np.r_[x0, v] + 10, np.diag([400.0] * k + [100.0] * k), 0.0),
+              at.GaussianState(np.r_[x0, v, np.zeros(k)] + 10,
+                               np.diag([400.0] * k + [100.0] * k + [4.0] * k), 0.0)]  # fmt: skip
+    kw = dict(initial_probs=[0.5, 0.5], switching_rates=[[-0.1, 0.1], [0.2, -0.2]], mask=mask)
+    ref = imm_filter(t, z, models, radar, None, priors, backend="numpy", **kw)
+    got = imm_filter(t, z, models, radar, None, priors, backend="numba", **kw)
+    assert np.abs(np.diff(np.sign(ref.filtered.mean[..., 0]))).max() > 0  # crossed the cut
+    np.testing.assert_allclose(got.filtered.mean, ref.filtered.mean, rtol=1e-9, atol=1e-8)
+    np.testing.assert_allclose(got.filtered.cov, ref.filtered.cov, rtol=1e-7, atol=1e-9)
+    np.testing.assert_allclose(got.log_likelihood, ref.log_likelihood, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(got.mode_probabilities, ref.mode_probabilities, atol=1e-9)
+    # a prediction on the radar's vertical axis: the reference's error, not a kernel status
+    on_axis = at.GaussianState(np.r_[radar.sensor_position, np.zeros(k)], np.eye(2 * k), 0.0)
+    with pytest.raises(ValueError, match="vertical axis"):
+        imm_filter(t[0, :3], z[0, :3], models[:1], radar, None, [on_axis], initial_probs=[1.0],
+                   switching_rates=[[0.0]], backend="numba")  # fmt: skip

@@ -17,6 +17,7 @@ import numpy as np
 from numba import prange
 
 from ._kernels import _LOG_2PI, kf_step
+from ._radar_update import radar_ekf_step
 from ._sqrt_kernel import lower_factor_into, lower_triangularize, outer_into, sqrt_step
 
 FORMS = ("standard", "joseph", "sqrt")  # the kernel's form codes 0, 1, 2
@@ -196,6 +197,9 @@ def imm_kernel(  # type: ignore[no-untyped-def]
     z,
     mask,
     h,
+    codes,
+    pose,
+    reads,
     r,
     r_min,
     log_mu0,
@@ -222,7 +226,10 @@ def imm_kernel(  # type: ignore[no-untyped-def]
     distinct step lengths (``qd`` holds factors of ``Qd`` in square-root form), ``log_pi``
     (P, M, M) the log transition matrices and ``step_pi`` (N, T) the one of each step,
     ``form`` an index into :data:`FORMS`, ``didx`` (N|1, T) the step length of every step;
-    ``z``/``mask`` (N, T, m), ``h`` (M, m, nmax), ``r`` (N|1, T|1, m, m), ``emb_*`` the
+    ``z``/``mask`` (N, T, m), ``h`` (M, m, nmax), ``r`` (N|1, T|1, m, m). A radar measurement
+    (IMM-EKF, Joseph form) replaces ``h``: its component ``codes`` (m,; empty for a linear
+    measurement), ``pose`` and the ``reads`` (M, k) of each model (see
+    :mod:`adaptrack.filters._radar_update`). ``emb_*`` the
     (dst, src, count) of the states model i shares with model j, ``out_idx`` (M, n_out).
     ``status[i]`` becomes ``k + 1`` if track ``i`` stops at step ``k`` (S not positive
     definite). ``r_min`` (N|1, T|1) is the smallest eigenvalue of each ``R``; in the Joseph and
@@ -270,6 +277,10 @@ def imm_kernel(  # type: ignore[no-untyped-def]
         pre2 = np.empty((m + nmax, m + nmax))
         sr = np.empty((m, m))
         gain = np.empty((nmax, m))
+        radar = codes.shape[0] > 0
+        zp = np.empty(m)
+        jac = np.empty((m, reads.shape[1]))
+        sread = np.empty(reads.shape[1])
         for j in range(n_models):
             for a in range(nmax):
                 xs[j, a] = x0[j, ix, a]
@@ -312,6 +323,13 @@ def imm_kernel(  # type: ignore[no-untyped-def]
                     )  # fmt: skip
                     fs[j, :nj, :nj] = fac[:nj, :nj]
                     outer_into(fac, ps[j], nj)
+                elif radar:
+                    ok, nis, logdet, nobs = radar_ekf_step(
+                        xs[j, :nj], ps[j, :nj, :nj], phi[j, q, :nj, :nj], qd[j, q, :nj, :nj],
+                        u[j, q, :nj], z[i, k], mask[i, k], codes, pose, reads[j], r[ir, kr],
+                        xp[:nj], pp[:nj, :nj], tmp[:nj, :nj], hm[:, :nj], rm, hp[:, :nj], s, lo,
+                        kt[:, :nj], nu, wv, ikh[:nj, :nj], zp, jac, sread,
+                    )  # fmt: skip
                 else:
                     ok, nis, logdet, nobs = kf_step(
                         xs[j, :nj], ps[j, :nj, :nj], phi[j, q, :nj, :nj], qd[j, q, :nj, :nj],

@@ -32,7 +32,12 @@ from .._typing import ArrayLike, FloatArray
 from .._validation import as_float_array, check_symmetric_pd, check_times
 from ..models.continuous import MotionModel, as_motion_model
 from ..models.discretize import Method, Noise
-from ..models.measurement import MeasurementModel, state_indices
+from ..models.measurement import (
+    MeasurementModel,
+    PositionMeasurement,
+    RadarMeasurement,
+    state_indices,
+)
 from ..models.turn import NonlinearMotionModel
 from ..types import GaussianState, _trusted
 from .ekf import ekf_predict_step, ekf_update_step
@@ -166,7 +171,10 @@ def imm_filter(
         times the smallest eigenvalue of ``R`` (the criterion of ``kalman_filter``).
     backend : {"auto", "numpy", "numba"}
         The NumPy reference or the compiled kernel (same numbers to rounding); ``"auto"``
-        compiles from 20,000 track-steps on.
+        compiles from 20,000 track-steps on. The kernel runs linear measurements (a
+        :class:`~adaptrack.models.PositionMeasurement` is one) and the IMM-EKF of a
+        :class:`~adaptrack.models.RadarMeasurement`; other measurement models, the IMM-UKF and
+        nonlinear motion models run in NumPy.
 
     Returns
     -------
@@ -182,6 +190,10 @@ def imm_filter(
         raise ValueError("models must hold at least one model")
     names = [m.state_names for m in models]
     mm = measured_states if isinstance(measured_states, MeasurementModel) else None
+    if isinstance(mm, PositionMeasurement):  # linear: the Kalman IMM (compiled, any form)
+        if measurement_cov is None:
+            measurement_cov = mm.noise_cov
+        measured_states, mm = mm.reads, None
     measured = tuple(measured_states) if mm is None else mm.names  # type: ignore[arg-type]
     for i, nm in enumerate(names):
         missing = [s for s in (measured if mm is None else mm.reads) if s not in nm]
@@ -259,7 +271,8 @@ def imm_filter(
         pis, step_pi = pi[None], np.zeros(dt.shape, dtype=np.int64)
     else:
         pis, step_pi = _switching_probs(rates, dt)
-    compiled = mm is None and not turning and use_compiled(backend, z.size // m)
+    radar_ekf = isinstance(mm, RadarMeasurement) and nonlinear == "ekf"
+    compiled = (mm is None or radar_ekf) and not turning and use_compiled(backend, z.size // m)
     run = _imm_compiled if compiled else _imm_numpy
     problem = _Problem(
         tb, dt, z, mk, models, measured, r, initial, pis, step_pi, mu0, method, noise,
@@ -478,6 +491,7 @@ def _imm_compiled(problem: _Problem, form: str) -> tuple[IMMResult, float]:
     r, initial, mu0 = problem.r, problem.initial, problem.mu0
     method, noise, tb = problem.method, problem.noise, problem.tb
     from ._imm_kernel import FORMS, imm_kernel
+    from ._radar_update import radar_layout
 
     batch, (n_steps, m) = z.shape[:-2], z.shape[-2:]
     n_tr = int(np.prod(batch, dtype=int))
@@ -497,6 +511,12 @@ def _imm_compiled(problem: _Problem, form: str) -> tuple[IMMResult, float]:
     emb_cnt = np.zeros((n_models, n_models), dtype=np.int64)
     out_names = tuple(s for s in names[0] if all(s in nm for nm in names))
     out_idx = np.array([[nm.index(s) for s in out_names] for nm in names], dtype=np.int64)
+    radar = problem.nonlinear[0] if problem.nonlinear else None
+    if isinstance(radar, RadarMeasurement):
+        codes, pose = radar_layout(radar)
+        reads = np.array([state_indices(radar, nm) for nm in names], dtype=np.int64)
+    else:
+        codes, pose, reads = np.zeros(0, np.int64), np.zeros(8), np.zeros((n_models, 1), np.int64)
     for j, mdl in enumerate(models):
         nj = mdl.state_dim
         phi[j, :, :nj, :nj], qd[j, :, :nj, :nj], u[j, :, :nj] = step_transitions(
@@ -504,7 +524,8 @@ def _imm_compiled(problem: _Problem, form: str) -> tuple[IMMResult, float]:
         )
         if form == "sqrt":
             qd[j, :, :nj, :nj] = lower_factor(qd[j, :, :nj, :nj])
-        h[j, np.arange(m), [names[j].index(s_) for s_ in measured]] = 1.0
+        if radar is None:
+            h[j, np.arange(m), [names[j].index(s_) for s_ in measured]] = 1.0
         x0[j, :, :nj] = np.broadcast_to(initial[j].mean, batch + (nj,)).reshape(-1, nj)
         p0[j, :, :nj, :nj] = np.broadcast_to(initial[j].cov, batch + (nj, nj)).reshape(-1, nj, nj)
         for i in range(n_models):
@@ -535,6 +556,9 @@ def _imm_compiled(problem: _Problem, form: str) -> tuple[IMMResult, float]:
         c(z.reshape(n_tr, n_steps, m)),
         c(mask.reshape(n_tr, n_steps, m)),
         h,
+        codes,
+        pose,
+        reads,
         c(r4),
         c(np.linalg.eigvalsh(r4)[..., 0]),
         np.log(np.where(mu0 > 0, mu0, 1e-300)),
@@ -555,6 +579,8 @@ def _imm_compiled(problem: _Problem, form: str) -> tuple[IMMResult, float]:
         worst,
     )
     if status.any():
+        if radar is not None:  # the reference names the step and the cause
+            return _imm_numpy(problem, form)
         i = int(np.flatnonzero(status)[0])
         raise _indefinite(int(status[i]) - 1, i)
     comps = tuple(

@@ -1,0 +1,114 @@
+"""Compiled (numba) EKF step with a :class:`~adaptrack.models.RadarMeasurement`.
+
+The radar's geometry, its analytic Jacobian and the wrapped innovation, as the NumPy model
+computes them, followed by the Joseph update of :func:`adaptrack.filters._kernels.update_into`.
+The IMM kernel calls it for every model when its measurement is a radar.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from .._typing import FloatArray
+from ..models.measurement import RADAR_COMPONENTS, RadarMeasurement
+from ._kernels import predict_into, update_into
+
+RANGE, AZIMUTH, ELEVATION, RANGE_RATE = range(4)  # component codes, RADAR_COMPONENTS order
+
+
+def radar_layout(radar: RadarMeasurement) -> tuple[np.ndarray, FloatArray]:
+    """Component codes (m,) and the pose ``(n_axes, heading, position (3), velocity (3))``."""
+    codes = np.array([RADAR_COMPONENTS.index(c) for c in radar.components], dtype=np.int64)
+    pose = np.zeros(8)
+    k = radar.n_axes
+    pose[0], pose[1] = k, radar.heading
+    pose[2 : 2 + k] = np.asarray(radar.sensor_position)
+    pose[5 : 5 + k] = np.asarray(radar.sensor_velocity)
+    return codes, pose
+
+
+@numba.njit(cache=True, inline="always")
+def _wrap(a):  # type: ignore[no-untyped-def]
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
+@numba.njit(cache=True, inline="always")
+def radar_into(s, codes, pose, zp, jac):  # type: ignore[no-untyped-def]
+    """Predicted components ``zp`` (m,) and ``dh/ds`` ``jac`` (m, len(s)) of read states ``s``.
+
+    Returns False on the radar's vertical axis (azimuth undefined).
+    """
+    k = int(pose[0])
+    dx, dy = s[0] - pose[2], s[1] - pose[3]
+    dz = s[2] - pose[4] if k == 3 else 0.0
+    horiz2 = dx * dx + dy * dy
+    if horiz2 == 0.0:
+        return False
+    r = math.sqrt(horiz2 + dz * dz)
+    jac[:, :] = 0.0
+    for a in range(codes.shape[0]):
+        c = codes[a]
+        if c == RANGE:
+            zp[a] = r
+            jac[a, 0], jac[a, 1] = dx / r, dy / r
+            if k == 3:
+                jac[a, 2] = dz / r
+        elif c == AZIMUTH:
+            zp[a] = _wrap(math.atan2(dx, dy) - pose[1])
+            jac[a, 0], jac[a, 1] = dy / horiz2, -dx / horiz2
+        elif c == ELEVATION:
+            rho = math.sqrt(horiz2)
+            r2 = r * r
+            zp[a] = math.atan2(dz, rho)
+            jac[a, 0], jac[a, 1], jac[a, 2] = -dx * dz / (rho * r2), -dy * dz / (rho * r2), rho / r2
+        else:
+            rel0, rel1 = s[k] - pose[5], s[k + 1] - pose[6]
+            rel2 = s[k + 2] - pose[7] if k == 3 else 0.0
+            rr = (dx * rel0 + dy * rel1 + dz * rel2) / r
+            zp[a] = rr
+            d = (dx, dy, dz)
+            rel = (rel0, rel1, rel2)
+            for i in range(k):
+                jac[a, i] = (rel[i] - rr * d[i] / r) / r
+                jac[a, k + i] = d[i] / r
+    return True
+
+
+@numba.njit(cache=True, inline="always")
+def radar_ekf_step(  # type: ignore[no-untyped-def]
+    x, p, phi, qd, u, z, mask, codes, pose, reads, r, xp, pp, tmp, hm, rm, hp, s, lo, kt, nu, w,
+    ikh, zp, jac, sread,
+):  # fmt: skip
+    """One linear prediction + radar EKF update (Joseph form) in place, as ``kf_step``.
+
+    ``reads`` (k,) the state indices the radar reads; ``zp`` (m,), ``jac`` (m, k), ``sread``
+    (k,) scratch. Returns ``(ok, nis, log det S, observed components)``.
+    """
+    n = x.shape[0]
+    m = z.shape[0]
+    predict_into(x, p, phi, qd, u, xp, pp, tmp)
+    n_read = reads.shape[0]
+    for b in range(n_read):
+        sread[b] = xp[reads[b]]
+    if not radar_into(sread, codes, pose, zp, jac):
+        return False, 0.0, 0.0, 0.0
+    nobs = 0.0
+    for a in range(m):
+        on = mask[a]
+        nobs += 1.0 if on else 0.0
+        for b in range(n):
+            hm[a, b] = 0.0
+        for b in range(m):
+            rm[a, b] = r[a, b] if on and mask[b] else (1.0 if a == b and not on else 0.0)
+        if on:
+            for b in range(n_read):
+                hm[a, reads[b]] = jac[a, b]
+            d = z[a] - zp[a]
+            nu[a] = _wrap(d) if codes[a] == AZIMUTH or codes[a] == ELEVATION else d
+        else:
+            nu[a] = 0.0
+    ok, nis, logdet = update_into(xp, pp, nu, hm, rm, True, x, p, hp, s, lo, kt, w, ikh, tmp)
+    return ok, nis, logdet, nobs
