@@ -383,3 +383,62 @@ def filterpy_radar_ekf(t: np.ndarray, z: np.ndarray) -> np.ndarray:
                        lambda x: RADAR.predict(x[inv]), residual=residual)  # fmt: skip
             out[i, k] = ekf.x[inv]
     return out
+
+
+RADAR_IMM_Q = (0.1, 30.0)  # white acceleration PSDs of the quiet and agile CV modes [m^2/s^3]
+RADAR_IMM_PI = np.array([[0.95, 0.05], [0.1, 0.9]])
+RADAR_IMM_MU0 = np.array([0.8, 0.2])
+
+
+def adaptrack_radar_imm(t: np.ndarray, z: np.ndarray, backend: str = "auto") -> np.ndarray:
+    """``imm_filter`` of two radar EKFs over every track at once; combined means (N, T, 6)."""
+    from adaptrack.filters.imm import imm_filter
+
+    n = z.shape[0]
+    prior = at.GaussianState(_radar_prior(z[:, 0]), np.broadcast_to(RADAR_P0, (n, 6, 6)), t[0])
+    models = [at.models.ConstantVelocity(q, n_axes=3) for q in RADAR_IMM_Q]
+    # FilterPy weighs its first update with mu0 @ pi (its IMMEstimator's cbar): the same here
+    return imm_filter(t, z, models, RADAR, None, [prior, prior], RADAR_IMM_PI,
+                      RADAR_IMM_MU0 @ RADAR_IMM_PI, backend=backend).filtered.mean  # fmt: skip
+
+
+def filterpy_radar_imm(t: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """FilterPy's ``IMMEstimator`` of two ``ExtendedKalmanFilter``, one track at a time."""
+    from filterpy.common import Q_continuous_white_noise
+    from filterpy.kalman import ExtendedKalmanFilter, IMMEstimator
+
+    perm = np.array([0, 3, 1, 4, 2, 5])  # FilterPy (x, vx, y, vy, z, vz) of ours
+    inv = np.argsort(perm)
+    dt = float(t[1] - t[0])
+    ang = np.array([False, True, True, False])
+
+    def residual(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        d = a - b
+        d[ang] = (d[ang] + np.pi) % (2 * np.pi) - np.pi
+        return d
+
+    class RadarEKF(ExtendedKalmanFilter):
+        def predict(self, u: object = None) -> None:  # IMMEstimator passes u=None
+            super().predict(0)
+
+        def update(self, zk: np.ndarray) -> None:
+            super().update(zk, lambda x: RADAR.jacobian(x[inv])[:, perm],
+                           lambda x: RADAR.predict(x[inv]), residual=residual)  # fmt: skip
+
+    out = np.empty(z.shape[:-1] + (6,))
+    x0 = _radar_prior(z[:, 0])
+    for i in range(z.shape[0]):
+        filters = []
+        for q in RADAR_IMM_Q:
+            f = RadarEKF(dim_x=6, dim_z=4)
+            f.F = np.kron(np.eye(3), [[1.0, dt], [0.0, 1.0]])
+            f.Q = Q_continuous_white_noise(2, dt, q, block_size=3)
+            f.R, f.x, f.P = RADAR.noise_cov, x0[i][perm], RADAR_P0[np.ix_(perm, perm)]
+            filters.append(f)
+        imm = IMMEstimator(filters, RADAR_IMM_MU0.copy(), RADAR_IMM_PI.copy())
+        for k in range(z.shape[1]):
+            if k:
+                imm.predict()
+            imm.update(z[i, k].copy())
+            out[i, k] = imm.x[inv]
+    return out

@@ -1,35 +1,40 @@
-"""Recorded flights seen by simulated radars: our ML-tuned IMM-EKF against a tuned FilterPy IMM.
+"""Recorded flights seen by simulated radars, and a car's GNSS: our ML-tuned IMMs against a
+truth-tuned FilterPy IMM.
 
-``python -m benchmarks.recorded_imm [--data DIR] [--scan 4.8] [--seed 1]`` reads every
-``air_*.csv`` flight of ``DIR`` (default ``../shared/data``, else ``docs/data``) as truth.
-Radars are placed along each flight as ``adaptrack evaluate flights`` places them (a new one
-60 km ahead of the first point no radar covers, 5 km to the side; 111 km coverage; a handover
-when the aircraft leaves a radar's coverage), with 30 m range, 0.08 deg azimuth and 0.1 deg
-elevation noise, every ``--scan`` seconds; every stretch one radar sees is one track: the
-whole flight is scored.
+``python -m benchmarks.recorded_imm [--data DIR] [--scan 4.8] [--seed 1] [--models cv+ca,cv+ct]
+[--car-only]`` reads every ``air_*.csv`` flight of ``DIR`` (default ``../shared/data``, else
+``docs/data``) as truth. Radars are placed along each flight as ``adaptrack evaluate flights``
+places them (a new one 60 km ahead of the first point no radar covers, 5 km to the side; 111
+km coverage; a handover when the aircraft leaves a radar's coverage), with 30 m range, 0.08
+deg azimuth and 0.1 deg elevation noise, every ``--scan`` seconds; every stretch one radar
+sees is one track: the whole flight is scored.
 
-Leave one flight out: both estimators are tuned on the other flights and scored on it.
+Leave one flight out: every estimator is tuned on the other flights and scored on it.
 
 * ours: :func:`adaptrack.filters.imm.imm_filter` over the radar measurement model (IMM-EKF,
-  constant velocity + constant acceleration, continuous-time switching), its two PSDs and its
-  switching rate fitted by maximum likelihood of the plots (no truth; radar noise from the
-  sensor's specification);
+  continuous-time switching) of constant velocity with constant acceleration (``cv+ca``,
+  the compiled kernel) or with the coordinated turn (``cv+ct``, NumPy), horizontal and vertical
+  PSDs apart; PSDs and switching rate fitted by maximum likelihood of the plots (no truth;
+  radar noise from the sensor's specification);
 * FilterPy: ``IMMEstimator`` of two ``KalmanFilter`` (CV padded to the CA state) on the plots
-  converted to east-north-up, each with its converted covariance, its two PSDs and switching
-  probability chosen by grid search against the truth.
+  converted to east-north-up, each with its converted covariance; its two PSDs and switching
+  probability chosen by grid search against the truth, on the isotropic grid (one PSD per
+  model for all axes) and then, around its best, with the vertical PSDs apart (``split``).
 
 Prints the position RMSE of each on each held-out flight and pooled (first three scans of each
-track left out), and the ratio. First the car drive (``ground_*.csv``): a 10 Hz GNSS (2 m
-horizontal, 4 m vertical noise) simulated on it, both tuned on its first half and scored on
-the second. Not a timing benchmark.
+track left out), and the ratios. First the car drive (``ground_*.csv``): a 10 Hz GNSS (2 m
+horizontal, 4 m vertical noise) simulated on it, every estimator tuned on its first half and
+scored on the second. Not a timing benchmark (about an hour, most of it the ``cv+ct`` fits).
 """
 
 from __future__ import annotations
 
 import argparse
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -44,11 +49,12 @@ from adaptrack.analysis.flights import (
 from adaptrack.analysis.flights import RANGE_STD_M as RANGE_STD
 from adaptrack.coords.geodetic import ecef_to_enu, geodetic_to_ecef
 from adaptrack.coords.radar import polar_to_enu, polar_to_enu_cov
-from adaptrack.filters.imm import imm_filter
+from adaptrack.filters.imm import IMMResult, imm_filter
 from adaptrack.io.tables import read_flight_csv
 from adaptrack.models import (
     ConstantAcceleration,
     ConstantVelocity,
+    CoordinatedTurn,
     PositionMeasurement,
     RadarMeasurement,
 )
@@ -108,27 +114,57 @@ def _priors(track: Track) -> list[at.GaussianState]:
     ]
 
 
-def ours_run(track: Track, q_cv: float, q_ca: float, rate: float):  # type: ignore[no-untyped-def]
-    """The IMM-EKF on one track."""
-    models = [ConstantVelocity(q_cv, n_axes=3), ConstantAcceleration(q_ca, n_axes=3)]
+MODEL_SETS = ("cv+ca", "cv+ct")
+START = {  # starting values of the maximum-likelihood fit: PSDs, switching rate [1/s]
+    ("cv+ca", False): {"q_cv_h": 1.0, "q_cv_v": 0.01, "q_ca_h": 0.1, "q_ca_v": 0.001, "rate": 0.05},
+    ("cv+ct", False): {"q_cv_h": 0.5, "q_cv_v": 0.01, "q_ct": 0.5, "q_w": 1e-5, "q_ct_v": 0.01,
+                       "rate": 0.05},
+    ("cv+ca", True): {"q_cv_h": 1.0, "q_cv_v": 0.1, "q_ca_h": 1.0, "q_ca_v": 0.1, "rate": 0.1},
+    ("cv+ct", True): {"q_cv_h": 0.5, "q_cv_v": 0.1, "q_ct": 0.5, "q_w": 1e-3, "q_ct_v": 0.1,
+                      "rate": 0.1},
+}  # fmt: skip
+TURN_STD = {False: 0.05, True: 0.3}  # prior turn-rate sigma [rad/s]: aircraft, car
+
+
+def ours_models(kind: str, v: Mapping[str, float]) -> list[Any]:
+    """CV with CA or with the coordinated turn; horizontal and vertical PSDs apart."""
+    cv = ConstantVelocity((v["q_cv_h"], v["q_cv_h"], v["q_cv_v"]), n_axes=3)
+    if kind == "cv+ca":
+        return [cv, ConstantAcceleration((v["q_ca_h"], v["q_ca_h"], v["q_ca_v"]), n_axes=3)]
+    return [cv, CoordinatedTurn(v["q_ct"], v["q_w"], v["q_ct_v"], n_axes=3)]
+
+
+def ours_run(track: Track, kind: str, v: Mapping[str, float], gnss: bool = False) -> IMMResult:
+    """Our IMM (``kind`` of :data:`MODEL_SETS`) on one track's radar plots (IMM-EKF) or
+    GNSS fixes, with the parameters ``v`` (PSDs, switching ``rate`` [1/s])."""
+    rate = v["rate"]
     rates = [[-rate, rate], [rate, -rate]]
-    return imm_filter(track.times, track.plots, models, RADAR, None, _priors(track),
-                      initial_probs=[0.5, 0.5], switching_rates=rates)  # fmt: skip
+    sensor, priors = (GNSS, car_priors(track)) if gnss else (RADAR, _priors(track))
+    if kind == "cv+ct":
+        ct = np.zeros((7, 7))
+        ct[:6, :6], ct[6, 6] = priors[0].cov, TURN_STD[gnss] ** 2
+        priors = [priors[0], at.GaussianState(np.r_[priors[0].mean, 0.0], ct, priors[0].time)]
+    return imm_filter(track.times, track.plots, ours_models(kind, v), sensor, None, priors,
+                      initial_probs=[0.5, 0.5], switching_rates=rates,
+                      backend="numba" if kind == "cv+ca" else "numpy")  # fmt: skip
 
 
-def fit_ours(tracks: list[Track]) -> dict[str, float]:
-    """Maximum likelihood of the plots over the training tracks (no truth)."""
+def fit_ours(tracks: list[Track], kind: str, gnss: bool = False) -> dict[str, float]:
+    """Maximum likelihood of the plots (or fixes) over the training tracks (no truth)."""
 
     def loglik(v: dict[str, float]) -> float:
-        return float(sum(ours_run(tr, v["q_cv"], v["q_ca"], v["rate"]).log_likelihood.sum()
-                         for tr in tracks))  # fmt: skip
+        return float(sum(ours_run(tr, kind, v, gnss).log_likelihood.sum() for tr in tracks))
 
-    fit = fit_by_likelihood(loglik, {"q_cv": 1.0, "q_ca": 0.1, "rate": 0.05})
+    fit = fit_by_likelihood(loglik, START[kind, gnss])
     return {n: fit.value(n) for n in fit.names}
 
 
 def filterpy_run(
-    track: Track, q_cv: float, q_ca: float, p_switch: float, gnss: bool = False
+    track: Track,
+    q_cv: float | tuple[float, ...],
+    q_ca: float | tuple[float, ...],
+    p_switch: float,
+    gnss: bool = False,
 ) -> np.ndarray:
     """FilterPy's IMM on the converted plots (or GNSS fixes); positions (T, 3)."""
     from filterpy.kalman import IMMEstimator, KalmanFilter
@@ -183,18 +219,40 @@ def squared_errors(est: np.ndarray, track: Track) -> np.ndarray:
     return np.sum((est[WARM_UP:] - track.truth[WARM_UP:]) ** 2, axis=1)
 
 
-def tune_filterpy(tracks: list[Track]) -> dict[str, float]:
-    """Grid search against the truth of the training tracks."""
-    best, best_mse = {}, math.inf
-    for q_cv in (0.1, 0.5, 2.0, 8.0):
-        for q_ca in (0.01, 0.1, 1.0, 10.0):
-            for p_switch in (0.01, 0.05, 0.2):
-                mse = float(np.mean(np.concatenate(
-                    [squared_errors(filterpy_run(tr, q_cv, q_ca, p_switch), tr) for tr in tracks]
-                )))  # fmt: skip
-                if mse < best_mse:
-                    best, best_mse = {"q_cv": q_cv, "q_ca": q_ca, "p_switch": p_switch}, mse
-    return best
+FilterPyParams = dict[str, Any]
+VERTICAL_FACTORS = (1.0, 1e-1, 1e-2, 1e-3, 1e-4)  # vertical PSD / horizontal, searched
+
+
+def tune_filterpy(
+    tracks: list[Track], q_cvs: tuple[float, ...], q_cas: tuple[float, ...],
+    p_switches: tuple[float, ...], gnss: bool = False,
+) -> tuple[FilterPyParams, FilterPyParams]:  # fmt: skip
+    """Grid search against the truth of the training tracks.
+
+    First the isotropic grid (one PSD per model for all axes); then, around its best, the
+    vertical PSDs of both models as fractions of the horizontal ones. Returns both bests.
+    """
+
+    def mse(v: FilterPyParams) -> float:
+        errs = [squared_errors(filterpy_run(tr, **v, gnss=gnss), tr) for tr in tracks]
+        return float(np.mean(np.concatenate(errs)))
+
+    grid = [{"q_cv": a, "q_ca": b, "p_switch": c}
+            for a in q_cvs for b in q_cas for c in p_switches]  # fmt: skip
+    iso = min(grid, key=mse)
+    split = [{"q_cv": (iso["q_cv"],) * 2 + (iso["q_cv"] * f,),
+              "q_ca": (iso["q_ca"],) * 2 + (iso["q_ca"] * g,), "p_switch": iso["p_switch"]}
+             for f in VERTICAL_FACTORS for g in VERTICAL_FACTORS]  # fmt: skip
+    return iso, min(split, key=mse)
+
+
+def describe(params: Mapping[str, Any]) -> str:
+    """``name value`` pairs, tuples shown as horizontal / vertical."""
+
+    def one(v: Any) -> str:
+        return f"{v[0]:.3g}/{v[2]:.3g}" if isinstance(v, tuple) else f"{v:.3g}"
+
+    return ", ".join(f"{k} {one(v)}" for k, v in params.items())
 
 
 GNSS_STD_M = (2.0, 2.0, 4.0)  # simulated receiver noise, east, north, up [m]
@@ -221,35 +279,46 @@ def car_priors(track: Track) -> list[at.GaussianState]:
             at.GaussianState(np.r_[track.plots[0], np.zeros(6)], ca, track.times[0])]  # fmt: skip
 
 
-def car_comparison(path: Path, rng: np.random.Generator) -> None:
+FILTERPY = ("isotropic", "split")  # FilterPy's grids (tune_filterpy)
+
+
+def report(
+    name: str, sq: dict[str, list[np.ndarray]], params: dict[str, Any], kinds: list[str]
+) -> None:
+    """Print each of our model sets and each FilterPy grid, with the ratios."""
+    r = {k: math.sqrt(float(np.concatenate(v).mean())) for k, v in sq.items()}
+    print(name)
+    for kind in kinds:
+        print(f"  ours, IMM {kind}: {r[kind]:.2f} m ({describe(params[kind])})"
+              if kind in params else f"  ours, IMM {kind}: {r[kind]:.2f} m")  # fmt: skip
+    for label in FILTERPY:
+        ratios = ", ".join(f"{k} {r[k] / r[label]:.3f}" for k in kinds)
+        extra = f" ({describe(params[label])})" if label in params else ""
+        print(f"  FilterPy, {label} grid: {r[label]:.2f} m{extra}; ours / FilterPy: {ratios}")
+
+
+def car_comparison(path: Path, rng: np.random.Generator, kinds: list[str]) -> None:
     """Tune on the drive's first half (ours by likelihood, FilterPy against truth), score
     the second."""
     train, test = car_halves(path, rng)
+    params: dict[str, Any] = {kind: fit_ours([train], kind, gnss=True) for kind in kinds}
+    fp = tune_filterpy([train], (0.1, 0.5, 2.0, 8.0), (0.1, 1.0, 10.0, 50.0),
+                       (0.005, 0.02, 0.1), gnss=True)  # fmt: skip
+    params |= dict(zip(FILTERPY, fp, strict=True))
+    sq = {kind: [squared_errors(ours_run(test, kind, params[kind], True).filtered.mean[:, :3],
+                                test)] for kind in kinds}  # fmt: skip
+    for label in FILTERPY:
+        sq[label] = [squared_errors(filterpy_run(test, **params[label], gnss=True), test)]
+    raw = rmse([test], lambda tr: tr.plots)
+    report(f"car (second half, 10 Hz GNSS of {GNSS_STD_M} m; fixes {raw:.2f} m)", sq, params,
+           kinds)  # fmt: skip
 
-    def ours(track: Track, v: dict[str, float]):  # type: ignore[no-untyped-def]
-        models = [ConstantVelocity(v["q_cv"], n_axes=3), ConstantAcceleration(v["q_ca"], n_axes=3)]
-        rates = [[-v["rate"], v["rate"]], [v["rate"], -v["rate"]]]
-        return imm_filter(track.times, track.plots, models, GNSS, None, car_priors(track),
-                          initial_probs=[0.5, 0.5], switching_rates=rates)  # fmt: skip
 
-    fit = fit_by_likelihood(lambda v: float(ours(train, v).log_likelihood.sum()),
-                            {"q_cv": 1.0, "q_ca": 1.0, "rate": 0.1})  # fmt: skip
-    ours_p = {n: fit.value(n) for n in fit.names}
-    best, best_mse = {}, math.inf
-    for q_cv in (0.1, 0.5, 2.0, 8.0):
-        for q_ca in (0.1, 1.0, 10.0, 50.0):
-            for p_switch in (0.005, 0.02, 0.1):
-                mse = float(np.mean(squared_errors(
-                    filterpy_run(train, q_cv, q_ca, p_switch, gnss=True), train)))  # fmt: skip
-                if mse < best_mse:
-                    best, best_mse = {"q_cv": q_cv, "q_ca": q_ca, "p_switch": p_switch}, mse
-    ro = math.sqrt(squared_errors(ours(test, ours_p).filtered.mean[:, :3], test).mean())
-    rf = math.sqrt(squared_errors(filterpy_run(test, **best, gnss=True), test).mean())
-    raw = math.sqrt(squared_errors(test.plots, test).mean())
-    print(f"car (second half, 10 Hz GNSS of {GNSS_STD_M} m): fixes {raw:.2f} m, ours {ro:.2f} m "
-          f"({', '.join(f'{k} {v:.3g}' for k, v in ours_p.items())}), FilterPy {rf:.2f} m "
-          f"({', '.join(f'{k} {v:g}' for k, v in best.items())}); ours / FilterPy "
-          f"{ro / rf:.3f}")  # fmt: skip
+def rmse(tracks: list[Track], estimate: Any) -> float:
+    """Position RMSE [m] of ``estimate(track)`` over ``tracks`` pooled."""
+    return math.sqrt(
+        float(np.concatenate([squared_errors(estimate(tr), tr) for tr in tracks]).mean())
+    )
 
 
 def main() -> None:
@@ -258,41 +327,42 @@ def main() -> None:
     parser.add_argument("--scan", type=float, default=4.8, help="radar scan period [s]")
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--car-only", action="store_true", help="only the car drive")
+    parser.add_argument(
+        "--models",
+        default=",".join(MODEL_SETS),
+        help="our IMMs, comma-separated: cv+ca (compiled), cv+ct (NumPy)",
+    )
     args = parser.parse_args()
     data = args.data or next(
         d for d in (Path("../shared/data"), Path("docs/data")) if list(d.glob("air_*.csv"))
     )
+    kinds = args.models.split(",")
+    if not set(kinds) <= set(MODEL_SETS):
+        parser.error(f"--models takes {', '.join(MODEL_SETS)}")
     rng = np.random.default_rng(args.seed)
     for car in sorted(data.glob("ground_*.csv")):
-        car_comparison(car, rng)
+        car_comparison(car, rng, kinds)
     if args.car_only:
         return
     flights = {p.stem: flight_tracks(p, args.scan, rng) for p in sorted(data.glob("air_*.csv"))}
     for name, tracks in flights.items():
         n = sum(tr.times.size for tr in tracks)
         print(f"{name}: {len(tracks)} radar stretches, {n} scans")
-    pooled = {"ours": [], "filterpy": []}
+    pooled: dict[str, list[np.ndarray]] = {k: [] for k in [*kinds, *FILTERPY]}
     for name, test in flights.items():
         train = [tr for other, trs in flights.items() if other != name for tr in trs]
-        ours_p, fp_p = fit_ours(train), tune_filterpy(train)
-        e_ours = np.concatenate(
-            [squared_errors(ours_run(tr, **ours_p).filtered.mean[:, :3], tr) for tr in test]
-        )
-        e_fp = np.concatenate([squared_errors(filterpy_run(tr, **fp_p), tr) for tr in test])
-        pooled["ours"].append(e_ours)
-        pooled["filterpy"].append(e_fp)
-        ro, rf = math.sqrt(e_ours.mean()), math.sqrt(e_fp.mean())
-        ours_txt = ", ".join(f"{k} {v:.3g}" for k, v in ours_p.items())
-        fp_txt = ", ".join(f"{k} {v:g}" for k, v in fp_p.items())
-        print(
-            f"held out {name}: ours {ro:.1f} m ({ours_txt}); FilterPy {rf:.1f} m ({fp_txt}); "
-            f"ours / FilterPy {ro / rf:.3f}"
-        )
-    ro = math.sqrt(np.concatenate(pooled["ours"]).mean())
-    rf = math.sqrt(np.concatenate(pooled["filterpy"]).mean())
-    print(f"pooled over held-out flights: ours {ro:.1f} m, FilterPy {rf:.1f} m, "
-          f"ratio {ro / rf:.3f} (ours {abs(100 * (1 - ro / rf)):.1f} % "
-          f"{'lower' if ro < rf else 'higher'})")  # fmt: skip
+        params: dict[str, Any] = {kind: fit_ours(train, kind) for kind in kinds}
+        grids = tune_filterpy(train, (0.1, 0.5, 2.0, 8.0), (0.01, 0.1, 1.0, 10.0),
+                              (0.01, 0.05, 0.2))  # fmt: skip
+        params |= dict(zip(FILTERPY, grids, strict=True))
+        sq = {kind: [squared_errors(ours_run(tr, kind, params[kind]).filtered.mean[:, :3], tr)
+                     for tr in test] for kind in kinds}  # fmt: skip
+        for label in FILTERPY:
+            sq[label] = [squared_errors(filterpy_run(tr, **params[label]), tr) for tr in test]
+        for k, v in sq.items():
+            pooled[k].extend(v)
+        report(f"held out {name}", sq, params, kinds)
+    report("pooled over the held-out flights", pooled, {}, kinds)
 
 
 if __name__ == "__main__":

@@ -16,6 +16,8 @@ Workloads (full sizes; ``--quick`` shrinks them to a smoke test):
   Joseph and square-root forms, against FilterPy's ``IMMEstimator``;
 * ``radar_ekf``: a 3-D radar (range, azimuth, elevation, range-rate) constant-velocity EKF
   over 1,000 tracks x 200 scans, against FilterPy's ``ExtendedKalmanFilter``;
+* ``radar_imm``: the same radar, an IMM-EKF of two CV modes (the compiled kernel and its NumPy
+  reference) against FilterPy's ``IMMEstimator`` of two ``ExtendedKalmanFilter``;
 * ``lx_mc``: the ``lx_default`` level-crossing compliance Monte Carlo;
 * ``memory``: peak traced memory of the batch filter over its input + output arrays.
 
@@ -73,6 +75,7 @@ def run(quick: bool, only: list[str] | None = None, workers: int = 2) -> list[Re
         "stream": lambda: workloads.streaming(quick, repeats),
         "imm": lambda: workloads.imm(quick, repeats),
         "radar_ekf": lambda: workloads.radar_ekf(quick, repeats),
+        "radar_imm": lambda: workloads.radar_imm(quick, repeats),
         "lx_mc": lambda: workloads.crossing(quick, workers),
         "scene": lambda: workloads.scene(quick),
         "memory": lambda: workloads.memory(quick),

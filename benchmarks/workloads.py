@@ -317,6 +317,27 @@ def radar_ekf(quick: bool, repeats: int) -> list[Result]:
     )
 
 
+def radar_imm(quick: bool, repeats: int) -> list[Result]:
+    """The same radar, an IMM-EKF of two CV modes over 1,000 tracks x 200 scans (20 x 50
+    ``quick``): adaptrack's compiled kernel and its NumPy reference, FilterPy's
+    ``IMMEstimator`` of two ``ExtendedKalmanFilter``."""
+    n_tracks, n_steps = (20, 50) if quick else (1_000, 200)
+    t, z = peers.radar_data(n_tracks, n_steps, seed=9)
+    return _compare(
+        "radar_imm",
+        t,
+        z,
+        {
+            "adaptrack": (lambda t, z: peers.adaptrack_radar_imm(t, z, "numba"), n_tracks,
+                          n_steps),
+            "adaptrack (NumPy)": (lambda t, z: peers.adaptrack_radar_imm(t, z, "numpy"),
+                                  n_tracks, n_steps),
+            "filterpy": (peers.filterpy_radar_imm, 2 if quick else 20, n_steps),
+        },
+        repeats,
+    )  # fmt: skip
+
+
 def crossing(quick: bool, workers: int) -> list[Result]:
     """``lx_default`` compliance Monte Carlo: the deployed estimator, and the demo's table.
 
