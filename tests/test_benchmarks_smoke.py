@@ -16,10 +16,19 @@ def test_benchmarks_quick_run_writes_json(tmp_path, capsys):
     for workload in ("single", "batch"):
         for impl in ("adaptrack", "filterpy", "pykalman", "simdkalman", "stonesoup"):
             assert (workload, impl) in impls
-    for workload in ("rts", "rts_batch", "stream", "lx_mc", "memory", "scene", "radar_ekf"):
+    for workload in (
+        "rts",
+        "rts_batch",
+        "stream",
+        "lx_mc",
+        "memory",
+        "scene",
+        "radar_ekf",
+        "radar_imm",
+    ):
         assert (workload, "adaptrack") in impls
     assert ("scene", "stonesoup (GNN 2-D, EKF CV, same gate)") in impls
-    assert ("radar_ekf", "filterpy") in impls
+    assert ("radar_ekf", "filterpy") in impls and ("radar_imm", "filterpy") in impls
     timed = [r for r in out["results"] if r["workload"] not in ("lx_mc", "memory")]
     assert all(r["per_step_us"] > 0 and r["track_steps_per_s"] > 0 for r in timed)
     memory = [r for r in out["results"] if r["workload"] == "memory"]
