@@ -16,9 +16,10 @@ import numba
 import numpy as np
 from numba import prange
 
-from ._kernels import _LOG_2PI, kf_step
-from ._radar_update import radar_ekf_step
+from ._kernels import _LOG_2PI, kf_step, masked_update_into
+from ._radar_update import radar_ekf_step, radar_update_into
 from ._sqrt_kernel import lower_factor_into, lower_triangularize, outer_into, sqrt_step
+from ._turn_kernel import turn_predict_into
 
 FORMS = ("standard", "joseph", "sqrt")  # the kernel's form codes 0, 1, 2
 
@@ -200,6 +201,9 @@ def imm_kernel(  # type: ignore[no-untyped-def]
     codes,
     pose,
     reads,
+    kinds,
+    turn_par,
+    dts,
     r,
     r_min,
     log_mu0,
@@ -229,7 +233,9 @@ def imm_kernel(  # type: ignore[no-untyped-def]
     ``z``/``mask`` (N, T, m), ``h`` (M, m, nmax), ``r`` (N|1, T|1, m, m). A radar measurement
     (IMM-EKF, Joseph form) replaces ``h``: its component ``codes`` (m,; empty for a linear
     measurement), ``pose`` and the ``reads`` (M, k) of each model (see
-    :mod:`adaptrack.filters._radar_update`). ``emb_*`` the
+    :mod:`adaptrack.filters._radar_update`). ``kinds`` (M,) is 1 for a coordinated-turn model
+    (``turn_par`` (M, 4) its parameters, predicted over the step lengths ``dts`` (U,)), 0 for
+    a linear one. ``emb_*`` the
     (dst, src, count) of the states model i shares with model j, ``out_idx`` (M, n_out).
     ``status[i]`` becomes ``k + 1`` if track ``i`` stops at step ``k`` (S not positive
     definite). ``r_min`` (N|1, T|1) is the smallest eigenvalue of each ``R``; in the Joseph and
@@ -278,6 +284,9 @@ def imm_kernel(  # type: ignore[no-untyped-def]
         sr = np.empty((m, m))
         gain = np.empty((nmax, m))
         radar = codes.shape[0] > 0
+        fbuf = np.empty((nmax, nmax))
+        qbuf = np.empty((nmax, nmax))
+        u0 = np.empty(nmax)
         zp = np.empty(m)
         jac = np.empty((m, reads.shape[1]))
         sread = np.empty(reads.shape[1])
@@ -323,6 +332,23 @@ def imm_kernel(  # type: ignore[no-untyped-def]
                     )  # fmt: skip
                     fs[j, :nj, :nj] = fac[:nj, :nj]
                     outer_into(fac, ps[j], nj)
+                elif kinds[j] == 1:  # coordinated turn: EKF prediction, Joseph update
+                    turn_predict_into(
+                        xs[j, :nj], ps[j, :nj, :nj], dts[q], turn_par[j], xp[:nj], pp[:nj, :nj],
+                        tmp[:nj, :nj], fbuf[:nj, :nj], qbuf[:nj, :nj], u0[:nj],
+                    )  # fmt: skip
+                    if radar:
+                        ok, nis, logdet, nobs = radar_update_into(
+                            xp[:nj], pp[:nj, :nj], z[i, k], mask[i, k], codes, pose, reads[j],
+                            r[ir, kr], xs[j, :nj], ps[j, :nj, :nj], tmp[:nj, :nj], hm[:, :nj], rm,
+                            hp[:, :nj], s, lo, kt[:, :nj], nu, wv, ikh[:nj, :nj], zp, jac, sread,
+                        )  # fmt: skip
+                    else:
+                        ok, nis, logdet, nobs = masked_update_into(
+                            xp[:nj], pp[:nj, :nj], z[i, k], mask[i, k], h[j, :, :nj], r[ir, kr],
+                            off, True, xs[j, :nj], ps[j, :nj, :nj], tmp[:nj, :nj], hm[:, :nj],
+                            rm, hp[:, :nj], s, lo, kt[:, :nj], nu, wv, ikh[:nj, :nj],
+                        )  # fmt: skip
                 elif radar:
                     ok, nis, logdet, nobs = radar_ekf_step(
                         xs[j, :nj], ps[j, :nj, :nj], phi[j, q, :nj, :nj], qd[j, q, :nj, :nj],

@@ -138,9 +138,23 @@ def kf_step(  # type: ignore[no-untyped-def]
     Returns ``(ok, nis, log det S, observed components)``; ``ok`` is False (and ``x``, ``p``
     untouched) when ``S`` is not positive definite.
     """
-    n = x.shape[0]
-    m = z.shape[0]
     predict_into(x, p, phi, qd, u, xp, pp, tmp)
+    return masked_update_into(
+        xp, pp, z, mask, h, r, off, joseph, x, p, tmp, hm, rm, hp, s, lo, kt, nu, w, ikh
+    )
+
+
+@numba.njit(cache=True, inline="always")
+def masked_update_into(  # type: ignore[no-untyped-def]
+    xp, pp, z, mask, h, r, off, joseph, x, p, tmp, hm, rm, hp, s, lo, kt, nu, w, ikh
+):
+    """Update the prior ``xp``, ``pp`` as :func:`kf_step` does, into ``x``, ``p``.
+
+    Missing components (``mask`` False) carry no information. Returns ``(ok, nis, log det S,
+    observed components)``.
+    """
+    n = xp.shape[0]
+    m = z.shape[0]
     # masked measurement model and innovation
     nobs = 0.0
     for a in range(m):

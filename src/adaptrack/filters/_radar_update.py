@@ -87,9 +87,21 @@ def radar_ekf_step(  # type: ignore[no-untyped-def]
     ``reads`` (k,) the state indices the radar reads; ``zp`` (m,), ``jac`` (m, k), ``sread``
     (k,) scratch. Returns ``(ok, nis, log det S, observed components)``.
     """
-    n = x.shape[0]
-    m = z.shape[0]
     predict_into(x, p, phi, qd, u, xp, pp, tmp)
+    return radar_update_into(
+        xp, pp, z, mask, codes, pose, reads, r, x, p, tmp, hm, rm, hp, s, lo, kt, nu, w, ikh, zp,
+        jac, sread,
+    )  # fmt: skip
+
+
+@numba.njit(cache=True, inline="always")
+def radar_update_into(  # type: ignore[no-untyped-def]
+    xp, pp, z, mask, codes, pose, reads, r, x, p, tmp, hm, rm, hp, s, lo, kt, nu, w, ikh, zp,
+    jac, sread,
+):  # fmt: skip
+    """Update the prior ``xp``, ``pp`` with the radar, as :func:`radar_ekf_step` does."""
+    n = xp.shape[0]
+    m = z.shape[0]
     n_read = reads.shape[0]
     for b in range(n_read):
         sread[b] = xp[reads[b]]

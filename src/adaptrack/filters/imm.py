@@ -38,7 +38,7 @@ from ..models.measurement import (
     RadarMeasurement,
     state_indices,
 )
-from ..models.turn import NonlinearMotionModel
+from ..models.turn import CoordinatedTurn, NonlinearMotionModel
 from ..types import GaussianState, _trusted
 from .ekf import ekf_predict_step, ekf_update_step
 from .kalman import (
@@ -132,7 +132,7 @@ def imm_filter(
     models : sequence of MotionModel or NonlinearMotionModel, length M
         Each must have every state in ``measured_states``. A nonlinear one (e.g.
         :class:`~adaptrack.models.CoordinatedTurn`) is predicted as ``nonlinear`` says
-        (linearised, or by sigma points); the run is then in NumPy and Joseph form.
+        (linearised, or by sigma points); the run is then in Joseph form.
     measured_states : sequence of str, length m, or MeasurementModel
         Names of the measured states, e.g. ``("x", "y")``; or a nonlinear measurement model
         (e.g. :class:`~adaptrack.models.RadarMeasurement`), which every model's update
@@ -173,8 +173,9 @@ def imm_filter(
         The NumPy reference or the compiled kernel (same numbers to rounding); ``"auto"``
         compiles from 20,000 track-steps on. The kernel runs linear measurements (a
         :class:`~adaptrack.models.PositionMeasurement` is one) and the IMM-EKF of a
-        :class:`~adaptrack.models.RadarMeasurement`; other measurement models, the IMM-UKF and
-        nonlinear motion models run in NumPy.
+        :class:`~adaptrack.models.RadarMeasurement`, with linear models and
+        :class:`~adaptrack.models.CoordinatedTurn` (linearised); other measurement models,
+        other nonlinear motion models and the IMM-UKF run in NumPy.
 
     Returns
     -------
@@ -272,7 +273,10 @@ def imm_filter(
     else:
         pis, step_pi = _switching_probs(rates, dt)
     radar_ekf = isinstance(mm, RadarMeasurement) and nonlinear == "ekf"
-    compiled = (mm is None or radar_ekf) and not turning and use_compiled(backend, z.size // m)
+    kernel_models = all(isinstance(mdl, CoordinatedTurn | MotionModel) for mdl in models) and (
+        not turning or nonlinear == "ekf"
+    )
+    compiled = (mm is None or radar_ekf) and kernel_models and use_compiled(backend, z.size // m)
     run = _imm_compiled if compiled else _imm_numpy
     problem = _Problem(
         tb, dt, z, mk, models, measured, r, initial, pis, step_pi, mu0, method, noise,
@@ -492,6 +496,7 @@ def _imm_compiled(problem: _Problem, form: str) -> tuple[IMMResult, float]:
     method, noise, tb = problem.method, problem.noise, problem.tb
     from ._imm_kernel import FORMS, imm_kernel
     from ._radar_update import radar_layout
+    from ._turn_kernel import turn_parameters
 
     batch, (n_steps, m) = z.shape[:-2], z.shape[-2:]
     n_tr = int(np.prod(batch, dtype=int))
@@ -517,11 +522,16 @@ def _imm_compiled(problem: _Problem, form: str) -> tuple[IMMResult, float]:
         reads = np.array([state_indices(radar, nm) for nm in names], dtype=np.int64)
     else:
         codes, pose, reads = np.zeros(0, np.int64), np.zeros(8), np.zeros((n_models, 1), np.int64)
+    kinds = np.zeros(n_models, dtype=np.int64)
+    turn_par = np.zeros((n_models, 4))
     for j, mdl in enumerate(models):
         nj = mdl.state_dim
-        phi[j, :, :nj, :nj], qd[j, :, :nj, :nj], u[j, :, :nj] = step_transitions(
-            cast(MotionModel, mdl), uniq, method, noise
-        )
+        if isinstance(mdl, CoordinatedTurn):
+            kinds[j], turn_par[j] = 1, turn_parameters(mdl)
+        else:
+            phi[j, :, :nj, :nj], qd[j, :, :nj, :nj], u[j, :, :nj] = step_transitions(
+                cast(MotionModel, mdl), uniq, method, noise
+            )
         if form == "sqrt":
             qd[j, :, :nj, :nj] = lower_factor(qd[j, :, :nj, :nj])
         if radar is None:
@@ -559,6 +569,9 @@ def _imm_compiled(problem: _Problem, form: str) -> tuple[IMMResult, float]:
         codes,
         pose,
         reads,
+        kinds,
+        turn_par,
+        uniq,
         c(r4),
         c(np.linalg.eigvalsh(r4)[..., 0]),
         np.log(np.where(mu0 > 0, mu0, 1e-300)),
