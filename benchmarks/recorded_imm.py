@@ -12,8 +12,8 @@ sees is one track: the whole flight is scored.
 Leave one flight out: every estimator is tuned on the other flights and scored on it.
 
 * ours: :func:`adaptrack.filters.imm.imm_filter` over the radar measurement model (IMM-EKF,
-  continuous-time switching) of constant velocity with constant acceleration (``cv+ca``,
-  the compiled kernel) or with the coordinated turn (``cv+ct``, NumPy), horizontal and vertical
+  continuous-time switching, the compiled kernel) of constant velocity with constant
+  acceleration (``cv+ca``) or with the coordinated turn (``cv+ct``), horizontal and vertical
   PSDs apart; PSDs and switching rate fitted by maximum likelihood of the plots (no truth;
   radar noise from the sensor's specification);
 * FilterPy: ``IMMEstimator`` of two ``KalmanFilter`` (CV padded to the CA state) on the plots
@@ -24,7 +24,7 @@ Leave one flight out: every estimator is tuned on the other flights and scored o
 Prints the position RMSE of each on each held-out flight and pooled (first three scans of each
 track left out), and the ratios. First the car drive (``ground_*.csv``): a 10 Hz GNSS (2 m
 horizontal, 4 m vertical noise) simulated on it, every estimator tuned on its first half and
-scored on the second. Not a timing benchmark (about an hour, most of it the ``cv+ct`` fits).
+scored on the second. Not a timing benchmark (about half an hour, most of it FilterPy's grids).
 """
 
 from __future__ import annotations
@@ -146,7 +146,7 @@ def ours_run(track: Track, kind: str, v: Mapping[str, float], gnss: bool = False
         priors = [priors[0], at.GaussianState(np.r_[priors[0].mean, 0.0], ct, priors[0].time)]
     return imm_filter(track.times, track.plots, ours_models(kind, v), sensor, None, priors,
                       initial_probs=[0.5, 0.5], switching_rates=rates,
-                      backend="numba" if kind == "cv+ca" else "numpy")  # fmt: skip
+                      backend="numba")  # fmt: skip
 
 
 def fit_ours(tracks: list[Track], kind: str, gnss: bool = False) -> dict[str, float]:
@@ -330,7 +330,7 @@ def main() -> None:
     parser.add_argument(
         "--models",
         default=",".join(MODEL_SETS),
-        help="our IMMs, comma-separated: cv+ca (compiled), cv+ct (NumPy)",
+        help="our IMMs, comma-separated: cv+ca, cv+ct",
     )
     args = parser.parse_args()
     data = args.data or next(
