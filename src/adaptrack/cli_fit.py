@@ -11,6 +11,7 @@ from rich.table import Table
 from ._cli_errors import check_outputs, err_console, fail
 from ._toml import load_toml
 from .analysis.consistency import innovation_consistency
+from .io.radar_plots import RADAR_LAYOUTS, RadarLog, read_radar_log
 from .io.tables import DataFormatError, write_table_atomic, write_text_atomic
 from .smoothers import rts_smooth
 from .tuning.position_log import (
@@ -24,7 +25,6 @@ from .tuning.position_log import (
     fit_toml,
     read_position_log,
 )
-from .tuning.radar_log import RADAR_LAYOUTS, RadarLog, read_radar_log
 
 
 def _read(path: Path, measurement: str) -> PositionLog | RadarLog:

@@ -303,7 +303,7 @@ def test_a_radar_record_with_bad_rows_is_named(tmp_path):
         (frame.iloc[[0, 2, 1, *range(3, len(frame))]], "row 3, column 'time_s': unsorted"),
         (frame.assign(range_rate_mps=frame.range_rate_mps.where(frame.index != 6, np.inf)),
          "row 7"),
-        (frame.iloc[:1], "at least 2 samples"),
+        (frame.iloc[:1], "at least 2 plots"),
     ]  # fmt: skip
     for bad, message in cases:
         bad.to_csv(tmp_path / "bad.csv", index=False)

@@ -23,6 +23,7 @@ import pandas as pd
 
 from ..analysis.flights import NavigationNodes
 from ..coords.radar import polar_to_enu, polar_to_enu_cov
+from .radar_plots import angle_column, read_radar_log
 from .tables import (
     DataFormatError,
     check_increasing,
@@ -38,25 +39,6 @@ KNOWN_COLUMNS = {
     "time_s", "range_m", "azimuth_deg", "azimuth_rad", "elevation_deg", "elevation_rad",
     *VELOCITY_COLUMNS, *RATE_COLUMNS,
 }  # fmt: skip
-
-
-def _angle(frame, name: str, path: Path, limit: float) -> np.ndarray:  # type: ignore[no-untyped-def]
-    deg, rad = f"{name}_deg", f"{name}_rad"
-    if deg in frame.columns and rad in frame.columns:
-        raise DataFormatError(f"{path}: both {deg!r} and {rad!r} given (mixed units); keep one")
-    if rad in frame.columns:
-        v = numeric_column(frame, rad, path, allow_nan=True)
-        bad = np.abs(v) > limit
-        if np.any(bad):
-            row = int(np.argmax(bad))
-            raise DataFormatError(
-                f"{path}: row {row + 1}, column {rad!r}: {v[row]} is out of "
-                f"range for radians (|value| <= {limit:.4g}); degrees given?"
-            )
-        return v
-    if deg in frame.columns:
-        return np.deg2rad(numeric_column(frame, deg, path, allow_nan=True))
-    raise DataFormatError(f"{path}: missing column {deg!r} or {rad!r}")
 
 
 def read_navigation_measurements(
@@ -86,8 +68,8 @@ def read_navigation_measurements(
     if not has_radar:
         raise DataFormatError(f"{p}: missing column 'range_m' (radar nodes are required)")
     rng_m = numeric_column(frame, "range_m", p, allow_nan=True)
-    az = _angle(frame, "azimuth", p, 2 * np.pi)
-    el = _angle(frame, "elevation", p, np.pi / 2)
+    az = angle_column(frame, "azimuth", p, allow_nan=True)[0]
+    el = angle_column(frame, "elevation", p, allow_nan=True)[0]
     radar_group = np.stack([rng_m, az, el], -1)
     vel = (
         np.stack([numeric_column(frame, c, p, allow_nan=True) for c in VELOCITY_COLUMNS], -1)
@@ -143,9 +125,10 @@ def _check_columns(frame: pd.DataFrame, p: Path) -> None:
 def read_radar_record(path: str | Path, frame: pd.DataFrame | None = None) -> RadarRecord:
     """Read one target's radar samples with range-rate: every row a complete radar sample.
 
-    ``time_s, range_m, azimuth_*, elevation_*, range_rate_mps[, range_accel_mps2]``; velocity
-    rows of a second source are refused (not combined with triple nodes). ``frame``: the
-    table already read from ``path``.
+    ``time_s, range_m, azimuth_*, elevation_*, range_rate_mps[, range_accel_mps2]``, read by
+    :func:`~adaptrack.io.radar_plots.read_radar_log`; any other column is refused, velocity
+    rows of a second source too (not combined with triple nodes). ``frame``: the table
+    already read from ``path``.
     """
     p = Path(path)
     frame = read_table(p) if frame is None else frame
@@ -156,25 +139,8 @@ def read_radar_record(path: str | Path, frame: pd.DataFrame | None = None) -> Ra
             f"{p}: velocity rows of a second source are not combined with a radar's triple "
             "nodes; smooth them in a file without range_rate_mps"
         )
-    t = numeric_column(frame, "time_s", p)
-    check_increasing(t, p, "time_s")
-    polar = np.stack(
-        [numeric_column(frame, "range_m", p), _angle(frame, "azimuth", p, 2 * np.pi),
-         _angle(frame, "elevation", p, np.pi / 2)], -1,
-    )  # fmt: skip
-    if not np.all(np.isfinite(polar)):
-        row = int(np.argmax(~np.all(np.isfinite(polar), -1)))
-        raise DataFormatError(f"{p}: row {row + 1}: an incomplete radar sample")
-    rate = numeric_column(frame, "range_rate_mps", p)
-    check_radar_values(p, polar[:, 0], rate)
-    if t.size < 2:
-        raise DataFormatError(f"{p}: a radar record needs at least 2 samples; got {t.size}")
-    accel = (
-        numeric_column(frame, "range_accel_mps2", p)
-        if "range_accel_mps2" in frame.columns
-        else None
-    )
-    return RadarRecord(t, polar, rate, accel)
+    log = read_radar_log(p, "radar3d", frame)
+    return RadarRecord(log.times, log.plots[:, :3], log.plots[:, 3], log.range_accel)
 
 
 @dataclass(frozen=True)

@@ -21,6 +21,7 @@ from .._typing import FloatArray
 from ..coords.geodetic import ecef_to_enu, ecef_to_geodetic, enu_to_ecef, geodetic_to_ecef
 from ..filters.ekf import ekf_filter
 from ..filters.run import kalman_filter
+from ..io.radar_plots import RADAR_LAYOUTS, RadarLog
 from ..io.tables import (
     DataFormatError,
     check_increasing,
@@ -41,7 +42,7 @@ from ..smoothers import rts_smooth
 from ..types import FilterResult, GaussianState
 from .calibration import fit_clock_offset
 from .likelihood import LikelihoodFit, fit_by_likelihood
-from .radar_log import RADAR_LAYOUTS, TURN_PRIOR_STD, RadarLog, radar_parameters, run_radar
+from .radar_log import TURN_PRIOR_STD, radar_parameters, run_radar
 
 Measurement = Literal["gnss", "position"]
 Model = Literal["cv", "ca", "ct"]
