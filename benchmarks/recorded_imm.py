@@ -44,6 +44,7 @@ from adaptrack.analysis.flights import (
     ELEVATION_STD_RAD,
     radar_sites,
     radar_stretches,
+    scan_rows,
     sub_flight,
 )
 from adaptrack.analysis.flights import RANGE_STD_M as RANGE_STD
@@ -79,8 +80,7 @@ def flight_tracks(path: Path, scan_s: float, rng: np.random.Generator) -> list[T
     """Every radar stretch of one flight (:func:`~adaptrack.analysis.flights.radar_stretches`),
     with noisy plots."""
     fl = read_flight_csv(path)
-    scan = np.floor((fl.times - fl.times[0]) / scan_s)
-    scans = sub_flight(fl, np.flatnonzero(np.diff(np.concatenate([[-1.0], scan])) > 0))
+    scans = sub_flight(fl, scan_rows(fl.times, scan_s))
     tracks = []
     for site, rows in radar_stretches(scans, radar_sites(scans)):
         if rows.size < 10:

@@ -191,6 +191,15 @@ def radar_site(flight: Flight) -> tuple[float, float, float]:
     return (float(np.mean(flight.lat) - math.radians(0.1)), float(np.mean(flight.lon)), 0.0)
 
 
+def scan_rows(times: FloatArray, scan_s: float) -> np.ndarray:
+    """Return the fixes a radar scanning every ``scan_s`` [s] from ``times[0]`` reports.
+
+    The first fix of each scan period (indices into ``times``).
+    """
+    scan = np.floor((times - times[0]) / scan_s)
+    return np.flatnonzero(np.diff(np.concatenate([[-1.0], scan])) > 0)
+
+
 def simulate_flight_measurements(
     flight: Flight,
     *,
@@ -206,8 +215,7 @@ def simulate_flight_measurements(
     rot_fix = enu_to_ecef_rotation(flight.lat, flight.lon)
     rot_site = enu_to_ecef_rotation(site[0], site[1])
     vel = np.einsum("ji,njk,nk->ni", rot_site, rot_fix, flight.velocity_enu)
-    scan = np.floor((flight.times - flight.times[0]) / scan_s)
-    radar_idx = np.flatnonzero(np.diff(np.concatenate([[-1.0], scan])) > 0)
+    radar_idx = scan_rows(flight.times, scan_s)
     in_cover = np.linalg.norm(pos[radar_idx], axis=-1) <= MAX_RANGE_M
     if in_cover.sum() < 10:
         raise ValueError(
@@ -373,7 +381,7 @@ def evaluate_flight(
         n_scans = 0
         for k, (site, fixes) in enumerate(stretches):
             part = sub_flight(flight, fixes)
-            n_scans += int(np.unique(np.floor((part.times - part.times[0]) / scan)).size)
+            n_scans += scan_rows(part.times, scan).size
             try:
                 m = simulate_flight_measurements(part, seed=seed + k, scan_s=scan, site=site)
             except ValueError:  # fewer than 10 scans in this stretch
@@ -407,6 +415,7 @@ __all__ = [
     "radar_site",
     "radar_sites",
     "radar_stretches",
+    "scan_rows",
     "simulate_flight_measurements",
     "smooth_kalman",
     "smooth_lsq",
