@@ -316,8 +316,18 @@ def invocation(fx: Fixtures, d: Path, rng: np.random.Generator) -> Invocation:
             return Invocation(["smooth", "in.csv", "--site", "50.4,30.5,180", "--method", method,
                                "--out", "est.csv"], ("est.csv",), where)  # fmt: skip
         if command == "fit radar":
-            return Invocation(["fit", "in.csv", "--measurement", "radar3d", "--out", "fit.toml"],
-                              ("fit.toml",), where)  # fmt: skip
+            model = str(rng.choice(["cv", "ca", "ct"]))
+            argv = [
+                "fit",
+                "in.csv",
+                "--measurement",
+                "radar3d",
+                "--model",
+                model,
+                "--out",
+                "fit.toml",
+            ]
+            return Invocation(argv, ("fit.toml",), where + f" --model {model}")
         if command == "filter radar":
             (d / "fit.toml").write_text(FIT_TOML)
             return Invocation(["filter", "in.csv", "--config", "fit.toml", "--out", "est.csv"],
