@@ -83,11 +83,12 @@ def test_filters_are_consistent_on_turning_targets(run):
     assert np.all((total > lo) & (total < hi)), (total.min(), total.max(), lo, hi)
 
 
-def test_smoothing_a_turn_lowers_the_error():
-    """Extended RTS over the EKF's stored Jacobians: position MSE lower than filtered, over
-    100 runs (paired, the improvement many standard errors away from zero)."""
+@pytest.mark.parametrize("run", [at.ekf_filter, at.ukf_filter])
+def test_smoothing_a_turn_lowers_the_error(run):
+    """RTS over the stored (statistical) linearisations: position MSE lower than filtered,
+    over 100 runs (paired, the improvement many standard errors away from zero)."""
     ct, t, x, z, prior = turning_problem(78, n_tracks=100)
-    res = at.ekf_filter(t, z, ct, RADAR, prior)
+    res = run(t, z, ct, RADAR, prior)
     sm = at.rts_smooth(res)
     e_f = np.sum((res.filtered.mean[..., :2] - x[..., :2]) ** 2, -1).mean(-1)
     e_s = np.sum((sm.mean[..., :2] - x[..., :2]) ** 2, -1).mean(-1)
