@@ -2,10 +2,11 @@
 
 Models of different sizes are padded to the largest; each model's block is used through
 views of its own size. Per track (tracks in parallel) and step: mixing with the shared-state
-embedding, predict + update with :func:`adaptrack.filters._kernels.kf_step` (Joseph or
-standard form) or :func:`adaptrack.filters._sqrt_kernel.sqrt_step` from the mixed factor
-(square-root form: the models' factors are mixed in factor form, :func:`mix_factor_into`),
-mode probabilities by log-sum-exp, combination. Agrees with the NumPy reference to rounding.
+embedding; prediction (linear, or the coordinated turn's) and update (linear as
+:func:`adaptrack.filters._kernels.kf_step` does, Joseph or standard form, or a radar's), or
+:func:`adaptrack.filters._sqrt_kernel.sqrt_step` from the mixed factor (square-root form: the
+models' factors are mixed in factor form, :func:`mix_factor_into`); mode probabilities by
+log-sum-exp; combination. Agrees with the NumPy reference to rounding.
 """
 
 from __future__ import annotations
@@ -16,8 +17,8 @@ import numba
 import numpy as np
 from numba import prange
 
-from ._kernels import _LOG_2PI, kf_step, masked_update_into
-from ._radar_update import radar_ekf_step, radar_update_into
+from ._kernels import _LOG_2PI, masked_update_into, predict_into
+from ._radar_update import radar_update_into
 from ._sqrt_kernel import lower_factor_into, lower_triangularize, outer_into, sqrt_step
 from ._turn_kernel import turn_predict_into
 
@@ -332,11 +333,17 @@ def imm_kernel(  # type: ignore[no-untyped-def]
                     )  # fmt: skip
                     fs[j, :nj, :nj] = fac[:nj, :nj]
                     outer_into(fac, ps[j], nj)
-                elif kinds[j] == 1:  # coordinated turn: EKF prediction, Joseph update
-                    turn_predict_into(
-                        xs[j, :nj], ps[j, :nj, :nj], dts[q], turn_par[j], xp[:nj], pp[:nj, :nj],
-                        tmp[:nj, :nj], fbuf[:nj, :nj], qbuf[:nj, :nj], u0[:nj],
-                    )  # fmt: skip
+                else:
+                    if kinds[j] == 1:  # coordinated turn: EKF prediction
+                        turn_predict_into(
+                            xs[j, :nj], ps[j, :nj, :nj], dts[q], turn_par[j], xp[:nj],
+                            pp[:nj, :nj], tmp[:nj, :nj], fbuf[:nj, :nj], qbuf[:nj, :nj], u0[:nj],
+                        )  # fmt: skip
+                    else:
+                        predict_into(
+                            xs[j, :nj], ps[j, :nj, :nj], phi[j, q, :nj, :nj], qd[j, q, :nj, :nj],
+                            u[j, q, :nj], xp[:nj], pp[:nj, :nj], tmp[:nj, :nj],
+                        )  # fmt: skip
                     if radar:
                         ok, nis, logdet, nobs = radar_update_into(
                             xp[:nj], pp[:nj, :nj], z[i, k], mask[i, k], codes, pose, reads[j],
@@ -346,29 +353,15 @@ def imm_kernel(  # type: ignore[no-untyped-def]
                     else:
                         ok, nis, logdet, nobs = masked_update_into(
                             xp[:nj], pp[:nj, :nj], z[i, k], mask[i, k], h[j, :, :nj], r[ir, kr],
-                            off, True, xs[j, :nj], ps[j, :nj, :nj], tmp[:nj, :nj], hm[:, :nj],
-                            rm, hp[:, :nj], s, lo, kt[:, :nj], nu, wv, ikh[:nj, :nj],
+                            off, form == 1, xs[j, :nj], ps[j, :nj, :nj], tmp[:nj, :nj],
+                            hm[:, :nj], rm, hp[:, :nj], s, lo, kt[:, :nj], nu, wv, ikh[:nj, :nj],
                         )  # fmt: skip
-                elif radar:
-                    ok, nis, logdet, nobs = radar_ekf_step(
-                        xs[j, :nj], ps[j, :nj, :nj], phi[j, q, :nj, :nj], qd[j, q, :nj, :nj],
-                        u[j, q, :nj], z[i, k], mask[i, k], codes, pose, reads[j], r[ir, kr],
-                        xp[:nj], pp[:nj, :nj], tmp[:nj, :nj], hm[:, :nj], rm, hp[:, :nj], s, lo,
-                        kt[:, :nj], nu, wv, ikh[:nj, :nj], zp, jac, sread,
-                    )  # fmt: skip
-                else:
-                    ok, nis, logdet, nobs = kf_step(
-                        xs[j, :nj], ps[j, :nj, :nj], phi[j, q, :nj, :nj], qd[j, q, :nj, :nj],
-                        u[j, q, :nj], z[i, k], mask[i, k], h[j, :, :nj], r[ir, kr], off,
-                        form == 1, xp[:nj], pp[:nj, :nj], tmp[:nj, :nj], hm[:, :nj], rm,
-                        hp[:, :nj], s, lo, kt[:, :nj], nu, wv, ikh[:nj, :nj],
-                    )  # fmt: skip
-                    if ok:
-                        tr = 0.0
-                        for a in range(m):
-                            if mask[i, k, a]:
-                                tr += s[a, a]
-                        worst[i] = max(worst[i], tr / r_min[ir, kr])
+                        if ok:
+                            tr = 0.0
+                            for a in range(m):
+                                if mask[i, k, a]:
+                                    tr += s[a, a]
+                            worst[i] = max(worst[i], tr / r_min[ir, kr])
                 if not ok:
                     status[i] = k + 1
                     break

@@ -1,4 +1,4 @@
-"""Compiled (numba) EKF step with a :class:`~adaptrack.models.RadarMeasurement`.
+"""Compiled (numba) EKF update with a :class:`~adaptrack.models.RadarMeasurement`.
 
 The radar's geometry, its analytic Jacobian and the wrapped innovation, as the NumPy model
 computes them, followed by the Joseph update of :func:`adaptrack.filters._kernels.update_into`.
@@ -14,7 +14,7 @@ import numpy as np
 
 from .._typing import FloatArray
 from ..models.measurement import RADAR_COMPONENTS, RadarMeasurement
-from ._kernels import predict_into, update_into
+from ._kernels import update_into
 
 RANGE, AZIMUTH, ELEVATION, RANGE_RATE = range(4)  # component codes, RADAR_COMPONENTS order
 
@@ -78,28 +78,16 @@ def radar_into(s, codes, pose, zp, jac):  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True, inline="always")
-def radar_ekf_step(  # type: ignore[no-untyped-def]
-    x, p, phi, qd, u, z, mask, codes, pose, reads, r, xp, pp, tmp, hm, rm, hp, s, lo, kt, nu, w,
-    ikh, zp, jac, sread,
-):  # fmt: skip
-    """One linear prediction + radar EKF update (Joseph form) in place, as ``kf_step``.
-
-    ``reads`` (k,) the state indices the radar reads; ``zp`` (m,), ``jac`` (m, k), ``sread``
-    (k,) scratch. Returns ``(ok, nis, log det S, observed components)``.
-    """
-    predict_into(x, p, phi, qd, u, xp, pp, tmp)
-    return radar_update_into(
-        xp, pp, z, mask, codes, pose, reads, r, x, p, tmp, hm, rm, hp, s, lo, kt, nu, w, ikh, zp,
-        jac, sread,
-    )  # fmt: skip
-
-
-@numba.njit(cache=True, inline="always")
 def radar_update_into(  # type: ignore[no-untyped-def]
     xp, pp, z, mask, codes, pose, reads, r, x, p, tmp, hm, rm, hp, s, lo, kt, nu, w, ikh, zp,
     jac, sread,
 ):  # fmt: skip
-    """Update the prior ``xp``, ``pp`` with the radar, as :func:`radar_ekf_step` does."""
+    """Update the prior ``xp``, ``pp`` with the radar (EKF, Joseph form) into ``x``, ``p``.
+
+    ``reads`` (k,) the state indices the radar reads; ``zp`` (m,), ``jac`` (m, k), ``sread``
+    (k,) scratch; the rest as :func:`~adaptrack.filters._kernels.masked_update_into`. Returns
+    ``(ok, nis, log det S, observed components)``.
+    """
     n = xp.shape[0]
     m = z.shape[0]
     n_read = reads.shape[0]
