@@ -214,11 +214,10 @@ def _run(log: PositionLog | RadarLog, model: str, values: dict[str, float]) -> F
     prior_var[:k] = r
     if isinstance(motion, NonlinearMotionModel):
         prior_var[-1] = TURN_PRIOR_STD**2
-        prior = GaussianState(mean, np.diag(prior_var), np.asarray(log.times[0]))
-        return ekf_filter(
-            log.times, log.enu, motion, PositionMeasurement(np.array(r), _AXES[:k]), prior
-        )
     prior = GaussianState(mean, np.diag(prior_var), np.asarray(log.times[0]))
+    if isinstance(motion, NonlinearMotionModel):
+        sensor = PositionMeasurement(np.array(r), _AXES[:k])
+        return ekf_filter(log.times, log.enu, motion, sensor, prior)
     return kalman_filter(
         log.times, log.enu, motion, list(_AXES[:k]), np.diag(r), prior, backend="numba"
     )
