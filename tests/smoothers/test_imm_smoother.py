@@ -1,4 +1,5 @@
-"""IMM smoother: one model is RTS; against the exact (enumerated) posterior; Monte Carlo."""
+"""IMM smoother: one model is RTS (linear or extended); against the exact (enumerated)
+posterior; Monte Carlo with linear models and with the coordinated turn."""
 
 import itertools
 
@@ -7,7 +8,12 @@ import pytest
 
 import adaptrack as at
 from adaptrack.filters.imm import imm_filter
-from adaptrack.models import ConstantAcceleration, ConstantVelocity, CoordinatedTurn
+from adaptrack.models import (
+    ConstantAcceleration,
+    ConstantVelocity,
+    CoordinatedTurn,
+    RadarMeasurement,
+)
 from adaptrack.smoothers.imm_smoother import imm_smooth
 
 
@@ -131,5 +137,88 @@ def test_bad_arguments_are_named(rng):
         imm_smooth(res, models)
     with pytest.raises(TypeError, match="IMMResult"):
         imm_smooth(res.filtered, models, pi)
-    with pytest.raises(TypeError, match=r"models\[1\] is a nonlinear CoordinatedTurn"):
+    with pytest.raises(ValueError, match="the filter's models"):
         imm_smooth(res, [models[0], CoordinatedTurn()], pi)
+    with pytest.raises(TypeError, match=r"models\[1\]"):
+        imm_smooth(res, [models[0], "ca"], pi)
+
+
+RADAR = RadarMeasurement(noise_cov=np.diag([25.0, 1e-6]))
+
+
+def test_one_turn_model_is_the_extended_rts_smoother(rng):
+    """A coordinated turn alone, radar plots over irregular steps: the IMM smoother equals
+    the extended RTS smoother of the EKF (both linearise at each filtered estimate)."""
+    t = np.cumsum(rng.uniform(0.5, 1.5, (3, 40)), axis=1)
+    heading = 0.3 + 0.03 * t
+    pos = np.stack([3000.0 + 500 * np.sin(heading), 4000.0 + 500 * np.cos(heading)], -1)
+    z = RADAR.predict(pos) + rng.normal(size=(3, 40, 2)) * [5.0, 1e-3]
+    ct = CoordinatedTurn(0.2, 1e-4)
+    prior = at.GaussianState([3100.0, 4450.0, 14.0, -4.0, 0.0],
+                             np.diag([400.0, 400.0, 100.0, 100.0, 1e-3]), 0.0)  # fmt: skip
+    imm = imm_filter(t, z, [ct], RADAR, None, [prior], initial_probs=[1.0],
+                     switching_rates=[[0.0]])  # fmt: skip
+    ours = imm_smooth(imm, [ct], switching_rates=[[0.0]])
+    ref = at.rts_smooth(at.ekf_filter(t, z, ct, RADAR, prior))
+    np.testing.assert_allclose(ours.smoothed.mean, ref.mean, rtol=1e-9, atol=1e-7)
+    np.testing.assert_allclose(ours.smoothed.cov, ref.cov, rtol=1e-7, atol=1e-9)
+
+
+def _turning_flights(rng, n_tracks, n_steps):
+    """Straight legs and turns of 2-4 deg/s either way at 80 m/s: truth integrated over 0.1 s
+    (independent of the turn model), radar plots every 1-2 s."""
+    fine = 0.1
+    t = np.cumsum(rng.uniform(1.0, 2.0, (n_tracks, n_steps)), axis=1)
+    grid = np.arange(0.0, t.max() + fine, fine)
+    rate = np.zeros((n_tracks, grid.size))
+    for run in range(n_tracks):
+        for start in rng.uniform(0.0, grid[-1] - 40.0, 3):
+            turn = (grid >= start) & (grid < start + 30.0)
+            rate[run, turn] = np.deg2rad(rng.uniform(2.0, 4.0)) * rng.choice([-1.0, 1.0])
+    heading = 0.5 + np.cumsum(rate, axis=1) * fine
+    vel = 80.0 * np.stack([np.sin(heading), np.cos(heading)], -1)
+    fine_pos = np.array([3000.0, 4000.0]) + np.cumsum(vel, axis=1) * fine
+    k = np.rint(t / fine).astype(int)
+    rows = np.arange(n_tracks)[:, None]
+    pos, v = fine_pos[rows, k], vel[rows, k]
+    z = RADAR.predict(pos) + rng.normal(size=(n_tracks, n_steps, 2)) * [5.0, 1e-3]
+    return t, z, pos, v
+
+
+@pytest.mark.statistical
+@pytest.mark.parametrize("slow", [False, True])
+def test_smoothing_cv_and_ct_on_turning_flights(slow):
+    """CV (4 states) + CT (5) over 30 flights with three turns each, paired per flight.
+
+    Switching about as often as the turns (0.02 / 0.05 per s): smoothed position and
+    velocity errors below the filter's by more than 3 standard errors (measured: position
+    MSE 64.5 -> 33.8 m^2, velocity 44 -> 2.2 (m/s)^2). Switching rarely (0.002 / 0.005 per
+    s): the CT mode holds, and the smoothed position error is that of the CT model's own
+    extended RTS within 3 standard errors (measured 28.6 and 29.0 m^2; weighing the pairs
+    with the linear correction to Kim's approximation gave 57 m^2)."""
+    rng = np.random.default_rng(11)
+    n, steps = 30, 120
+    t, z, pos, vel = _turning_flights(rng, n, steps)
+    cv, ct = ConstantVelocity(0.05, n_axes=2), CoordinatedTurn(0.05, 1e-4)
+    start = np.c_[pos[:, 0], vel[:, 0]] + rng.normal(size=(n, 4)) * 10.0
+    cov = np.diag([100.0, 100.0, 100.0, 100.0])
+    priors = [at.GaussianState(start, np.broadcast_to(cov, (n, 4, 4)), 0.0),
+              at.GaussianState(np.c_[start, np.zeros(n)], np.broadcast_to(
+                  np.diag([100.0, 100.0, 100.0, 100.0, 1e-3]), (n, 5, 5)), 0.0)]  # fmt: skip
+    rates = [[-0.002, 0.002], [0.005, -0.005]] if slow else [[-0.02, 0.02], [0.05, -0.05]]
+    res = imm_filter(t, z, [cv, ct], RADAR, None, priors, initial_probs=[0.5, 0.5],
+                     switching_rates=rates)  # fmt: skip
+    sm = imm_smooth(res, [cv, ct], switching_rates=rates)
+
+    def mse(mean, cols, truth):
+        return np.sum((mean[..., cols] - truth) ** 2, -1).mean(-1)
+
+    if slow:
+        alone = at.rts_smooth(at.ekf_filter(t, z, ct, RADAR, priors[1]))
+        d = mse(sm.smoothed.mean, [0, 1], pos) - mse(alone.mean, [0, 1], pos)
+        assert abs(d.mean()) < 3 * d.std(ddof=1) / np.sqrt(n), d.mean()
+        return
+    for cols, truth in (([0, 1], pos), ([2, 3], vel)):
+        e_f, e_s = mse(res.filtered.mean, cols, truth), mse(sm.smoothed.mean, cols, truth)
+        d = e_f - e_s
+        assert d.mean() > 3 * d.std(ddof=1) / np.sqrt(d.size), (cols, e_f.mean(), e_s.mean())
