@@ -293,9 +293,13 @@ def test_two_moving_parts_of_one_long_body_are_one_track_two_cars_are_not():
 
 
 def test_a_young_static_object_on_a_stopped_bus_is_its_reflection_an_old_one_is_clutter():
-    """A stopped bus (spread 2 m: its body reaches 4 m either side) and a static object 3 m
-    ahead of its centre: dropped while young (the bus's own far end taken for a post), kept
-    once it is learnt clutter, kept 5 m ahead (off the body) or 2 m across."""
+    """A stopped bus (spread 2 m: its body reaches 4 m either side) and a static object of
+    spread 1 m (its body 2 m either side) 3 m ahead of the bus's centre: dropped while young
+    (the bus's own far end taken for a post), kept once it is learnt clutter, kept 2 m
+    across. Along, the bodies decide: 5.5 m ahead they overlap (dropped: the bus's far end,
+    whose reflections taught the static track a body's spread; development seed 802 left
+    the bus track 1.7 m off when it was kept), 6.5 m ahead they do not (kept); a point of
+    clutter (spread 0.3 m) 5.5 m ahead is off the bus's body (kept)."""
     x = np.zeros((2, 4))
     x[1, 0] = 3.0
     p = np.tile(np.eye(4) * 0.01, (2, 1, 1))
@@ -306,8 +310,9 @@ def test_a_young_static_object_on_a_stopped_bus_is_its_reflection_an_old_one_is_
     ids = np.array([1, 2])
     corridor = np.zeros(2, np.int64)
 
-    def drop(young, along=3.0, across=0.0):
+    def drop(young, along=3.0, across=0.0, own_spread=1.0):
         x[1, 0], x[1, 3] = along, across
+        spread[1] = own_spread
         return merged_rows(
             corridor, x, p, spread, static, stopped, moved, ids, np.ones(2, bool), 1.2, 1.0,
             4.0, np.array([False, young]),
@@ -315,5 +320,7 @@ def test_a_young_static_object_on_a_stopped_bus_is_its_reflection_an_old_one_is_
 
     assert drop(True) == [False, True]
     assert drop(False) == [False, False]
-    assert drop(True, along=5.0) == [False, False]
     assert drop(True, across=2.0) == [False, False]
+    assert drop(True, along=5.5) == [False, True]
+    assert drop(True, along=6.5) == [False, False]
+    assert drop(True, along=5.5, own_spread=0.3) == [False, False]

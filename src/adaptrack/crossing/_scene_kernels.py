@@ -634,10 +634,12 @@ def merged_rows(  # type: ignore[no-untyped-def]
     (``BODY_HALF_SPREADS`` spreads either side) overlap are one long body tracked in two parts
     (no one drives into another): the younger goes, and the body's other reflections, on no
     body now, teach the survivor its length. A ``young`` static object (not yet learnt
-    clutter) within a stopped road user's body (``BODY_HALF_SPREADS`` of its spreads along,
-    ``lateral_m`` across) is that road user's reflection: it goes (a bus stopped with an
-    under-learnt body would otherwise see its far end taken for a post, which then holds
-    half its reflections).
+    clutter) whose body overlaps a stopped road user's (``BODY_HALF_SPREADS`` spreads either
+    side along, within ``lateral_m`` across) is that road user's reflection: it goes (a bus
+    stopped with an under-learnt body would otherwise see its far end taken for a post, which
+    then holds part of its reflections, learns their spread and leaves the bus track a
+    shorter body further off; a point of clutter learns a small spread and stays off a body
+    beside it).
     """
     n = x.shape[0]
     drop = np.zeros(n, dtype=np.bool_)
@@ -649,7 +651,7 @@ def merged_rows(  # type: ignore[no-untyped-def]
                 s, r = (a, b) if static[a] else (b, a)  # the static one, the road user
                 if (
                     young[s] and stopped[r] and moved[r] and not drop[r]
-                    and abs(x[s, 0] - x[r, 0]) < BODY_HALF_SPREADS * spread[r]
+                    and abs(x[s, 0] - x[r, 0]) < BODY_HALF_SPREADS * (spread[r] + spread[s])
                     and abs(x[s, 3] - x[r, 3]) < lateral_m
                 ):  # fmt: skip
                     drop[s] = True

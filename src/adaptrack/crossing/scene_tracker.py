@@ -28,7 +28,7 @@ coasting time or, for a stopped track, by misses in a row: :mod:`adaptrack.track
 open tentative tracks from the detections left over, clustered within ``cluster_radius_m``;
 split a stopped track whose reflections come from two bodies of a queue
 (:meth:`SceneTracker._split`); merge two tracks on one body (two moving parts of one long
-vehicle among them; a young static object on a stopped road user's body,
+vehicle among them; a young static object whose body overlaps a stopped road user's,
 ``absorb_young_static``). The per-track arithmetic runs compiled (:mod:`._scene_kernels`).
 
 Stopped mode: a confirmed track slower than ``stop_speed_mps`` for ``stop_confirm_s`` (a
