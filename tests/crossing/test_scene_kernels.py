@@ -125,6 +125,42 @@ def test_a_body_reaching_past_the_radars_range_is_seen_over_its_near_part():
     assert _visible_part(1, x, spread, corridor, roads, bounds, radar, fields) == (0.0, 2.0, 0.0)
 
 
+@pytest.mark.parametrize("site_name", ["lx_curve_near", "lx_three_arm"])
+def test_the_visible_part_of_a_body_equals_a_sampled_field_of_view_test(site_name):
+    """Each radar's visible part of random bodies against RadarSpec.in_view at lane points.
+
+    Independent of the kernels' geometry: the points come from the road's own lane
+    geometry, the field test from the radar's NumPy one. Bodies straddle the field edges.
+    """
+    site, corridors, roads, bounds = _corridor_tables(site_name)
+    rng = np.random.default_rng(7)
+    n = 400
+    a = (2.0 * np.arange(VISIBLE_SAMPLES) / (VISIBLE_SAMPLES - 1) - 1.0)[None, :]
+    for radar in site.radars:
+        corridor = rng.integers(0, len(corridors), n)
+        x = np.zeros((n, 4))
+        x[:, 0] = rng.uniform(0.0, [corridors[c].path.length_m for c in corridor])
+        x[:, 3] = rng.uniform(-3.0, 3.0, n)
+        spread = rng.uniform(0.2, 4.0, n)
+        checked = 0
+        for i in range(n):
+            path = corridors[corridor[i]].path
+            pts = path.lane_geometry(x[i, 0] + BODY_HALF_SPREADS * spread[i] * a[0], x[i, 3])[0]
+            seen = radar.in_view(*radar.polar(pts))
+            k = int(seen.sum())
+            want = (0.0, spread[i], 0.0)
+            if 0 < k < VISIBLE_SAMPLES:
+                slope = -0.5 if seen[0] != seen[-1] else (-1.0 if not seen[0] else 0.0)
+                offset = float((BODY_HALF_SPREADS * spread[i] * a[0])[seen].mean())
+                want = (offset, spread[i] * k / VISIBLE_SAMPLES, slope)
+                checked += 1
+            got = _visible_part(
+                i, x, spread, corridor, roads, bounds, radar.kernel_row(), radar.field_table()
+            )
+            assert got == pytest.approx(want, abs=1e-9), (radar.name, i)
+        assert checked > 5  # bodies cut by a field's edge were among them
+
+
 def test_compiled_clusters_equal_the_kd_tree_clusters():
     rng = np.random.default_rng(3)
     for _ in range(200):
@@ -168,10 +204,10 @@ def test_opened_tracks_start_where_the_detections_are_with_their_radial_speed():
     vr = np.array([12.0 * cos, 12.0 * cos, 0.0])  # 12 m/s along u
     z = np.stack([rng_m, az, vr], -1)
     radar_row, noise_tab, noise_cnt = radar.kernel_row(), *radar.noise_table()
-    corridor, x, p, labels = open_tracks(
+    corridor, x, p, labels, first = open_tracks(
         z, radar_row, noise_tab, noise_cnt, roads, bounds, 3.0, 15.0**2, 1.5**2
     )
-    assert labels.tolist() == [0, 0, 1]
+    assert labels.tolist() == [0, 0, 1] and first.tolist() == [0, 2]
     assert corridor.tolist() == nearest_corridor(corridors, ground[[0, 2]])[0].tolist()
     centre = pos.mean(axis=0)
     assert np.hypot(*(cor.path.lane_geometry(x[0, 0], x[0, 3])[0] - centre)) < 0.05

@@ -117,6 +117,35 @@ def _ground_point(z_row, radar):  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True, inline="always")
+def _view_uniform(road, u, d, half, radar, fields):  # type: ignore[no-untyped-def]
+    """Whether the lane points within ``half`` [m] of ``(u, d)`` are all in view or all out.
+
+    False when it cannot tell. A sufficient test from the centre point alone: the points lie
+    within ``half`` of it (the arc is no shorter than its chord), so their slant ranges
+    differ from its by at most ``half`` and their bearings by at most
+    ``asin(half / ground range)``.
+    """
+    cx, cy, th, _ = _centreline(road, u)
+    ex = cx - d * math.cos(th) - radar[0]
+    ey = cy + d * math.sin(th) - radar[1]
+    ground = math.sqrt(ex * ex + ey * ey)
+    if ground <= half:
+        return False
+    rng = math.sqrt(ground * ground + radar[2] * radar[2])
+    if rng + half < radar[4]:
+        return True  # all nearer than the minimum range
+    off = off_boresight(math.atan2(ex, ey), radar)
+    widen = math.asin(half / ground)
+    all_in = rng - half >= radar[4]
+    some_field = False
+    for f in range(fields.shape[0]):
+        if rng + half <= fields[f, 0] and off + widen <= fields[f, 1]:
+            return all_in
+        some_field |= rng - half <= fields[f, 0] and off - widen <= fields[f, 1]
+    return not some_field
+
+
+@numba.njit(cache=True, inline="always")
 def _visible_part(i, x, spread, corridor, roads, bounds, radar, fields):  # type: ignore[no-untyped-def]
     """Locate the part of track ``i``'s body inside the radar's field of view.
 
@@ -130,6 +159,8 @@ def _visible_part(i, x, spread, corridor, roads, bounds, radar, fields):  # type
     """
     half = BODY_HALF_SPREADS * spread[i]
     road = roads[:, bounds[corridor[i], 0] : bounds[corridor[i], 1]]
+    if _view_uniform(road, x[i, 0], x[i, 3], half, radar, fields):
+        return 0.0, spread[i], 0.0
     n_in, total = 0, 0.0
     first_in = last_in = False
     for k in range(VISIBLE_SAMPLES):
@@ -179,6 +210,33 @@ def _model(  # type: ignore[no-untyped-def]
         for c in range(3):
             rm[a, c] += s2 * bb[a] * bb[c]
     return part_spread
+
+
+@numba.njit(cache=True)
+def detections_in_view(z, radar, fields):  # type: ignore[no-untyped-def]
+    """Whether each detection (range, azimuth, ...) of ``z`` (n, 3) lies in the radar's view."""
+    seen = np.zeros(z.shape[0], dtype=np.bool_)
+    for j in range(z.shape[0]):
+        seen[j] = in_view(z[j, 0], off_boresight(z[j, 1], radar), fields, radar[4])
+    return seen
+
+
+@numba.njit(cache=True)
+def confirmed_rows(confirmed, time_s, last_hit_s, stopped, moved, coasting_s, codes):  # type: ignore[no-untyped-def]
+    """Rows of the confirmed tracks and their status codes.
+
+    ``codes``: the codes of confirmed, coasting (no detection for more than ``coasting_s``
+    [s]), stopped, and static (stopped, never moved).
+    """
+    rows = np.flatnonzero(confirmed)
+    status = np.empty(rows.size, np.int64)
+    for k in range(rows.size):
+        i = rows[k]
+        if stopped[i]:
+            status[k] = codes[2] if moved[i] else codes[3]
+        else:
+            status[k] = codes[1] if time_s[i] - last_hit_s[i] > coasting_s else codes[0]
+    return rows, status
 
 
 @numba.njit(cache=True)
@@ -476,6 +534,9 @@ def occluders(rows, x, spread, corridor, roads, bounds, radar, can_hide):  # typ
     misses count. Of several, the nearest to the radar is returned.
     """
     n = x.shape[0]
+    out = np.full(rows.size, -1, dtype=np.int64)
+    if rows.size == 0:
+        return out
     rng = np.zeros(n)
     az = np.zeros(n)
     half = np.zeros(n)
@@ -487,7 +548,6 @@ def occluders(rows, x, spread, corridor, roads, bounds, radar, can_hide):  # typ
         ux, uy = ex / max(rng[i], 1e-9), ey / max(rng[i], 1e-9)
         across = abs(ux * ty - uy * tx) * 2.0 * spread[i] + abs(ux * tx + uy * ty) * 1.0
         half[i] = math.atan2(across, max(rng[i], 1e-9))
-    out = np.full(rows.size, -1, dtype=np.int64)
     for k in range(rows.size):
         i = rows[k]
         for j in range(n):
@@ -583,7 +643,8 @@ def open_tracks(  # type: ignore[no-untyped-def]
     detections' mean (:func:`nearest_sample`), with the speed along the corridor that its first
     detection's radial speed gives where the line of sight is not across the lane (and the
     radar does not fold), else 0 with variance ``initial_speed_var``; the position along has
-    variance ``1 + along_var``. Returns ``(corridor, x, p, labels)`` (one row per body).
+    variance ``1 + along_var``. Returns ``(corridor, x, p, labels, first)``: one row per body,
+    each detection's body, and each body's first detection.
     """
     n = z.shape[0]
     gx, gy = np.zeros(n), np.zeros(n)
@@ -618,7 +679,7 @@ def open_tracks(  # type: ignore[no-untyped-def]
         p[g, 0, 0] = 1.0 + along_var
         p[g, 2, 2] = 9.0
         p[g, 3, 3] = 1.0
-    return corridor, x, p, labels
+    return corridor, x, p, labels, first
 
 
 @numba.njit(cache=True)

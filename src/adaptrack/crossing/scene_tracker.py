@@ -85,6 +85,8 @@ from ..tracking import (
     gnn_assign,
 )
 from ._scene_kernels import (
+    confirmed_rows,
+    detections_in_view,
     gate_scan,
     merged_rows,
     miss_updates,
@@ -105,6 +107,10 @@ from .site import Site
 N_STATE = 4  # u, du/dt, d2u/dt2, d
 STATIC = len(TrackStatus)  # status code of a stopped object that never moved
 STATUS_NAMES = (*(s.name.lower() for s in TrackStatus), "static")  # by status code
+COASTING_S = 0.2  # a confirmed track without a detection for longer is coasting [s]
+_STATUS_CODES = np.array(
+    [TrackStatus.CONFIRMED, TrackStatus.COASTING, TrackStatus.STOPPED, STATIC], np.int64
+)  # confirmed_rows' codes
 ROW_COLUMNS = (
     "track_id", "time_s", "east_m", "north_m", "speed_mps", "east_speed_mps", "north_speed_mps",
     "from_crossing_m", "status", "moved", "position_std_m", "speed_std_mps",
@@ -389,7 +395,7 @@ class SceneTracker:
         """
         radar_row, noise_tab, noise_cnt = self._radar_tables[radar_name][:3]
         cfg = self.config
-        corridor, x, p, labels = open_tracks(
+        corridor, x, p, _, first = open_tracks(
             z, radar_row, noise_tab, noise_cnt, self._roads, self._bounds,
             cfg.cluster_radius_m, cfg.initial_speed_std_mps**2, cfg.body_along_std_m**2,
         )  # fmt: skip
@@ -397,7 +403,6 @@ class SceneTracker:
         if n_new:
             self.book.add(n_new, time_s)
             sensor_id = np.full((n_new, len(self._radars)), -1, np.int64)
-            first = np.unique(labels, return_index=True)[1]  # each cluster's first detection
             sensor_id[:, self._radar_index[radar_name]] = ids[first]
             self.tracks.append(
                 _Tracks.opened(corridor, x, p, time_s, cfg.body_along_std_m, sensor_id)
@@ -430,11 +435,11 @@ class SceneTracker:
                 f"{last} s (scans of a radar must be in time order, one per time)"
             )
         z = np.asarray(z, dtype=float).reshape(-1, 3)
-        if not np.all(np.isfinite(z)):
+        if not np.isfinite(z).all():
             raise ValueError(f"radar {radar_name!r} at {time_s} s: a detection is not finite")
         ids = _sensor_ids(ids, z.shape[0], radar_name, time_s)
         self._last_time[radar_name] = time_s
-        time_s = float(radar.measured_at(time_s))
+        time_s = float(time_s) - radar.latency_s  # when the scan was made
         self.last_scan_s = time_s
         cfg = self.config
         bias = self.azimuth_bias_rad[radar_name]
@@ -446,16 +451,18 @@ class SceneTracker:
             tr.x, tr.p, tr.time_s, tr.stopped, tr.direction, time_s,
             cfg.accel_psd, cfg.lateral_psd, cfg.stopped_psd,
         )  # fmt: skip
-        view = radar.in_view(z[:, 0], z[:, 1])
+        radar_row, noise_tab, noise_cnt, fields, pd_tab, pd_cnt = self._radar_tables[radar_name]
+        view = detections_in_view(z, radar_row, fields)
         self.outside_view = ~view
-        self.log.rejected_outside_view += int(self.outside_view.sum())
-        z = z[view]
-        ids = ids[view]
+        n_out = int(np.count_nonzero(self.outside_view))
+        if n_out:
+            self.log.rejected_outside_view += n_out
+            z = z[view]
+            ids = ids[view]
         r_col = self._radar_index[radar_name]
         n_t = tr.time_s.size
         used = np.zeros(z.shape[0], dtype=bool)
         if n_t:
-            radar_row, noise_tab, noise_cnt, fields, pd_tab, pd_cnt = self._radar_tables[radar_name]
             stats = self._bias_stats[radar_name]
             d2 = np.empty((n_t, z.shape[0]))
             logdet = np.empty(n_t)
@@ -517,7 +524,7 @@ class SceneTracker:
             ready = tr.p[rows, 1, 1] < cfg.confirm_speed_std_mps**2
             now = self.book.record(rows, hit[rows], time_s, ready)
             tr.anchor_u[now] = tr.x[now, 0]  # the first position known well enough
-        self.log.updated += int(used.sum())
+        self.log.updated += int(np.count_nonzero(used))
         left = z[~used]
         if left.shape[0]:
             n_new = self._open(left, ids[~used], radar_name, time_s)
@@ -592,7 +599,8 @@ class SceneTracker:
             self.book.confirmed, cfg.merge_lateral_m, cfg.merge_speed_mps,
             cfg.merge_parts_speed_mps, young & cfg.absorb_young_static,
         )  # fmt: skip
-        self._drop(np.flatnonzero(drop))
+        if drop.any():
+            self._drop(np.flatnonzero(drop))
 
     def _modes(self, time_s: float) -> None:
         """Update moving and stopped modes (:func:`._scene_kernels.mode_changes`); raise events."""
@@ -702,7 +710,8 @@ class SceneTracker:
         )
         dead = (tr.x[:, 0] < 0) | (tr.x[:, 0] > self._length_m[tr.corridor])  # left its corridor
         dead[gone] = True
-        self._drop(np.flatnonzero(dead))
+        if dead.any():
+            self._drop(np.flatnonzero(dead))
 
     def _drop(self, rows: np.ndarray) -> None:
         """Forget the tracks in ``rows`` (book and filter states)."""
@@ -731,11 +740,10 @@ class SceneTracker:
     def snapshot(self, time_s: float) -> _Snapshot:
         """Return the confirmed tracks' states at ``time_s`` (:meth:`rows` before geometry)."""
         tr = self.tracks
-        rows = np.flatnonzero(self.book.confirmed)
-        coasting = tr.time_s[rows] - self.book.last_hit_s[rows] > 0.2
-        status = np.where(coasting, int(TrackStatus.COASTING), int(TrackStatus.CONFIRMED))
-        stopped = tr.stopped[rows]
-        status[stopped] = np.where(tr.moved[rows[stopped]], int(TrackStatus.STOPPED), STATIC)
+        rows, status = confirmed_rows(
+            self.book.confirmed, tr.time_s, self.book.last_hit_s, tr.stopped, tr.moved,
+            COASTING_S, _STATUS_CODES,
+        )  # fmt: skip
         return _Snapshot(
             self.book.ids[rows], np.full(rows.size, time_s), tr.x[rows], tr.p[rows],
             tr.corridor[rows], status, tr.moved[rows],
@@ -818,6 +826,8 @@ def _sensor_ids(ids: np.ndarray | None, n: int, radar_name: str, time_s: float) 
     if ids is None:
         return np.full(n, -1, np.int64)
     raw = np.asarray(ids)
+    if raw.dtype == np.int64 and raw.shape == (n,) and raw.min(initial=-1) >= -1:
+        return raw  # already valid (as iter_scans yields them)
     if raw.shape != (n,) or not np.issubdtype(raw.dtype, np.integer) or np.any(raw < -1):
         raise ValueError(
             f"radar {radar_name!r} at {time_s} s: sensor ids must be {n} integers >= -1 "
