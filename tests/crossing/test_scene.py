@@ -219,6 +219,7 @@ def test_events_over_closures_queues_and_a_stall(seed):
 def test_learnt_clutter_reserves_its_own_detections():
     """A static object older than clutter_age_s keeps the detections in its tight gate; a
     young one (a vehicle waiting at a closure may look static) and moving tracks do not."""
+    from adaptrack.crossing._scene_kernels import reserve_clutter
     from adaptrack.crossing.scene_tracker import SceneTrackerConfig, _Tracks
 
     tracker = SceneTracker(SITE, SceneTrackerConfig(clutter_age_s=100.0))
@@ -228,7 +229,7 @@ def test_learnt_clutter_reserves_its_own_detections():
     tracker.tracks = _Tracks.opened(np.zeros(3, int), x, p, 200.0, 1.0, _no_ids(3))
     tracker.tracks.stopped[[0, 2]] = True  # rows 0 and 2 never moved: static
     d2 = np.array([[1.0, 50.0, 2.0], [3.0, 4.0, 5.0], [60.0, 0.5, 70.0]])
-    tracker._reserve_clutter(d2)
+    reserve_clutter(d2, tracker._clutter(), tracker._clutter_gate)
     # the old object's detections 0 and 2 (gate 11.3 at 0.99) are its own against everyone
     # else; detection 1, within only the young one's gate, stays open to the road user
     np.testing.assert_array_equal(d2[0], [1.0, 50.0, 2.0])

@@ -18,6 +18,7 @@ import numpy as np
 
 from ..filters._kernels import cholesky_into, predict_into, update_into
 from ..tracking.assignment import cluster_labels
+from ..tracking.lifecycle import record_hits
 from ._ekf_kernels import (
     ROAD,
     _centreline,
@@ -346,6 +347,158 @@ def gate_scan(  # type: ignore[no-untyped-def]
                 for i in range(n_t):
                     d2[i, j] += penalty[i, j]
     return seen
+
+
+@numba.njit(cache=True)
+def reserve_clutter(d2, clutter, clutter_gate):  # type: ignore[no-untyped-def]
+    """Give the detections within ``clutter_gate`` of a ``clutter`` row to clutter alone.
+
+    The other rows of ``d2`` (T, D) are set to ``inf`` for them, in place; nothing changes
+    when no row, or every row, is clutter.
+    """
+    n_t, n_d = d2.shape
+    n_clutter = 0
+    for i in range(n_t):
+        n_clutter += clutter[i]
+    if n_clutter == 0 or n_clutter == n_t:
+        return
+    for j in range(n_d):
+        mine = False
+        for i in range(n_t):
+            mine |= clutter[i] and d2[i, j] <= clutter_gate
+        if mine:
+            for i in range(n_t):
+                if not clutter[i]:
+                    d2[i, j] = np.inf
+
+
+@numba.njit(cache=True)
+def favour_sensor_ids(d2, sensor_id, ids, bonus, gate):  # type: ignore[no-untyped-def]
+    """Take ``bonus`` off gated ``d2`` (T, D) where a detection's id ``ids`` (D,) is a track's.
+
+    ``sensor_id`` (T,): the id the radar last gave each track; -1 is no id. In place, not
+    below 0.
+    """
+    for j in range(ids.size):
+        if ids[j] >= 0:
+            for i in range(sensor_id.size):
+                if sensor_id[i] == ids[j] and d2[i, j] <= gate:
+                    d2[i, j] = max(d2[i, j] - bonus, 0.0)
+
+
+@numba.njit(cache=True)
+def associate_scan(  # type: ignore[no-untyped-def]
+    x, p, spread, stopped, moved, confirmed, clutter, direction, corridor, sensor_id, roads,
+    bounds, radar, noise_tab, noise_cnt, fields, across_std, start_speed_max, extent_gate,
+    occlusion_gate, gate, clutter_gate, id_bonus, z, ids,
+):  # fmt: skip
+    """Gate a scan's detections ``z`` (D, 3) to the predicted tracks; try the simple assignment.
+
+    In a standing queue a stopped track's gate is narrowed behind the stopped road user that
+    hides it (with ``occlusion_gate``; :func:`occluders`, :func:`gate_scan`). A detection in
+    ``clutter_gate`` of an old static object (``clutter`` rows: never moved, older than the
+    clutter age) is its reflection alone (the other rows' ``d2`` set to ``inf``: a road user
+    passing over a barrier post would take it and leave a track behind on it:
+    :func:`reserve_clutter`). With ``id_bonus`` > 0, a gated detection whose sensor id
+    (``ids`` (D,), -1 none) is the one this radar last gave a track (``sensor_id`` (T,))
+    costs that much less (:func:`favour_sensor_ids`).
+    Returns ``(seen, d2, logdet, simple, tracks, detections)``: each track in view,
+    distances (T, D), log-determinants (T,) (:func:`gate_scan`) and, if ``simple``, the
+    one-to-one assignment (:func:`unambiguous_assignment`).
+    """
+    n_t, n_d = x.shape[0], z.shape[0]
+    d2 = np.empty((n_t, n_d))
+    logdet = np.empty(n_t)
+    road_user = moved & confirmed
+    behind = np.full(n_t, -1, dtype=np.int64)  # the stopped road user hiding a queued track
+    if occlusion_gate:
+        queued = np.flatnonzero(stopped)
+        nearest = occluders(queued, x, spread, corridor, roads, bounds, radar, road_user)
+        for k in range(queued.size):
+            if nearest[k] >= 0 and stopped[nearest[k]]:  # else the nearest is moving
+                behind[queued[k]] = nearest[k]
+    seen = gate_scan(
+        x, p, spread, stopped & moved, road_user, behind, direction, corridor, roads, bounds,
+        radar, noise_tab, noise_cnt, fields, across_std, start_speed_max, extent_gate, gate, z,
+        d2, logdet,
+    )  # fmt: skip
+    if n_d == 0:
+        return seen, d2, logdet, True, np.zeros(0, np.int64), np.zeros(0, np.int64)
+    reserve_clutter(d2, clutter, clutter_gate)
+    if id_bonus != 0.0:
+        favour_sensor_ids(d2, sensor_id, ids, id_bonus, gate)
+    simple, tracks, dets = unambiguous_assignment(d2, gate)
+    return seen, d2, logdet, simple, tracks, dets
+
+
+@numba.njit(cache=True)
+def apply_scan(  # type: ignore[no-untyped-def]
+    time_s, seen, d2, logdet, gate, tracks, dets, z, ids, radar_col, x, p, spread, along_m2,
+    along_m4, stopped, moved, direction, slow_since, corridor, miss_run, occluded, anchor_u,
+    sensor_id, history, misses, last_hit_s, confirmed, roads, bounds, radar, noise_tab,
+    noise_cnt, fields, pd_tab, pd_cnt, across_std, moving_radial, start_speed_var,
+    learning_rate, shape_rate, spread_lo, spread_hi, align, lane_half_width, bias, bias_stats,
+    bias_forget, bias_gate, confirm_speed_var, window_mask, confirm_hits,
+):  # fmt: skip
+    """Update the tracks with a gated scan (:func:`associate_scan`) in place.
+
+    Every gated detection goes to its owner (:func:`owners`: the assignment's, then the
+    likeliest track) and updates it (:func:`update_tracks`); the assigned detection's sensor
+    id becomes its track's (column ``radar_col`` of ``sensor_id``). A track in view without a
+    detection is hidden if a nearer track covers it (:func:`occluders`; its miss tells
+    nothing), else takes what the miss tells (:func:`miss_updates`, moving ones). Tracks in
+    view and not hidden record the hit or miss in the track book's arrays
+    (:func:`adaptrack.tracking.lifecycle.record_hits`; confirmed once their speed variance is
+    below ``confirm_speed_var``), and one confirmed now anchors where it is. Returns which
+    detections were used (D,).
+    """
+    n_t, n_d = d2.shape
+    used = np.zeros(n_d, dtype=np.bool_)
+    hit = np.zeros(n_t, dtype=np.bool_)
+    if n_d:
+        owner, order = owners(d2, logdet, gate, tracks, dets)
+        update_tracks(
+            order, owner, z, x, p, spread, along_m2, along_m4, stopped, moved, direction,
+            slow_since, corridor, roads, bounds, radar, noise_tab, noise_cnt, fields,
+            across_std, moving_radial, start_speed_var, learning_rate, shape_rate, spread_lo,
+            spread_hi, align, lane_half_width, bias, bias_stats, bias_forget, bias_gate,
+        )  # fmt: skip
+        for j in order:
+            used[j] = True
+            hit[owner[j]] = True
+        for k in range(tracks.size):
+            sensor_id[tracks[k], radar_col] = ids[dets[k]]  # its own, not a body's other
+    for i in range(n_t):
+        if hit[i]:
+            miss_run[i] = 1.0
+    missed = np.flatnonzero(seen & ~hit)
+    nearer = occluders(missed, x, spread, corridor, roads, bounds, radar, np.ones(n_t, np.bool_))
+    for i in range(n_t):
+        if hit[i]:
+            occluded[i] = False
+    moving_missed = np.zeros(missed.size, np.int64)
+    m = 0
+    for k in range(missed.size):
+        i = missed[k]
+        occluded[i] = nearer[k] >= 0
+        if not occluded[i] and not stopped[i]:
+            moving_missed[m] = i
+            m += 1
+    miss_updates(
+        moving_missed[:m], x, p, spread, miss_run, corridor, roads, bounds, radar, noise_tab,
+        noise_cnt, fields, pd_tab, pd_cnt,
+    )  # fmt: skip
+    rows = np.flatnonzero(seen & ~occluded)
+    ready = np.zeros(rows.size, np.bool_)
+    for k in range(rows.size):
+        ready[k] = p[rows[k], 1, 1] < confirm_speed_var
+    now = record_hits(
+        history, misses, last_hit_s, confirmed, rows, hit[rows], time_s, ready, window_mask,
+        confirm_hits,
+    )  # fmt: skip
+    for i in now:
+        anchor_u[i] = x[i, 0]
+    return used
 
 
 @numba.njit(cache=True)

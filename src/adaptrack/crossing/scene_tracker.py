@@ -85,20 +85,16 @@ from ..tracking import (
     gnn_assign,
 )
 from ._scene_kernels import (
+    apply_scan,
+    associate_scan,
     confirmed_rows,
     detections_in_view,
-    gate_scan,
     merged_rows,
-    miss_updates,
     mode_changes,
-    occluders,
     open_tracks,
-    owners,
     planar_rows,
     predict_tracks,
     split_rows,
-    unambiguous_assignment,
-    update_tracks,
 )
 from .corridor import Corridor, site_corridors
 from .sensor import curve_tables
@@ -460,70 +456,33 @@ class SceneTracker:
             z = z[view]
             ids = ids[view]
         r_col = self._radar_index[radar_name]
-        n_t = tr.time_s.size
         used = np.zeros(z.shape[0], dtype=bool)
-        if n_t:
+        if tr.time_s.size:
+            book = self.book
+            seen, d2, logdet, simple, ti, di = associate_scan(
+                tr.x, tr.p, tr.spread, tr.stopped, tr.moved, book.confirmed, self._clutter(),
+                tr.direction, tr.corridor, tr.sensor_id[:, r_col], self._roads, self._bounds,
+                radar_row, noise_tab, noise_cnt, fields, cfg.body_across_std_m,
+                cfg.start_speed_max_mps, cfg.body_extent_gate, cfg.occlusion_gate, self._gate,
+                self._clutter_gate, cfg.sensor_id_bonus, z, ids,
+            )  # fmt: skip
+            if not simple:
+                ti, di = gnn_assign(np.where(d2 <= self._gate, d2, np.inf), self._gate)
             stats = self._bias_stats[radar_name]
-            d2 = np.empty((n_t, z.shape[0]))
-            logdet = np.empty(n_t)
-            road_user = tr.moved & self.book.confirmed
-            behind = np.full(n_t, -1)  # in a standing queue, the stopped road user hiding it
-            if cfg.occlusion_gate:
-                queued = np.flatnonzero(tr.stopped)
-                behind[queued] = occluders(
-                    queued, tr.x, tr.spread, tr.corridor, self._roads, self._bounds, radar_row,
-                    road_user,
-                )  # fmt: skip
-                behind[(behind >= 0) & ~tr.stopped[behind]] = -1  # the nearest is moving
-            seen = gate_scan(
-                tr.x, tr.p, tr.spread, tr.stopped & tr.moved, road_user, behind, tr.direction,
-                tr.corridor,
-                self._roads, self._bounds, radar_row, noise_tab, noise_cnt, fields,
-                cfg.body_across_std_m, cfg.start_speed_max_mps, cfg.body_extent_gate,
-                self._gate, z, d2, logdet,
+            used = apply_scan(
+                time_s, seen, d2, logdet, self._gate, ti, di, z, ids, r_col, tr.x, tr.p,
+                tr.spread, tr.along_m2, tr.along_m4, tr.stopped, tr.moved, tr.direction,
+                tr.slow_since, tr.corridor, tr.miss_run, tr.occluded, tr.anchor_u, tr.sensor_id,
+                book.history, book.misses, book.last_hit_s, book.confirmed, self._roads,
+                self._bounds, radar_row, noise_tab, noise_cnt, fields, pd_tab, pd_cnt,
+                cfg.body_across_std_m, cfg.moving_radial_mps, cfg.start_speed_max_mps**2,
+                cfg.spread_learning_rate, cfg.shape_learning_rate, *cfg.spread_limits_m,
+                cfg.estimate_azimuth_bias, self._half_lane, bias, stats,
+                1.0 - 1.0 / cfg.bias_memory, cfg.bias_gate_m, cfg.confirm_speed_std_mps**2,
+                (1 << book.rules.confirm_window) - 1, book.rules.confirm_hits,
             )  # fmt: skip
-            hit = np.zeros(n_t, dtype=bool)
-            if z.shape[0]:
-                self._reserve_clutter(d2)
-                self._favour_sensor_ids(d2, ids, r_col)
-                simple, ti, di = unambiguous_assignment(d2, self._gate)
-                if not simple:
-                    ti, di = gnn_assign(np.where(d2 <= self._gate, d2, np.inf), self._gate)
-                owner, order = owners(d2, logdet, self._gate, ti, di)
-                lo, hi = cfg.spread_limits_m
-                update_tracks(
-                    order, owner, z, tr.x, tr.p, tr.spread, tr.along_m2, tr.along_m4,
-                    tr.stopped, tr.moved, tr.direction, tr.slow_since, tr.corridor,
-                    self._roads, self._bounds, radar_row, noise_tab, noise_cnt, fields,
-                    cfg.body_across_std_m, cfg.moving_radial_mps, cfg.start_speed_max_mps**2,
-                    cfg.spread_learning_rate, cfg.shape_learning_rate, lo, hi,
-                    cfg.estimate_azimuth_bias,
-                    self._half_lane, bias, stats,
-                    1.0 - 1.0 / cfg.bias_memory, cfg.bias_gate_m,
-                )  # fmt: skip
-                if stats[2] >= cfg.bias_min_samples:
-                    self.azimuth_bias_rad[radar_name] = float(stats[1] / stats[0])
-                used[order] = True
-                hit[owner[order]] = True
-                tr.sensor_id[ti, r_col] = ids[di]  # its own detection's, not a body's other
-            tr.miss_run[hit] = 1.0
-            missed = np.flatnonzero(seen & ~hit)
-            hidden = (
-                occluders(missed, tr.x, tr.spread, tr.corridor, self._roads, self._bounds,
-                          radar_row, np.ones(n_t, bool)) >= 0
-            )  # fmt: skip
-            tr.occluded[hit] = False
-            tr.occluded[missed] = hidden
-            missed = missed[~hidden]  # a hidden track's miss tells nothing
-            miss_updates(
-                missed[~tr.stopped[missed]], tr.x, tr.p, tr.spread, tr.miss_run, tr.corridor,
-                self._roads, self._bounds, radar_row, noise_tab, noise_cnt, fields, pd_tab,
-                pd_cnt,
-            )  # fmt: skip
-            rows = np.flatnonzero(seen & ~tr.occluded)
-            ready = tr.p[rows, 1, 1] < cfg.confirm_speed_std_mps**2
-            now = self.book.record(rows, hit[rows], time_s, ready)
-            tr.anchor_u[now] = tr.x[now, 0]  # the first position known well enough
+            if stats[2] >= cfg.bias_min_samples:
+                self.azimuth_bias_rad[radar_name] = float(stats[1] / stats[0])
         self.log.updated += int(np.count_nonzero(used))
         left = z[~used]
         if left.shape[0]:
@@ -535,28 +494,14 @@ class SceneTracker:
         self._delete(time_s)
         self._merge()
 
-    def _favour_sensor_ids(self, d2: FloatArray, ids: np.ndarray, radar_col: int) -> None:
-        """Take ``sensor_id_bonus`` off gated ``d2`` where a detection has a track's sensor id."""
-        if self.config.sensor_id_bonus == 0.0 or ids.max(initial=-1) < 0:
-            return  # the default, and raw detections: no work per scan
-        last = self.tracks.sensor_id[:, radar_col]
-        same = (last[:, None] == ids[None, :]) & (ids >= 0)[None, :] & (d2 <= self._gate)
-        if same.any():
-            d2[same] = np.maximum(d2[same] - self.config.sensor_id_bonus, 0.0)
+    def _clutter(self) -> np.ndarray:
+        """Return the static objects older than ``clutter_age_s`` (bool per track).
 
-    def _reserve_clutter(self, d2: FloatArray) -> None:
-        """Give a static object's detections to it alone (``d2`` rows of others set to inf).
-
-        A detection within ``clutter_gate`` of a static object (never moved: a barrier post,
-        a rail) is its reflection; a road user passing over it would otherwise take it and
-        leave a track behind on the clutter when it drives on.
+        Barrier posts, rails: their detections are their own (:func:`.reserve_clutter`); a
+        young one may be a vehicle waiting at a closure.
         """
-        static = self.tracks.static
-        static &= self.tracks.time_s - self.book.born_s >= self.config.clutter_age_s
-        if not static.any() or static.all():
-            return
-        mine = (d2[static] <= self._clutter_gate).any(axis=0)
-        d2[np.ix_(~static, mine)] = np.inf
+        tr = self.tracks
+        return tr.static & (tr.time_s - self.book.born_s >= self.config.clutter_age_s)
 
     def _split(self, time_s: float) -> None:
         """Split a stopped track holding two queued bodies (:func:`._scene_kernels.split_rows`).

@@ -104,7 +104,7 @@ class TrackBook:
         ``ready`` (bool per row, default all): a track is confirmed only once its state is
         determined well enough (e.g. its speed), whatever its hits.
         """
-        return _record(
+        return record_hits(
             self.history, self.misses, self.last_hit_s, self.confirmed,
             np.asarray(rows, np.int64), np.asarray(hit, bool), float(time_s),
             np.ones(len(rows), bool) if ready is None else np.asarray(ready, bool),
@@ -145,10 +145,13 @@ class TrackBook:
 
 
 @numba.njit(cache=True)
-def _record(  # type: ignore[no-untyped-def]
+def record_hits(  # type: ignore[no-untyped-def]
     history, misses, last_hit_s, confirmed, rows, hit, time_s, ready, window_mask, confirm_hits
 ):  # fmt: skip
-    """:meth:`TrackBook.record` in place; returns the rows confirmed now."""
+    """:meth:`TrackBook.record` on a book's arrays in place (for compiled callers).
+
+    ``window_mask``: ``2**confirm_window - 1``. Returns the rows confirmed now.
+    """
     now = np.zeros(rows.size, np.int64)
     n = 0
     for k in range(rows.size):
@@ -194,4 +197,4 @@ def _expired(  # type: ignore[no-untyped-def]
     return np.flatnonzero(dead)
 
 
-__all__ = ["LifecycleRules", "TrackBook", "TrackStatus"]
+__all__ = ["LifecycleRules", "TrackBook", "TrackStatus", "record_hits"]
