@@ -18,7 +18,7 @@ import numpy as np
 
 from ..filters._kernels import cholesky_into, predict_into, update_into
 from ..tracking.assignment import cluster_labels
-from ..tracking.lifecycle import record_hits
+from ..tracking.lifecycle import expired_rows, record_hits
 from ._ekf_kernels import (
     ROAD,
     _centreline,
@@ -840,7 +840,7 @@ def merged_rows(  # type: ignore[no-untyped-def]
     corridor, x, p, spread, static, stopped, moved, ids, confirmed, lateral_m, speed_mps,
     parts_speed, young,
 ):  # fmt: skip
-    """Rows to drop: the younger of two tracks on one body (see ``SceneTracker._merge``).
+    """Rows to drop: the younger of two tracks on one body (see ``SceneTracker._retire``).
 
     Pairs in row order; a confirmed track outlives an unconfirmed one whatever their ages; a
     track already dropped removes no other. Besides tracks within their spreads of each
@@ -889,6 +889,49 @@ def merged_rows(  # type: ignore[no-untyped-def]
             if not drop[older]:
                 drop[younger] = True
     return drop
+
+
+@numba.njit(cache=True)
+def retired_rows(  # type: ignore[no-untyped-def]
+    time_s, track_time_s, x, p, corridor, length_m, spread, stopped, moved, occluded, ids,
+    confirmed, misses, born_s, last_hit_s, stopped_detectable, tentative_misses,
+    max_tentative_s, max_coast_s, max_coast_stopped_s, max_coast_hidden_s, max_position_std_m,
+    max_stopped_misses, lateral_m, speed_mps, parts_speed, clutter_age_s, absorb_young_static,
+):  # fmt: skip
+    """Tracks to delete after a scan at ``time_s`` (bool per track).
+
+    Those the life-cycle rules expire (:func:`adaptrack.tracking.lifecycle.expired_rows`,
+    with the position sigma along and across the corridor), those that left their corridor
+    (``length_m`` per corridor) and, of the rest, the younger of two on one body
+    (:func:`merged_rows`; a static object younger than ``clutter_age_s`` may be absorbed if
+    ``absorb_young_static``).
+    """
+    n = x.shape[0]
+    position_std = np.zeros(n)
+    for i in range(n):
+        position_std[i] = math.sqrt(p[i, 0, 0] + p[i, 3, 3])
+    gone = expired_rows(
+        confirmed, misses, born_s, last_hit_s, time_s, stopped, occluded, position_std, True,
+        stopped_detectable, tentative_misses, max_tentative_s, max_coast_s,
+        max_coast_stopped_s, max_coast_hidden_s, max_position_std_m, max_stopped_misses,
+    )  # fmt: skip
+    dead = np.zeros(n, dtype=np.bool_)
+    for i in range(n):
+        dead[i] = x[i, 0] < 0 or x[i, 0] > length_m[corridor[i]]
+    for i in gone:
+        dead[i] = True
+    alive = np.flatnonzero(~dead)
+    young = np.zeros(alive.size, dtype=np.bool_)
+    for k in range(alive.size):
+        young[k] = absorb_young_static and track_time_s[alive[k]] - born_s[alive[k]] < clutter_age_s
+    static = stopped & ~moved
+    merged = merged_rows(
+        corridor[alive], x[alive], p[alive], spread[alive], static[alive], stopped[alive],
+        moved[alive], ids[alive], confirmed[alive], lateral_m, speed_mps, parts_speed, young,
+    )  # fmt: skip
+    for k in range(alive.size):
+        dead[alive[k]] |= merged[k]
+    return dead
 
 
 @numba.njit(cache=True)

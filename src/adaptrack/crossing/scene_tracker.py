@@ -89,11 +89,11 @@ from ._scene_kernels import (
     associate_scan,
     confirmed_rows,
     detections_in_view,
-    merged_rows,
     mode_changes,
     open_tracks,
     planar_rows,
     predict_tracks,
+    retired_rows,
     split_rows,
 )
 from .corridor import Corridor, site_corridors
@@ -491,8 +491,7 @@ class SceneTracker:
             self.log.joined_new += left.shape[0] - n_new
         self._modes(time_s)
         self._split(time_s)
-        self._delete(time_s)
-        self._merge()
+        self._retire(time_s)
 
     def _clutter(self) -> np.ndarray:
         """Return the static objects older than ``clutter_age_s`` (bool per track).
@@ -528,25 +527,6 @@ class SceneTracker:
         self.book.add_copies(rows, time_s)
         tr.append(rear)
 
-    def _merge(self) -> None:
-        """Drop the younger of two tracks on one body.
-
-        Same corridor, within the bodies' spreads along it (or, moving faster than
-        ``merge_parts_speed_mps``, with overlapping bodies: two parts of one long vehicle),
-        within ``merge_lateral_m`` across, velocities alike (within ``merge_speed_mps`` plus
-        three sigma), both static objects or neither.
-        """
-        tr = self.tracks
-        cfg = self.config
-        young = tr.time_s - self.book.born_s < cfg.clutter_age_s
-        drop = merged_rows(
-            tr.corridor, tr.x, tr.p, tr.spread, tr.static, tr.stopped, tr.moved, self.book.ids,
-            self.book.confirmed, cfg.merge_lateral_m, cfg.merge_speed_mps,
-            cfg.merge_parts_speed_mps, young & cfg.absorb_young_static,
-        )  # fmt: skip
-        if drop.any():
-            self._drop(np.flatnonzero(drop))
-
     def _modes(self, time_s: float) -> None:
         """Update moving and stopped modes (:func:`._scene_kernels.mode_changes`); raise events."""
         cfg = self.config
@@ -559,7 +539,9 @@ class SceneTracker:
             cfg.stop_exit_sigmas, cfg.stop_confirm_s,
             cfg.stop_seen_s if cfg.stationary_detections else np.inf,
         )  # fmt: skip
-        self._raise("stopped_between_barriers", self._new_objects(np.flatnonzero(hazard)), time_s)
+        if hazard.any():
+            rows = self._new_objects(np.flatnonzero(hazard))
+            self._raise("stopped_between_barriers", rows, time_s)
         if self._warning(time_s):
             self._stop_line_events(time_s, on_road)
 
@@ -647,14 +629,27 @@ class SceneTracker:
                 }
             )
 
-    def _delete(self, time_s: float) -> None:
+    def _retire(self, time_s: float) -> None:
+        """Delete the tracks that expired or left their corridor, then merge the rest.
+
+        Of two tracks on one body the younger goes: same corridor, within the bodies'
+        spreads along it (or, moving faster than ``merge_parts_speed_mps``, with overlapping
+        bodies: two parts of one long vehicle), within ``merge_lateral_m`` across, velocities
+        alike (within ``merge_speed_mps`` plus three sigma), both static objects or neither
+        (:func:`._scene_kernels.retired_rows`).
+        """
         tr = self.tracks
-        position_std = np.sqrt(tr.p[:, 0, 0] + tr.p[:, 3, 3])  # along and across the corridor
-        gone = self.book.expired(
-            time_s, tr.stopped, tr.occluded, position_std, self.config.stationary_detections
-        )
-        dead = (tr.x[:, 0] < 0) | (tr.x[:, 0] > self._length_m[tr.corridor])  # left its corridor
-        dead[gone] = True
+        book = self.book
+        cfg = self.config
+        r = cfg.rules
+        dead = retired_rows(
+            time_s, tr.time_s, tr.x, tr.p, tr.corridor, self._length_m, tr.spread, tr.stopped,
+            tr.moved, tr.occluded, book.ids, book.confirmed, book.misses, book.born_s,
+            book.last_hit_s, cfg.stationary_detections, r.tentative_misses, r.max_tentative_s,
+            r.max_coast_s, r.max_coast_stopped_s, r.max_coast_hidden_s, r.max_position_std_m,
+            r.max_stopped_misses, cfg.merge_lateral_m, cfg.merge_speed_mps,
+            cfg.merge_parts_speed_mps, cfg.clutter_age_s, cfg.absorb_young_static,
+        )  # fmt: skip
         if dead.any():
             self._drop(np.flatnonzero(dead))
 

@@ -128,7 +128,7 @@ class TrackBook:
         """
         r = self.rules
         std = np.zeros(self.ids.size) if position_std_m is None else np.asarray(position_std_m)
-        return _expired(
+        return expired_rows(
             self.confirmed, self.misses, self.born_s, self.last_hit_s, float(time_s),
             np.asarray(stopped, bool), np.asarray(hidden, bool), std.astype(float),
             position_std_m is not None, stopped_detectable, r.tentative_misses,
@@ -174,12 +174,12 @@ def record_hits(  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True)
-def _expired(  # type: ignore[no-untyped-def]
+def expired_rows(  # type: ignore[no-untyped-def]
     confirmed, misses, born_s, last_hit_s, time_s, stopped, hidden, position_std, check_std,
     stopped_detectable, tentative_misses, max_tentative_s, max_coast_s, max_coast_stopped_s,
     max_coast_hidden_s, max_position_std_m, max_stopped_misses,
 ):  # fmt: skip
-    """:meth:`TrackBook.expired`: the rows to delete."""
+    """:meth:`TrackBook.expired` on a book's arrays (for compiled callers): rows to delete."""
     dead = np.zeros(confirmed.size, np.bool_)
     for i in range(confirmed.size):
         if not confirmed[i]:
@@ -197,4 +197,4 @@ def _expired(  # type: ignore[no-untyped-def]
     return np.flatnonzero(dead)
 
 
-__all__ = ["LifecycleRules", "TrackBook", "TrackStatus", "record_hits"]
+__all__ = ["LifecycleRules", "TrackBook", "TrackStatus", "expired_rows", "record_hits"]
