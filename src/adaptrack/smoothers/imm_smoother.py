@@ -33,6 +33,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 
@@ -86,7 +87,8 @@ def imm_smooth(
         predicts).
     transition_probs, switching_rates : array_like, shape (M, M)
         The filter's switching: a Markov matrix per step or a generator [1/s] (exactly one).
-    method, noise : discretisation options of the filter run.
+    method, noise : the filter run's discretisation options of its linear models (a
+        nonlinear model propagates itself).
 
     Returns
     -------
@@ -181,7 +183,7 @@ def _predictor(
     model, propagated and linearised at the mean it is given.
     """
     if disc is None:
-        nonlinear: NonlinearMotionModel = model  # type: ignore[assignment]
+        nonlinear = cast(NonlinearMotionModel, model)
         dt_k = dt[..., k]
         qd_nl = nonlinear.process_cov(dt_k)
 
