@@ -177,7 +177,7 @@ def _corridor_tables(site_name):
     return site, tracker.corridors, tracker._roads, tracker._bounds
 
 
-@pytest.mark.parametrize("site_name", ["lx_default", "lx_three_arm"])
+@pytest.mark.parametrize("site_name", ["lx_default", "lx_three_arm", "lx_curve_near"])
 def test_nearest_corridor_sample_equals_the_roads_own_projection(site_name):
     _, corridors, roads, bounds = _corridor_tables(site_name)
     rng = np.random.default_rng(4)

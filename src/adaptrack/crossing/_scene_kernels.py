@@ -34,6 +34,7 @@ N_STATE = 4
 BIAS_MIN_SPEED_MPS = 6.0  # azimuth alignment on vehicles, not on cyclists at the lane's edge
 BODY_HALF_SPREADS = 2.0  # a body reaches this many spreads either side of its centre
 VISIBLE_SAMPLES = 17  # points over a body tested against a field of view
+NEAREST_BLOCK = 32  # centreline samples searched as a block once it may hold the nearest
 
 
 @numba.njit(cache=True, inline="always")
@@ -768,16 +769,25 @@ def planar_rows(  # type: ignore[no-untyped-def]
 def nearest_sample(roads, bounds, px, py):  # type: ignore[no-untyped-def]
     """Corridor whose centreline passes nearest to a point, ``u`` and signed offset ``d``.
 
-    ``u`` is the nearest centreline sample's; ``d`` is to the right of increasing ``u``; the
-    corridor is the one of least ``|d|`` (the first on a tie).
+    ``u`` is the nearest centreline sample's (the first on a tie); ``d`` is to the right of
+    increasing ``u``; the corridor is the one of least ``|d|`` (the first on a tie). Blocks of
+    samples that cannot hold a nearer one than found so far are skipped.
     """
     best_c, best_u, best_d = 0, 0.0, np.inf
     for c in range(bounds.shape[0]):
         k_best, r_best = bounds[c, 0], np.inf
-        for k in range(bounds[c, 0], bounds[c, 1]):
-            r = (px - roads[1, k]) ** 2 + (py - roads[2, k]) ** 2
-            if r < r_best:
-                k_best, r_best = k, r
+        for start in range(bounds[c, 0], bounds[c, 1], NEAREST_BLOCK):
+            stop = min(start + NEAREST_BLOCK, bounds[c, 1])
+            # no sample of the block lies nearer than its middle one less the arc to its ends
+            mid = (start + stop - 1) // 2
+            reach = max(roads[0, mid] - roads[0, start], roads[0, stop - 1] - roads[0, mid])
+            lower = math.sqrt((px - roads[1, mid]) ** 2 + (py - roads[2, mid]) ** 2) - reach
+            if lower > 0.0 and lower * lower > r_best * (1.0 + 1e-9) + 1e-12:
+                continue
+            for k in range(start, stop):
+                r = (px - roads[1, k]) ** 2 + (py - roads[2, k]) ** 2
+                if r < r_best:
+                    k_best, r_best = k, r
         th = roads[3, k_best]
         d = (px - roads[1, k_best]) * -math.cos(th) + (py - roads[2, k_best]) * math.sin(th)
         if abs(d) < abs(best_d):
