@@ -29,7 +29,9 @@ open tentative tracks from the detections left over, clustered within ``cluster_
 split a stopped track whose reflections come from two bodies of a queue
 (:meth:`SceneTracker._split`); merge two tracks on one body (two moving parts of one long
 vehicle among them; a young static object whose body overlaps a stopped road user's,
-``absorb_young_static``). The per-track arithmetic runs compiled (:mod:`._scene_kernels`).
+``absorb_young_static``). The per-track arithmetic runs compiled (:mod:`._scene_kernels`):
+a scan's gating and its update are one call each (``associate_scan``, ``apply_scan``),
+around the global assignment when a detection lies in two tracks' gates.
 
 Stopped mode: a confirmed track slower than ``stop_speed_mps`` for ``stop_confirm_s`` (a
 speed estimate within ``stop_exit_sigmas`` sigmas above it does not restart the count: the
