@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from adaptrack.filters._kernels import series_bank_row
+from adaptrack.filters._kernels import SERIES_CHUNK, series_bank_row, series_transitions
 from adaptrack.models import (
     ConstantAcceleration,
     ConstantVelocity,
@@ -63,6 +63,25 @@ def test_series_equals_exact_discretisation(model, max_dt):
     assert not qd.any()
 
 
+WITH_INPUT = Singer(time_constant_s=2.0, accel_std_mps2=1.0, mean_accel_mps2=[0.5, -1.5], n_axes=2)
+
+
+@pytest.mark.parametrize("model", [*MODELS, WITH_INPUT], ids=lambda m: type(m).__name__)
+def test_batched_steps_equal_single_steps_bit_for_bit(model):
+    """``series_transitions`` (steps side by side, for jittered batches) gives each step's
+    single-step values exactly, over more than one chunk, with doublings and an offset."""
+    rng = np.random.default_rng(5)
+    dt = np.concatenate([rng.uniform(0.0, 0.07, SERIES_CHUNK + 7), STEPS])
+    table = model_series_table(model, 0.06)
+    phi, qd, u = series_transitions(dt, table.phi_coef, table.qd_coef, table.offset_coef,
+                                    table.h_max)  # fmt: skip
+    for k in [*range(0, dt.size, 97), *range(dt.size - len(STEPS), dt.size)]:
+        one = _discretize(dt[k], table)
+        np.testing.assert_array_equal(phi[k], one[0])
+        np.testing.assert_array_equal(qd[k], one[1])
+        np.testing.assert_array_equal(u[k], one[2])
+
+
 @pytest.mark.parametrize("model", MODELS, ids=lambda m: type(m).__name__)
 def test_a_shortened_table_for_short_steps_is_still_exact(model):
     """A table for steps up to 0.06 s keeps only the terms above 1e-17 there: fewer of them
@@ -103,7 +122,7 @@ def test_appended_random_walk_and_bad_max_dt():
 @pytest.mark.parametrize("max_dt", [0.06, math.inf])
 def test_known_input_offset_equals_control_offset(max_dt):
     """The known-input offset ``u(dt)`` (mean acceleration of a Singer model), with doublings."""
-    model = Singer(time_constant_s=2.0, accel_std_mps2=1.0, mean_accel_mps2=[0.5, -1.5], n_axes=2)
+    model = WITH_INPUT
     table = model_series_table(model, max_dt)
     assert table.offset_coef.shape[1] == 6
     assert model_series_table(Singer(time_constant_s=2.0)).offset_coef.shape == (0, 3)

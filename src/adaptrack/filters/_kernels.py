@@ -359,6 +359,44 @@ def affine_backward(d, cg, e, out):  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True, inline="always")
+def _series_substep(dt, h_max):  # type: ignore[no-untyped-def]
+    """``(h, s)``: the step ``h = dt / 2^s <= h_max`` a series table evaluates directly."""
+    h, s = dt, 0
+    while h > h_max:
+        h *= 0.5
+        s += 1
+    return h, s
+
+
+@numba.njit(cache=True, inline="always")
+def _series_doublings(s, phi, qd, u, with_offset, tmp):  # type: ignore[no-untyped-def]
+    """Double the step ``s`` times in place (``tmp`` (n, n) scratch).
+
+    ``Qd(2h) = Phi Qd Phi^T + Qd``, ``u(2h) = Phi u + u``, ``Phi(2h) = Phi Phi``.
+    """
+    n = phi.shape[0]
+    for _ in range(s):
+        matmul_into(phi, qd, tmp)
+        for a in range(n):
+            for b in range(a, n):
+                acc = qd[a, b]
+                for c in range(n):
+                    acc += tmp[a, c] * phi[b, c]
+                qd[a, b] = acc
+                qd[b, a] = acc
+        if with_offset:
+            for a in range(n):
+                acc = u[a]
+                for c in range(n):
+                    acc += phi[a, c] * u[c]
+                tmp[a, 0] = acc
+            for a in range(n):
+                u[a] = tmp[a, 0]
+        matmul_into(phi, phi, tmp)
+        phi[:, :] = tmp
+
+
+@numba.njit(cache=True, inline="always")
 def series_transition_into(dt, phi_coef, qd_coef, off_coef, h_max, phi, qd, u, tmp):  # type: ignore[no-untyped-def]
     """``Phi(dt)``, ``Qd(dt)``, ``u(dt)`` of a :class:`~adaptrack.models.series_table.SeriesTable`.
 
@@ -366,10 +404,7 @@ def series_transition_into(dt, phi_coef, qd_coef, off_coef, h_max, phi, qd, u, t
     coefficients; ``tmp`` (n, n) scratch.
     """
     n = phi.shape[0]
-    h, s = dt, 0
-    while h > h_max:
-        h *= 0.5
-        s += 1
+    h, s = _series_substep(dt, h_max)
     top = phi_coef.shape[0] - 1
     for a in range(n):
         for b in range(n):
@@ -391,40 +426,64 @@ def series_transition_into(dt, phi_coef, qd_coef, off_coef, h_max, phi, qd, u, t
         for i in range(top, -1, -1):
             acc = acc * h + off_coef[i, a]
         u[a] = acc * h
-    for _ in range(s):  # Qd(2h) = Phi Qd Phi^T + Qd, u(2h) = Phi u + u, Phi(2h) = Phi Phi
-        matmul_into(phi, qd, tmp)
-        for a in range(n):
-            for b in range(a, n):
-                acc = qd[a, b]
-                for c in range(n):
-                    acc += tmp[a, c] * phi[b, c]
-                qd[a, b] = acc
-                qd[b, a] = acc
-        if top >= 0:
-            for a in range(n):
-                acc = u[a]
-                for c in range(n):
-                    acc += phi[a, c] * u[c]
-                tmp[a, 0] = acc
-            for a in range(n):
-                u[a] = tmp[a, 0]
-        matmul_into(phi, phi, tmp)
-        phi[:, :] = tmp
+    _series_doublings(s, phi, qd, u, top >= 0, tmp)
+
+
+SERIES_CHUNK = 4096  # steps evaluated side by side by ``series_transitions``
 
 
 @numba.njit(cache=True, parallel=True)
 def series_transitions(dt, phi_coef, qd_coef, off_coef, h_max):  # type: ignore[no-untyped-def]
-    """``Phi``, ``Qd``, ``u`` of every step length in ``dt`` (K,) from a series table."""
+    """``Phi``, ``Qd``, ``u`` of every step length in ``dt`` (K,) from a series table.
+
+    The values of :func:`series_transition_into`, step by step; each coefficient's Horner
+    update runs over a chunk of steps at once (independent chains, vectorised).
+    """
     n = phi_coef.shape[1]
-    phi, qd = np.empty((dt.size, n, n)), np.empty((dt.size, n, n))
-    u = np.empty((dt.size, n))
-    chunk = 4096
-    for c in numba.prange((dt.size + chunk - 1) // chunk):
+    k_all = dt.size
+    phi, qd = np.empty((k_all, n, n)), np.empty((k_all, n, n))
+    u = np.empty((k_all, n))
+    top_p, top_q, top_u = phi_coef.shape[0] - 1, qd_coef.shape[0] - 1, off_coef.shape[0] - 1
+    for c in prange((k_all + SERIES_CHUNK - 1) // SERIES_CHUNK):
+        lo = c * SERIES_CHUNK
+        m = min(SERIES_CHUNK, k_all - lo)
+        h = np.empty(m)
+        s = np.empty(m, np.int64)
+        for j in range(m):
+            h[j], s[j] = _series_substep(dt[lo + j], h_max)
+        acc = np.empty(m)
+        for a in range(n):
+            for b in range(n):
+                for j in range(m):
+                    acc[j] = phi_coef[top_p, a, b]
+                for i in range(top_p - 1, -1, -1):
+                    coef = phi_coef[i, a, b]
+                    for j in range(m):
+                        acc[j] = acc[j] * h[j] + coef
+                for j in range(m):
+                    phi[lo + j, a, b] = acc[j]
+            for b in range(a, n):
+                for j in range(m):
+                    acc[j] = qd_coef[top_q, a, b]
+                for i in range(top_q - 1, -1, -1):
+                    coef = qd_coef[i, a, b]
+                    for j in range(m):
+                        acc[j] = acc[j] * h[j] + coef
+                for j in range(m):
+                    qd[lo + j, a, b] = acc[j] * h[j]
+                    qd[lo + j, b, a] = acc[j] * h[j]
+            for j in range(m):
+                acc[j] = 0.0
+            for i in range(top_u, -1, -1):
+                coef = off_coef[i, a]
+                for j in range(m):
+                    acc[j] = acc[j] * h[j] + coef
+            for j in range(m):
+                u[lo + j, a] = acc[j] * h[j]
         tmp = np.empty((n, n))
-        for k in range(c * chunk, min((c + 1) * chunk, dt.size)):
-            series_transition_into(
-                dt[k], phi_coef, qd_coef, off_coef, h_max, phi[k], qd[k], u[k], tmp
-            )
+        for j in range(m):
+            if s[j]:
+                _series_doublings(s[j], phi[lo + j], qd[lo + j], u[lo + j], top_u >= 0, tmp)
     return phi, qd, u
 
 
