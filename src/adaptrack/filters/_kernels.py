@@ -429,6 +429,21 @@ def series_transition_into(dt, phi_coef, qd_coef, off_coef, h_max, phi, qd, u, t
     _series_doublings(s, phi, qd, u, top >= 0, tmp)
 
 
+@numba.njit(cache=True, inline="always")
+def _horner_steps(coef, h, acc):  # type: ignore[no-untyped-def]
+    """``acc[j] = sum_i coef[i] h[j]^i`` for every step ``j``: Horner, the steps side by side.
+
+    The operations of the single-step evaluation, in its order (0 without coefficients).
+    """
+    top = coef.shape[0] - 1
+    for j in range(acc.size):
+        acc[j] = coef[top] if top >= 0 else 0.0
+    for i in range(top - 1, -1, -1):
+        c = coef[i]
+        for j in range(acc.size):
+            acc[j] = acc[j] * h[j] + c
+
+
 SERIES_CHUNK = 4096  # steps evaluated side by side by ``series_transitions``
 
 
@@ -443,7 +458,7 @@ def series_transitions(dt, phi_coef, qd_coef, off_coef, h_max):  # type: ignore[
     k_all = dt.size
     phi, qd = np.empty((k_all, n, n)), np.empty((k_all, n, n))
     u = np.empty((k_all, n))
-    top_p, top_q, top_u = phi_coef.shape[0] - 1, qd_coef.shape[0] - 1, off_coef.shape[0] - 1
+    with_offset = off_coef.shape[0] > 0
     for c in prange((k_all + SERIES_CHUNK - 1) // SERIES_CHUNK):
         lo = c * SERIES_CHUNK
         m = min(SERIES_CHUNK, k_all - lo)
@@ -454,36 +469,21 @@ def series_transitions(dt, phi_coef, qd_coef, off_coef, h_max):  # type: ignore[
         acc = np.empty(m)
         for a in range(n):
             for b in range(n):
-                for j in range(m):
-                    acc[j] = phi_coef[top_p, a, b]
-                for i in range(top_p - 1, -1, -1):
-                    coef = phi_coef[i, a, b]
-                    for j in range(m):
-                        acc[j] = acc[j] * h[j] + coef
+                _horner_steps(phi_coef[:, a, b], h, acc)
                 for j in range(m):
                     phi[lo + j, a, b] = acc[j]
             for b in range(a, n):
-                for j in range(m):
-                    acc[j] = qd_coef[top_q, a, b]
-                for i in range(top_q - 1, -1, -1):
-                    coef = qd_coef[i, a, b]
-                    for j in range(m):
-                        acc[j] = acc[j] * h[j] + coef
+                _horner_steps(qd_coef[:, a, b], h, acc)
                 for j in range(m):
                     qd[lo + j, a, b] = acc[j] * h[j]
                     qd[lo + j, b, a] = acc[j] * h[j]
-            for j in range(m):
-                acc[j] = 0.0
-            for i in range(top_u, -1, -1):
-                coef = off_coef[i, a]
-                for j in range(m):
-                    acc[j] = acc[j] * h[j] + coef
+            _horner_steps(off_coef[:, a], h, acc)
             for j in range(m):
                 u[lo + j, a] = acc[j] * h[j]
         tmp = np.empty((n, n))
         for j in range(m):
             if s[j]:
-                _series_doublings(s[j], phi[lo + j], qd[lo + j], u[lo + j], top_u >= 0, tmp)
+                _series_doublings(s[j], phi[lo + j], qd[lo + j], u[lo + j], with_offset, tmp)
     return phi, qd, u
 
 
