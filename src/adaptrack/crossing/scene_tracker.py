@@ -437,7 +437,7 @@ class SceneTracker:
             raise ValueError(f"radar {radar_name!r} at {time_s} s: a detection is not finite")
         ids = _sensor_ids(ids, z.shape[0], radar_name, time_s)
         self._last_time[radar_name] = time_s
-        time_s = float(time_s) - radar.latency_s  # when the scan was made
+        time_s = float(radar.measured_at(time_s))
         self.last_scan_s = time_s
         cfg = self.config
         bias = self.azimuth_bias_rad[radar_name]

@@ -197,4 +197,4 @@ def expired_rows(  # type: ignore[no-untyped-def]
     return np.flatnonzero(dead)
 
 
-__all__ = ["LifecycleRules", "TrackBook", "TrackStatus", "expired_rows", "record_hits"]
+__all__ = ["LifecycleRules", "TrackBook", "TrackStatus"]  # the kernels: compiled callers only
