@@ -234,7 +234,7 @@ def test_the_younger_of_two_tracks_on_one_body_is_dropped_unless_it_is_the_confi
 
     def drop(confirmed):
         return merged_rows(
-            corridor, x, p, spread, static, no, no, ids, confirmed, 1.2, 1.0, 4.0, no
+            corridor, x, p, spread, static, no, no, ids, confirmed, 1.2, 1.0, 4.0, no, no, 0.5
         ).tolist()
 
     assert drop(np.array([True, True, False, True])) == [False, True, True, False]
@@ -242,6 +242,35 @@ def test_the_younger_of_two_tracks_on_one_body_is_dropped_unless_it_is_the_confi
     assert drop(np.array([False, False, True, True])) == [True, True, False, False]
     x[1, 1] = 12.0  # a different speed: another road user alongside
     assert drop(np.array([True, True, True, True])) == [False, False, True, False]
+
+
+def test_a_road_user_followed_for_long_is_not_merged_into_one_beside_it():
+    """A motorcycle filtering past a truck that stops: the two estimates 1.1 m apart across
+    (within ``merge_lateral_m`` 1.2) and 2.5 m along, both slow. The truck's track is the
+    younger; once settled (followed longer than ``merge_settled_s``) it is not dropped for a
+    track more than 0.5 m beside it (development seed 801 lost a stopped truck this way, and
+    the bus queued behind took its reflections). A duplicate in its lane (0.3 m across) is
+    still merged, and so is the younger when it is not settled."""
+    x = np.zeros((2, 4))
+    x[:, 0] = [20.0, 22.5]
+    x[:, 1] = [0.4, 0.2]
+    x[1, 3] = 1.1
+    p = np.tile(np.eye(4) * 0.01, (2, 1, 1))
+    spread = np.array([0.5, 2.0])
+    ids = np.array([4, 8])  # the motorcycle's track is the older
+    corridor = np.zeros(2, np.int64)
+    yes, no = np.ones(2, bool), np.zeros(2, bool)
+
+    def drop(settled, across=1.1):
+        x[1, 3] = across
+        return merged_rows(
+            corridor, x, p, spread, no, no, yes, ids, yes, 1.2, 1.0, 4.0, no,
+            np.array(settled), 0.5,
+        ).tolist()  # fmt: skip
+
+    assert drop([True, True]) == [False, False]  # side by side: both stay
+    assert drop([True, False]) == [False, True]  # the young one beside is a duplicate
+    assert drop([True, True], across=0.3) == [False, True]  # in one lane: one body
 
 
 def _creep(speeds, exit_sigmas, speed_std=0.1, dt=0.05):
@@ -318,8 +347,9 @@ def test_two_moving_parts_of_one_long_body_are_one_track_two_cars_are_not():
         x[1, 0] = gap_m
         x[:, 1] = speed
         return merged_rows(
-            corridor, x, p, np.full(2, spread), no, stopped, moved, ids, yes, 1.2, 1.0, 4.0, no
-        ).tolist()
+            corridor, x, p, np.full(2, spread), no, stopped, moved, ids, yes, 1.2, 1.0, 4.0, no,
+            no, 0.5,
+        ).tolist()  # fmt: skip
 
     assert drop(4.4, 1.6) == [False, True]  # halves of a 12 m bus, 4.4 m apart: one body
     assert drop(7.0, 1.1) == [False, False]  # two 5 m cars with a 2 m gap at 43 km/h
@@ -351,7 +381,7 @@ def test_a_young_static_object_on_a_stopped_bus_is_its_reflection_an_old_one_is_
         spread[1] = own_spread
         return merged_rows(
             corridor, x, p, spread, static, stopped, moved, ids, np.ones(2, bool), 1.2, 1.0,
-            4.0, np.array([False, young]),
+            4.0, np.array([False, young]), np.zeros(2, bool), 0.5,
         ).tolist()  # fmt: skip
 
     assert drop(True) == [False, True]

@@ -848,7 +848,7 @@ def open_tracks(  # type: ignore[no-untyped-def]
 @numba.njit(cache=True)
 def merged_rows(  # type: ignore[no-untyped-def]
     corridor, x, p, spread, static, stopped, moved, ids, confirmed, lateral_m, speed_mps,
-    parts_speed, young,
+    parts_speed, young, settled, settled_lateral_m,
 ):  # fmt: skip
     """Rows to drop: the younger of two tracks on one body (see ``SceneTracker._retire``).
 
@@ -863,7 +863,9 @@ def merged_rows(  # type: ignore[no-untyped-def]
     stopped with an under-learnt body would otherwise see its far end taken for a post, which
     then holds part of its reflections, learns their spread and leaves the bus track a
     shorter body further off; a point of clutter learns a small spread and stays off a body
-    beside it).
+    beside it). A ``settled`` track (one followed for a while) is not dropped for a track
+    more than ``settled_lateral_m`` beside it: two road users side by side (a motorcycle
+    filtering past a queue) stay apart, while a duplicate of one body sits in its lane.
     """
     n = x.shape[0]
     drop = np.zeros(n, dtype=np.bool_)
@@ -896,6 +898,8 @@ def merged_rows(  # type: ignore[no-untyped-def]
             older, younger = (a, b) if ids[a] < ids[b] else (b, a)
             if confirmed[younger] and not confirmed[older]:
                 older, younger = younger, older
+            if settled[younger] and abs(x[a, 3] - x[b, 3]) > settled_lateral_m:
+                continue
             if not drop[older]:
                 drop[younger] = True
     return drop
@@ -907,6 +911,7 @@ def retired_rows(  # type: ignore[no-untyped-def]
     confirmed, misses, born_s, last_hit_s, stopped_detectable, tentative_misses,
     max_tentative_s, max_coast_s, max_coast_stopped_s, max_coast_hidden_s, max_position_std_m,
     max_stopped_misses, lateral_m, speed_mps, parts_speed, clutter_age_s, absorb_young_static,
+    settled_s, settled_lateral_m,
 ):  # fmt: skip
     """Tracks to delete after a scan at ``time_s`` (bool per track).
 
@@ -914,7 +919,8 @@ def retired_rows(  # type: ignore[no-untyped-def]
     with the position sigma along and across the corridor), those that left their corridor
     (``length_m`` per corridor) and, of the rest, the younger of two on one body
     (:func:`merged_rows`; a static object younger than ``clutter_age_s`` may be absorbed if
-    ``absorb_young_static``).
+    ``absorb_young_static``; a confirmed road user that has moved and been followed longer
+    than ``settled_s`` is settled).
     """
     n = x.shape[0]
     position_std = np.zeros(n)
@@ -932,12 +938,17 @@ def retired_rows(  # type: ignore[no-untyped-def]
         dead[i] = True
     alive = np.flatnonzero(~dead)
     young = np.zeros(alive.size, dtype=np.bool_)
+    settled = np.zeros(alive.size, dtype=np.bool_)
     for k in range(alive.size):
-        young[k] = absorb_young_static and track_time_s[alive[k]] - born_s[alive[k]] < clutter_age_s
+        i = alive[k]
+        age = track_time_s[i] - born_s[i]
+        young[k] = absorb_young_static and age < clutter_age_s
+        settled[k] = confirmed[i] and moved[i] and age > settled_s
     static = stopped & ~moved
     merged = merged_rows(
         corridor[alive], x[alive], p[alive], spread[alive], static[alive], stopped[alive],
         moved[alive], ids[alive], confirmed[alive], lateral_m, speed_mps, parts_speed, young,
+        settled, settled_lateral_m,
     )  # fmt: skip
     for k in range(alive.size):
         dead[alive[k]] |= merged[k]

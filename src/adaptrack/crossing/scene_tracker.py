@@ -151,6 +151,8 @@ class SceneTrackerConfig:
     merge_lateral_m: float = 1.2  # two tracks this close across (and along: the spread) ...
     merge_speed_mps: float = 1.0  # ... and this similar in speed are one body
     merge_parts_speed_mps: float = 4.0  # two faster road users whose bodies overlap: one
+    merge_settled_s: float = 10.0  # a road user followed this long is not merged into ...
+    merge_settled_lateral_m: float = 0.5  # ... a track this far beside it (side by side)
     stop_decel_mps2: float = 4.0  # a driver is expected to stop for the lights at this
     stationary_detections: bool = True  # the radars report stopped objects at zero Doppler
     stop_seen_s: float = 0.3  # ... so a stop counts only while detections show it
@@ -199,7 +201,7 @@ _POSITIVE = (
     "stop_decel_mps2",
 )  # fmt: skip
 _NO_LIMIT = (  # inf: no limit
-    "merge_parts_speed_mps", "clutter_age_s", "stop_seen_s", "bias_min_samples",
+    "merge_parts_speed_mps", "clutter_age_s", "stop_seen_s", "bias_min_samples", "merge_settled_s",
     "stop_confirm_s", "moved_distance_m",
 )  # fmt: skip
 
@@ -638,7 +640,9 @@ class SceneTracker:
         spreads along it (or, moving faster than ``merge_parts_speed_mps``, with overlapping
         bodies: two parts of one long vehicle), within ``merge_lateral_m`` across, velocities
         alike (within ``merge_speed_mps`` plus three sigma), both static objects or neither
-        (:func:`._scene_kernels.retired_rows`).
+        (:func:`._scene_kernels.retired_rows`). A road user followed longer than
+        ``merge_settled_s`` stays when the other is more than ``merge_settled_lateral_m``
+        beside it (two road users side by side, e.g. a motorcycle filtering past a queue).
         """
         tr = self.tracks
         book = self.book
@@ -651,6 +655,7 @@ class SceneTracker:
             r.max_coast_s, r.max_coast_stopped_s, r.max_coast_hidden_s, r.max_position_std_m,
             r.max_stopped_misses, cfg.merge_lateral_m, cfg.merge_speed_mps,
             cfg.merge_parts_speed_mps, cfg.clutter_age_s, cfg.absorb_young_static,
+            cfg.merge_settled_s, cfg.merge_settled_lateral_m,
         )  # fmt: skip
         if dead.any():
             self._drop(np.flatnonzero(dead))
