@@ -284,7 +284,8 @@ def _creep(speeds, exit_sigmas, speed_std=0.1, dt=0.05):
         x[0, 1] = v
         mode_changes(
             t, x, p, np.zeros(1, np.int64), one, np.full(1, t), np.zeros(1), stopped, one.copy(),
-            np.ones(1), slow_since, np.zeros(1, bool), np.array([1e3]), np.array([1.75]), 10.0,
+            np.ones(1), slow_since, np.zeros(1, bool), np.full(1, t), np.array([1e3]),
+            np.array([1.75]), 10.0,
             0.8, 1.0, 3.0, 0.3, exit_sigmas, 0.5, 0.3,
         )  # fmt: skip
         if stopped[0]:
@@ -303,6 +304,34 @@ def test_a_creep_to_a_halt_stops_once_though_its_noisy_speed_recrosses_the_thres
     v[18] = 0.6
     assert _creep(v, 2.0) == pytest.approx(0.95 + 0.5)
     assert _creep(np.full(40, 0.45), 2.0) == np.inf  # never below the threshold: no stop
+
+
+def test_a_stop_between_the_barriers_raises_only_once_a_doppler_measuring_detection_shows_it():
+    """A confirmed road user that moved, stopped 4 m from the crossing: no hazard while its
+    last speed-measuring detection is older than ``seen_s`` (0.3 s; validation seed 910 had
+    a track made still by misses and detections across the line of sight, whose radial speed
+    says nothing on the lane's: a false alarm), the hazard once one shows the standstill,
+    then never again for it."""
+    one = np.ones(1, bool)
+    x, p = np.zeros((1, 4)), np.tile(np.eye(4) * 0.01, (1, 1, 1))
+    x[0, 0] = 996.0  # the crossing at u = 1000 m
+    stopped, event = one.copy(), np.zeros(1, bool)
+    shown = np.full(1, -np.inf)
+
+    def hazard(t):
+        rows, _ = mode_changes(
+            t, x, p, np.zeros(1, np.int64), one, np.full(1, t), np.zeros(1), stopped,
+            one.copy(), np.ones(1), np.full(1, np.nan), event, shown, np.array([1e3]),
+            np.array([1.75]), 10.0, 0.8, 1.0, 3.0, 0.3, 2.0, 0.5, 0.3,
+        )  # fmt: skip
+        return bool(rows[0])
+
+    assert not hazard(10.0) and not event[0]  # every detection across the line of sight
+    shown[0] = 10.5 - 0.4
+    assert not hazard(10.5) and not event[0]  # shown, but 0.4 s ago
+    shown[0] = 11.0
+    assert hazard(11.0) and event[0]
+    assert not hazard(11.05)  # raised once
 
 
 def test_split_finds_two_queued_bodies_from_the_moments_of_their_reflections():

@@ -20,6 +20,7 @@ from ..filters._kernels import cholesky_into, predict_into, update_into
 from ..tracking.assignment import cluster_labels
 from ..tracking.lifecycle import expired_rows, record_hits
 from ._ekf_kernels import (
+    GATE_MIN_COS,
     ROAD,
     _centreline,
     doppler_usable,
@@ -436,7 +437,8 @@ def associate_scan(  # type: ignore[no-untyped-def]
 def apply_scan(  # type: ignore[no-untyped-def]
     time_s, seen, d2, logdet, gate, tracks, dets, z, ids, radar_col, x, p, spread, along_m2,
     along_m4, stopped, moved, direction, slow_since, corridor, miss_run, occluded, anchor_u,
-    sensor_id, history, misses, last_hit_s, confirmed, roads, bounds, radar, noise_tab,
+    doppler_seen_s, sensor_id, history, misses, last_hit_s, confirmed, roads, bounds, radar,
+    noise_tab,
     noise_cnt, fields, pd_tab, pd_cnt, across_std, moving_radial, start_speed_var,
     learning_rate, shape_rate, spread_lo, spread_hi, align, lane_half_width, bias, bias_stats,
     bias_forget, bias_gate, confirm_speed_var, window_mask, confirm_hits,
@@ -444,7 +446,8 @@ def apply_scan(  # type: ignore[no-untyped-def]
     """Update the tracks with a gated scan (:func:`associate_scan`) in place.
 
     Every gated detection goes to its owner (:func:`owners`: the assignment's, then the
-    likeliest track) and updates it (:func:`update_tracks`); the assigned detection's sensor
+    likeliest track) and updates it (:func:`update_tracks`, which sets ``doppler_seen_s``); the
+    assigned detection's sensor
     id becomes its track's (column ``radar_col`` of ``sensor_id``). A track in view without a
     detection is hidden if a nearer track covers it (:func:`occluders`; its miss tells
     nothing), else takes what the miss tells (:func:`miss_updates`, moving ones). Tracks in
@@ -459,8 +462,9 @@ def apply_scan(  # type: ignore[no-untyped-def]
     if n_d:
         owner, order = owners(d2, logdet, gate, tracks, dets)
         update_tracks(
-            order, owner, z, x, p, spread, along_m2, along_m4, stopped, moved, direction,
-            slow_since, corridor, roads, bounds, radar, noise_tab, noise_cnt, fields,
+            time_s, order, owner, z, x, p, spread, along_m2, along_m4, stopped, moved,
+            direction, slow_since, doppler_seen_s, corridor, roads, bounds, radar, noise_tab,
+            noise_cnt, fields,
             across_std, moving_radial, start_speed_var, learning_rate, shape_rate, spread_lo,
             spread_hi, align, lane_half_width, bias, bias_stats, bias_forget, bias_gate,
         )  # fmt: skip
@@ -570,8 +574,9 @@ def unambiguous_assignment(d2, gate):  # type: ignore[no-untyped-def]
 
 @numba.njit(cache=True)
 def update_tracks(  # type: ignore[no-untyped-def]
-    order, owner, z, x, p, spread, along_m2, along_m4, stopped, moved, direction, slow_since,
-    corridor, roads, bounds, radar, noise_tab, noise_cnt, fields, across_std, moving_radial,
+    time_s, order, owner, z, x, p, spread, along_m2, along_m4, stopped, moved, direction,
+    slow_since, doppler_seen_s, corridor, roads, bounds, radar, noise_tab, noise_cnt, fields,
+    across_std, moving_radial,
     start_speed_var, learning_rate, shape_rate, spread_lo, spread_hi, align, lane_half_width,
     bias, bias_stats, bias_forget, bias_gate,
 ):  # fmt: skip
@@ -595,7 +600,11 @@ def update_tracks(  # type: ignore[no-untyped-def]
     road user is not stopped (queued bodies touch: a neighbour's reflections would stretch
     it, and its gate with it); the second and fourth moments of the along-track residual
     (``along_m2``, ``along_m4``, rate ``shape_rate``: see :func:`split_rows`) are learnt
-    while the whole body is in view, stopped or not.
+    while the whole body is in view, stopped or not. A detection whose radial speed measures
+    the speed along the lane (the line of sight to its own ground point at least
+    ``GATE_MIN_COS`` along the lane, its alias known; not the track's point: a body's
+    detection may lie metres away, across the line of sight) sets the track's
+    ``doppler_seen_s`` to ``time_s``: it shows whether the road user stands.
     """
     zp, h, rm, jp, jv = _model_scratch()
     xv = np.zeros(N_STATE)
@@ -632,7 +641,12 @@ def update_tracks(  # type: ignore[no-untyped-def]
             i, x, spread, corridor, roads, bounds, radar, noise_tab, noise_cnt, fields,
             across_std, xv, zp, h, rm, jp, jv,
         )  # fmt: skip
-        innovation_into(z[j], zp, radar, doppler_usable(h, p[i], rm, radar), nu)
+        doppler = doppler_usable(h, p[i], rm, radar)
+        innovation_into(z[j], zp, radar, doppler, nu)
+        # the radial speed of the detection's own point measures the speed along the lane
+        los = ((gx - radar[0]) * tx + (gy - radar[1]) * ty) / z[j, 0]
+        if doppler and abs(los) >= GATE_MIN_COS:
+            doppler_seen_s[i] = time_s
         if (
             stopped[i] and moved[i] and abs(z[j, 2]) > moving_radial
             and direction[i] * z[j, 2] * h[2, 1] > 0.0
@@ -958,8 +972,8 @@ def retired_rows(  # type: ignore[no-untyped-def]
 @numba.njit(cache=True)
 def mode_changes(  # type: ignore[no-untyped-def]
     time_s, x, p, corridor, confirmed, last_hit_s, anchor_u, stopped, moved, direction,
-    slow_since, event_raised, crossing_u, half_lane, barrier_m, moved_speed, moving_speed_std,
-    moved_distance, stop_speed, stop_exit_sigmas, stop_confirm_s, seen_s,
+    slow_since, event_raised, doppler_seen_s, crossing_u, half_lane, barrier_m, moved_speed,
+    moving_speed_std, moved_distance, stop_speed, stop_exit_sigmas, stop_confirm_s, seen_s,
 ):  # fmt: skip
     """Update the moving / stopped modes after a scan in place (``SceneTracker._modes``).
 
@@ -970,8 +984,10 @@ def mode_changes(  # type: ignore[no-untyped-def]
     stays so while its speed is not significantly above (``stop_exit_sigmas`` sigmas) and
     after ``stop_confirm_s`` is ``stopped`` (speed and acceleration zeroed with their
     covariance). Returns the hazard rows (a moved track stopped on the carriageway within
-    ``barrier_m`` of the crossing, raised once: ``event_raised`` set) and which tracks are
-    on the carriageway (bool each).
+    ``barrier_m`` of the crossing, its standstill shown by a Doppler-measuring detection
+    within ``seen_s`` (``doppler_seen_s``), raised once: ``event_raised`` set) and which
+    tracks are on the carriageway (bool each). A stop that only misses and radial speeds
+    blind to the lane (across the line of sight) suggest raises nothing yet.
     """
     n = x.shape[0]
     hazard = np.zeros(n, dtype=np.bool_)
@@ -1001,7 +1017,8 @@ def mode_changes(  # type: ignore[no-untyped-def]
                     p[i, a, b] = p[i, b, a] = 0.0
         on_road[i] = abs(x[i, 3]) <= 2.0 * half_lane[corridor[i]]
         to_cross = abs(crossing_u[corridor[i]] - x[i, 0])
-        if stopped[i] and moved[i] and on_road[i] and to_cross <= barrier_m:
+        shown = time_s - doppler_seen_s[i] <= seen_s
+        if stopped[i] and moved[i] and on_road[i] and to_cross <= barrier_m and shown:
             hazard[i] = not event_raised[i]
             event_raised[i] = True
     return hazard, on_road

@@ -261,6 +261,7 @@ class _Tracks:
     direction: FloatArray  # +1 / -1: direction of travel along u once known, else 0
     miss_run: FloatArray  # probability of the current run of misses for a moving target
     occluded: np.ndarray  # hidden behind a nearer track at its last scan without a detection
+    doppler_seen_s: FloatArray  # last hit whose radial speed measured the speed [s] (-inf)
     sensor_id: np.ndarray  # (T, radars) the object id each radar last reported for it (-1 none)
 
     @classmethod
@@ -286,7 +287,7 @@ class _Tracks:
             anchor_u=x[:, 0].copy(),
             spread=np.full(n, spread_m), along_m2=np.full(n, m2), along_m4=np.full(n, m4),
             direction=np.zeros(n), miss_run=np.ones(n),
-            occluded=no.copy(), sensor_id=sensor_id,
+            occluded=no.copy(), doppler_seen_s=np.full(n, -np.inf), sensor_id=sensor_id,
         )  # fmt: skip
 
     @classmethod
@@ -476,9 +477,10 @@ class SceneTracker:
             used = apply_scan(
                 time_s, seen, d2, logdet, self._gate, ti, di, z, ids, r_col, tr.x, tr.p,
                 tr.spread, tr.along_m2, tr.along_m4, tr.stopped, tr.moved, tr.direction,
-                tr.slow_since, tr.corridor, tr.miss_run, tr.occluded, tr.anchor_u, tr.sensor_id,
-                book.history, book.misses, book.last_hit_s, book.confirmed, self._roads,
-                self._bounds, radar_row, noise_tab, noise_cnt, fields, pd_tab, pd_cnt,
+                tr.slow_since, tr.corridor, tr.miss_run, tr.occluded, tr.anchor_u,
+                tr.doppler_seen_s, tr.sensor_id, book.history, book.misses, book.last_hit_s,
+                book.confirmed, self._roads, self._bounds, radar_row, noise_tab, noise_cnt,
+                fields, pd_tab, pd_cnt,
                 cfg.body_across_std_m, cfg.moving_radial_mps, cfg.start_speed_max_mps**2,
                 cfg.spread_learning_rate, cfg.shape_learning_rate, *cfg.spread_limits_m,
                 cfg.estimate_azimuth_bias, self._half_lane, bias, stats,
@@ -538,8 +540,8 @@ class SceneTracker:
         hazard, on_road = mode_changes(
             time_s, tr.x, tr.p, tr.corridor, self.book.confirmed, self.book.last_hit_s,
             tr.anchor_u, tr.stopped, tr.moved, tr.direction, tr.slow_since, tr.event_raised,
-            self._crossing_u, self._half_lane, self.site.barrier_m, cfg.moved_speed_mps,
-            cfg.moving_speed_std_mps, cfg.moved_distance_m, cfg.stop_speed_mps,
+            tr.doppler_seen_s, self._crossing_u, self._half_lane, self.site.barrier_m,
+            cfg.moved_speed_mps, cfg.moving_speed_std_mps, cfg.moved_distance_m, cfg.stop_speed_mps,
             cfg.stop_exit_sigmas, cfg.stop_confirm_s,
             cfg.stop_seen_s if cfg.stationary_detections else np.inf,
         )  # fmt: skip
