@@ -521,3 +521,37 @@ def test_a_track_stopping_on_an_alarmed_object_raises_no_second_alarm(same_objec
         tracker.step(radar.name, k * radar.period_s, z)
     alarms = [e["track_id"] for e in tracker.events if e["event"] == "stopped_between_barriers"]
     assert sorted(alarms) == ([3] if same_object_m else [2, 3])
+
+
+def test_a_standstill_seen_only_across_the_line_of_sight_raises_no_alarm_until_measured():
+    """A car stalled 8 m past the crossing (between the barriers) on the south arm, where
+    radar_X sees it across its line of sight: there its radial speed is near zero whatever
+    the car does, so it shows no standstill (validation seed 910 raised a false alarm on
+    such detections). No alarm in 1 s of radar_X's scans; radar_B, looking along the arm,
+    shows the standstill and the alarm follows within its first scans."""
+    tracker = SceneTracker(SITE)
+    cor, _, half_lane = _queue_lane(tracker)
+    u = cor.crossing_u + 8.0
+    radars = {r.name: r for r in SITE.radars}
+    body = cor.path.lane_geometry(np.linspace(u - 2.0, u + 2.0, 9), -half_lane)
+    for name, across in (("radar_X", True), ("radar_B", False)):
+        r = radars[name]
+        sight = body[0] - np.asarray(r.position_m)
+        slant = np.sqrt((sight**2).sum(-1) + r.height_m**2)
+        cos = np.abs((sight * body[1]).sum(-1)) / slant  # radial speed per unit lane speed
+        assert (cos < 0.3).all() if across else (cos > 0.5).all()
+        assert r.in_view(*r.polar(body[0])).all()
+    _one_stopped_track(tracker, u, -half_lane, 1.1)
+    rng = np.random.default_rng(5)
+
+    def scans(name, start_s, seconds):
+        r = radars[name]
+        for k in range(int(seconds / r.period_s)):
+            z = _body_scan(rng, r, cor, u, -half_lane, 4.0, 1.8, 2)
+            tracker.step(name, start_s + k * r.period_s, z)
+
+    scans("radar_X", 0.0, 1.0)
+    assert tracker.tracks.stopped[0] and not tracker.events
+    scans("radar_B", 1.01, 0.2)
+    alarms = [e for e in tracker.events if e["event"] == "stopped_between_barriers"]
+    assert [e["track_id"] for e in alarms] == [1] and alarms[0]["time_s"] <= 1.01 + 0.1
