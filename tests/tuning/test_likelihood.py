@@ -4,6 +4,8 @@ The data come from a constant-velocity process simulated here with its own close
 transition and noise (not adaptrack's discretisation), observed in white noise.
 """
 
+import math
+
 import numpy as np
 import pytest
 
@@ -96,3 +98,34 @@ def test_bounds_and_scales_must_name_parameters_of_their_kind():
 def test_a_likelihood_not_finite_at_the_start_is_an_error():
     with pytest.raises(ValueError, match="not finite at the initial values"):
         fit_by_likelihood(lambda p: float("nan"), {"q": 1.0})
+
+
+@pytest.mark.parametrize("beyond", ["covariance error", "nan", "-inf"])
+def test_values_the_filter_cannot_run_with_are_stepped_around_not_fatal(beyond):
+    """A log-likelihood with its maximum at q = 2 (log-scale curvature 100: standard error
+    0.2) that cannot be evaluated beyond q = 3 (the filter raises ``CovarianceError``, or
+    gives NaN or -inf). L-BFGS-B alone stopped at q = 0.14 and called it converged after a
+    trial step met q > 3; the fit must find the maximum, its standard error from the
+    curvature, and must have met the region (the test can fail)."""
+    met = []
+
+    def loglik(p):
+        if p["q"] > 3.0:
+            met.append(p["q"])
+            if beyond == "covariance error":
+                raise at.CovarianceError("innovation covariance is not positive definite")
+            return float(beyond)
+        return -math.sqrt(1.0 + ((math.log(p["q"]) - math.log(2.0)) / 0.1) ** 2)
+
+    fit = fit_by_likelihood(loglik, {"q": 0.05})
+    assert met and fit.converged
+    assert fit.value("q") == pytest.approx(2.0, rel=1e-4)
+    assert fit.std_error("q") == pytest.approx(0.2, rel=1e-2)
+
+
+def test_a_filter_error_at_the_starting_values_is_the_callers():
+    def loglik(p):
+        raise at.CovarianceError("innovation covariance is not positive definite at step 1")
+
+    with pytest.raises(at.CovarianceError, match="step 1"):
+        fit_by_likelihood(loglik, {"q": 1.0})

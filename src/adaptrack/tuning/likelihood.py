@@ -32,6 +32,7 @@ import numpy as np
 from scipy.optimize import minimize
 
 from .._typing import FloatArray
+from ..filters.kalman import CovarianceError
 
 HESSIAN_STEP = 1e-2  # central-difference step in log parameters (1 % of each value)
 
@@ -106,11 +107,19 @@ def fit_by_likelihood(
     scales : mapping of str to float, optional
         Typical size of a signed parameter (default 1; its derivative step is 1 % of it).
 
+    Values at which the log-likelihood is not finite, or at which the filter cannot run (it
+    raises :class:`~adaptrack.filters.kalman.CovarianceError`, e.g. an innovation covariance
+    not positive definite at extreme noise values), are infinitely unlikely. Gradient steps
+    assume a finite cost everywhere (L-BFGS-B reported convergence far from the maximum when
+    a trial step met such values), so once one is met the search goes on from where it
+    stopped with the Nelder-Mead simplex, which steps around them, and ends with L-BFGS-B
+    from the simplex's best.
+
     Raises
     ------
     ValueError
         For a non-positive starting value or bound, or a log-likelihood that is not finite at
-        the start.
+        the start (a ``CovarianceError`` there is raised as it is).
     """
     positive = tuple(initial)
     start = np.array([float(initial[n]) for n in positive])
@@ -140,17 +149,29 @@ def fit_by_likelihood(
     def values_of(theta: FloatArray) -> FloatArray:
         return np.concatenate([np.exp(theta[:k]), theta[k:] * scale])
 
+    infeasible = 0
+
     def cost(theta: FloatArray) -> float:
-        value = log_likelihood(dict(zip(names, values_of(theta).tolist(), strict=True)))
-        return -value if np.isfinite(value) else math.inf
+        nonlocal infeasible
+        try:
+            value = log_likelihood(dict(zip(names, values_of(theta).tolist(), strict=True)))
+        except CovarianceError:  # values the filter cannot run with
+            value = math.nan
+        if np.isfinite(value):
+            return -value
+        infeasible += 1
+        return math.inf
 
     theta0 = np.concatenate([np.log(start), start_free / scale])
-    if not math.isfinite(cost(theta0)):
-        raise ValueError(
-            f"the log-likelihood is not finite at the initial values "
-            f"{dict(zip(names, values_of(theta0).tolist(), strict=True))}"
-        )
-    opt = minimize(cost, theta0, method="L-BFGS-B", bounds=box)
+    at_start = dict(zip(names, values_of(theta0).tolist(), strict=True))
+    if not math.isfinite(log_likelihood(at_start)):  # errors here are the caller's to see
+        raise ValueError(f"the log-likelihood is not finite at the initial values {at_start}")
+    with np.errstate(over="ignore", invalid="ignore"):  # inf costs are expected, not noise
+        opt = minimize(cost, theta0, method="L-BFGS-B", bounds=box)
+        if infeasible:  # L-BFGS-B's differences and line search assume a finite cost
+            simplex = minimize(cost, opt.x, method="Nelder-Mead", bounds=box, options=SIMPLEX)
+            polished = minimize(cost, simplex.x, method="L-BFGS-B", bounds=box)
+            opt = polished if polished.fun <= simplex.fun else simplex
     theta = np.asarray(opt.x, dtype=float)
     hess = _hessian(cost, theta, float(opt.fun))
     try:
@@ -170,6 +191,9 @@ def fit_by_likelihood(
         str(opt.message),
         free,
     )
+
+
+SIMPLEX = {"xatol": 1e-6, "fatol": 1e-8, "maxfev": 4000}  # Nelder-Mead, log parameters
 
 
 def _hessian(cost: Callable[[FloatArray], float], theta: FloatArray, f0: float) -> FloatArray:
