@@ -862,7 +862,7 @@ def open_tracks(  # type: ignore[no-untyped-def]
 @numba.njit(cache=True)
 def merged_rows(  # type: ignore[no-untyped-def]
     corridor, x, p, spread, static, stopped, moved, ids, confirmed, lateral_m, speed_mps,
-    parts_speed, young, settled, settled_lateral_m,
+    parts_speed, young, settled, settled_lateral_m, born,
 ):  # fmt: skip
     """Rows to drop: the younger of two tracks on one body (see ``SceneTracker._retire``).
 
@@ -872,8 +872,10 @@ def merged_rows(  # type: ignore[no-untyped-def]
     (``BODY_HALF_SPREADS`` spreads either side) overlap are one long body tracked in two parts
     (no one drives into another): the younger goes, and the body's other reflections, on no
     body now, teach the survivor its length. A ``young`` static object (not yet learnt
-    clutter) whose body overlaps a stopped road user's (``BODY_HALF_SPREADS`` spreads either
-    side along, within ``lateral_m`` across) is that road user's reflection: it goes (a bus
+    clutter), ``born`` after the road user, whose body overlaps a stopped road user's
+    (``BODY_HALF_SPREADS`` spreads either side along, within ``lateral_m`` across) is that
+    road user's reflection: it goes (one that stood there before the road user came is
+    clutter under it, e.g. a rail; a bus
     stopped with an under-learnt body would otherwise see its far end taken for a post, which
     then holds part of its reflections, learns their spread and leaves the bus track a
     shorter body further off; a point of clutter learns a small spread and stays off a body
@@ -890,7 +892,7 @@ def merged_rows(  # type: ignore[no-untyped-def]
             if static[a] != static[b]:
                 s, r = (a, b) if static[a] else (b, a)  # the static one, the road user
                 if (
-                    young[s] and stopped[r] and moved[r] and not drop[r]
+                    young[s] and born[s] > born[r] and stopped[r] and moved[r] and not drop[r]
                     and abs(x[s, 0] - x[r, 0]) < BODY_HALF_SPREADS * (spread[r] + spread[s])
                     and abs(x[s, 3] - x[r, 3]) < lateral_m
                 ):  # fmt: skip
@@ -962,7 +964,7 @@ def retired_rows(  # type: ignore[no-untyped-def]
     merged = merged_rows(
         corridor[alive], x[alive], p[alive], spread[alive], static[alive], stopped[alive],
         moved[alive], ids[alive], confirmed[alive], lateral_m, speed_mps, parts_speed, young,
-        settled, settled_lateral_m,
+        settled, settled_lateral_m, born_s[alive],
     )  # fmt: skip
     for k in range(alive.size):
         dead[alive[k]] |= merged[k]
