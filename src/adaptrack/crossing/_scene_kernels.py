@@ -438,20 +438,18 @@ def apply_scan(  # type: ignore[no-untyped-def]
     time_s, seen, d2, logdet, gate, tracks, dets, z, ids, radar_col, x, p, spread, along_m2,
     along_m4, stopped, moved, direction, slow_since, corridor, miss_run, occluded, anchor_u,
     doppler_seen_s, sensor_id, history, misses, last_hit_s, confirmed, roads, bounds, radar,
-    noise_tab,
-    noise_cnt, fields, pd_tab, pd_cnt, across_std, moving_radial, start_speed_var,
+    noise_tab, noise_cnt, fields, pd_tab, pd_cnt, across_std, moving_radial, start_speed_var,
     learning_rate, shape_rate, spread_lo, spread_hi, align, lane_half_width, bias, bias_stats,
     bias_forget, bias_gate, confirm_speed_var, window_mask, confirm_hits,
 ):  # fmt: skip
     """Update the tracks with a gated scan (:func:`associate_scan`) in place.
 
-    Every gated detection goes to its owner (:func:`owners`: the assignment's, then the
-    likeliest track) and updates it (:func:`update_tracks`, which sets ``doppler_seen_s``); the
-    assigned detection's sensor
-    id becomes its track's (column ``radar_col`` of ``sensor_id``). A track in view without a
-    detection is hidden if a nearer track covers it (:func:`occluders`; its miss tells
-    nothing), else takes what the miss tells (:func:`miss_updates`, moving ones). Tracks in
-    view and not hidden record the hit or miss in the track book's arrays
+    Every gated detection goes to its owner (:func:`owners`: the assignment's, then the likeliest
+    track) and updates it (:func:`update_tracks`, which sets ``doppler_seen_s``); the assigned
+    detection's sensor id becomes its track's (column ``radar_col`` of ``sensor_id``). A track
+    in view without a detection is hidden if a nearer track covers it (:func:`occluders`; its
+    miss tells nothing), else takes what the miss tells (:func:`miss_updates`, moving ones).
+    Tracks in view and not hidden record the hit or miss in the track book's arrays
     (:func:`adaptrack.tracking.lifecycle.record_hits`; confirmed once their speed variance is
     below ``confirm_speed_var``), and one confirmed now anchors where it is. Returns which
     detections were used (D,).
@@ -464,9 +462,9 @@ def apply_scan(  # type: ignore[no-untyped-def]
         update_tracks(
             time_s, order, owner, z, x, p, spread, along_m2, along_m4, stopped, moved,
             direction, slow_since, doppler_seen_s, corridor, roads, bounds, radar, noise_tab,
-            noise_cnt, fields,
-            across_std, moving_radial, start_speed_var, learning_rate, shape_rate, spread_lo,
-            spread_hi, align, lane_half_width, bias, bias_stats, bias_forget, bias_gate,
+            noise_cnt, fields, across_std, moving_radial, start_speed_var, learning_rate,
+            shape_rate, spread_lo, spread_hi, align, lane_half_width, bias, bias_stats,
+            bias_forget, bias_gate,
         )  # fmt: skip
         for j in order:
             used[j] = True
@@ -576,9 +574,8 @@ def unambiguous_assignment(d2, gate):  # type: ignore[no-untyped-def]
 def update_tracks(  # type: ignore[no-untyped-def]
     time_s, order, owner, z, x, p, spread, along_m2, along_m4, stopped, moved, direction,
     slow_since, doppler_seen_s, corridor, roads, bounds, radar, noise_tab, noise_cnt, fields,
-    across_std, moving_radial,
-    start_speed_var, learning_rate, shape_rate, spread_lo, spread_hi, align, lane_half_width,
-    bias, bias_stats, bias_forget, bias_gate,
+    across_std, moving_radial, start_speed_var, learning_rate, shape_rate, spread_lo,
+    spread_hi, align, lane_half_width, bias, bias_stats, bias_forget, bias_gate,
 ):  # fmt: skip
     """Update each owning track with its detections in ``order`` (sequential EKF updates).
 
@@ -866,22 +863,21 @@ def merged_rows(  # type: ignore[no-untyped-def]
 ):  # fmt: skip
     """Rows to drop: the younger of two tracks on one body (see ``SceneTracker._retire``).
 
-    Pairs in row order; a confirmed track outlives an unconfirmed one whatever their ages; a
-    track already dropped removes no other. Besides tracks within their spreads of each
-    other, two road users that have moved, faster than ``parts_speed``, whose bodies
-    (``BODY_HALF_SPREADS`` spreads either side) overlap are one long body tracked in two parts
-    (no one drives into another): the younger goes, and the body's other reflections, on no
-    body now, teach the survivor its length. A ``young`` static object (not yet learnt
-    clutter), ``born`` after the road user, whose body overlaps a stopped road user's
-    (``BODY_HALF_SPREADS`` spreads either side along, within ``lateral_m`` across) is that
-    road user's reflection: it goes (one that stood there before the road user came is
-    clutter under it, e.g. a rail; a bus
-    stopped with an under-learnt body would otherwise see its far end taken for a post, which
-    then holds part of its reflections, learns their spread and leaves the bus track a
-    shorter body further off; a point of clutter learns a small spread and stays off a body
-    beside it). A ``settled`` track (one followed for a while) is not dropped for a track
-    more than ``settled_lateral_m`` beside it: two road users side by side (a motorcycle
-    filtering past a queue) stay apart, while a duplicate of one body sits in its lane.
+    Pairs in row order; a confirmed track outlives an unconfirmed one whatever their ages; a track
+    already dropped removes no other. Besides tracks within their spreads of each other, two
+    road users that have moved, faster than ``parts_speed``, whose bodies (``BODY_HALF_SPREADS``
+    spreads either side) overlap are one long body tracked in two parts (no one drives into
+    another): the younger goes, and the body's other reflections, on no body now, teach the
+    survivor its length. A ``young`` static object (not yet learnt clutter), ``born`` after the
+    road user, whose body overlaps a stopped road user's (``BODY_HALF_SPREADS`` spreads either
+    side along, within ``lateral_m`` across) is that road user's reflection: it goes (one that
+    stood there before the road user came is clutter under it, e.g. a rail; a bus stopped with
+    an under-learnt body would otherwise see its far end taken for a post, which then holds part
+    of its reflections, learns their spread and leaves the bus track a shorter body further off;
+    a point of clutter learns a small spread and stays off a body beside it). A ``settled``
+    track (one followed for a while) is not dropped for a track more than ``settled_lateral_m``
+    beside it: two road users side by side (a motorcycle filtering past a queue) stay apart,
+    while a duplicate of one body sits in its lane.
     """
     n = x.shape[0]
     drop = np.zeros(n, dtype=np.bool_)

@@ -201,8 +201,8 @@ _POSITIVE = (
     "stop_decel_mps2",
 )  # fmt: skip
 _NO_LIMIT = (  # inf: no limit
-    "merge_parts_speed_mps", "clutter_age_s", "stop_seen_s", "bias_min_samples", "merge_settled_s",
-    "stop_confirm_s", "moved_distance_m",
+    "merge_parts_speed_mps", "merge_settled_s", "clutter_age_s", "stop_seen_s",
+    "bias_min_samples", "stop_confirm_s", "moved_distance_m",
 )  # fmt: skip
 
 
@@ -480,10 +480,9 @@ class SceneTracker:
                 tr.slow_since, tr.corridor, tr.miss_run, tr.occluded, tr.anchor_u,
                 tr.doppler_seen_s, tr.sensor_id, book.history, book.misses, book.last_hit_s,
                 book.confirmed, self._roads, self._bounds, radar_row, noise_tab, noise_cnt,
-                fields, pd_tab, pd_cnt,
-                cfg.body_across_std_m, cfg.moving_radial_mps, cfg.start_speed_max_mps**2,
-                cfg.spread_learning_rate, cfg.shape_learning_rate, *cfg.spread_limits_m,
-                cfg.estimate_azimuth_bias, self._half_lane, bias, stats,
+                fields, pd_tab, pd_cnt, cfg.body_across_std_m, cfg.moving_radial_mps,
+                cfg.start_speed_max_mps**2, cfg.spread_learning_rate, cfg.shape_learning_rate,
+                *cfg.spread_limits_m, cfg.estimate_azimuth_bias, self._half_lane, bias, stats,
                 1.0 - 1.0 / cfg.bias_memory, cfg.bias_gate_m, cfg.confirm_speed_std_mps**2,
                 (1 << book.rules.confirm_window) - 1, book.rules.confirm_hits,
             )  # fmt: skip
@@ -541,8 +540,8 @@ class SceneTracker:
             time_s, tr.x, tr.p, tr.corridor, self.book.confirmed, self.book.last_hit_s,
             tr.anchor_u, tr.stopped, tr.moved, tr.direction, tr.slow_since, tr.event_raised,
             tr.doppler_seen_s, self._crossing_u, self._half_lane, self.site.barrier_m,
-            cfg.moved_speed_mps, cfg.moving_speed_std_mps, cfg.moved_distance_m, cfg.stop_speed_mps,
-            cfg.stop_exit_sigmas, cfg.stop_confirm_s,
+            cfg.moved_speed_mps, cfg.moving_speed_std_mps, cfg.moved_distance_m,
+            cfg.stop_speed_mps, cfg.stop_exit_sigmas, cfg.stop_confirm_s,
             cfg.stop_seen_s if cfg.stationary_detections else np.inf,
         )  # fmt: skip
         if hazard.any():
