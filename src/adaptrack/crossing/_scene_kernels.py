@@ -259,11 +259,15 @@ def gate_scan(  # type: ignore[no-untyped-def]
     position (the sensor's range and azimuth noise projected on the lane, and the track's):
     the Gaussian body model's tail would otherwise reach into the next body of a queue. A
     detection on no body is left as it is (a long vehicle's far reflections are how its track
-    learns its spread). A track hidden behind a road user (``occluder``: the row of the
-    nearer road user on its line of sight, -1 none) is seen, if at all, over its own body past
-    the occluder: a detection in the occluder's gate that lies beyond the hidden track's body
-    is the occluder's (the hidden track's ``d2`` is ``inf``; a car queued behind a bus would
-    otherwise creep onto the bus's rear reflections, the nearest in its gate).
+    learns its spread), except by a stopped road user (``starting``), whose spread is not
+    learnt while it stands: such a detection costs it the excess all the same (a queued bus
+    whose own reflections are missed in a scan would take the rear reflections of the truck
+    ahead that fall between the two tracks' bodies). A track hidden behind a road user
+    (``occluder``: the row of the nearer road user on its line of sight, -1 none) is seen, if
+    at all, over its own body past the occluder: a detection in the occluder's gate that lies
+    beyond the hidden track's body is the occluder's (the hidden track's ``d2`` is ``inf``; a
+    car queued behind a bus would otherwise creep onto the bus's rear reflections, the
+    nearest in its gate).
     A stopped vehicle may be starting (``starting`` rows): its held zero speed is replaced by
     the speed in ``[0, start_speed_max]`` along its ``direction`` that best explains the
     detection's radial speed (a road user passing by in the other direction does not fit).
@@ -345,8 +349,8 @@ def gate_scan(  # type: ignore[no-untyped-def]
             on_a_body = False
             for i in range(n_t):
                 on_a_body |= road_user[i] and d2[i, j] <= gate and penalty[i, j] == 0.0
-            if on_a_body:
-                for i in range(n_t):
+            for i in range(n_t):
+                if on_a_body or starting[i]:
                     d2[i, j] += penalty[i, j]
     return seen
 

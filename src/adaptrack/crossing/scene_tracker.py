@@ -11,7 +11,8 @@ the body spread along (``body_along_std_m``) and across (``body_across_std_m``).
 One scan (all detections of one radar at one time) is processed as: predict every track to
 the scan time; gate the detections of the tracks in that radar's view (chi-square on the
 three-dimensional innovation; a detection on another road user's body that lies beyond a
-track's own body end along the lane costs that track its excess, ``body_extent_gate``; in a
+track's own body end along the lane costs that track its excess, ``body_extent_gate``, and
+a stopped road user's track pays it for any detection beyond its body's end; in a
 standing queue, a track hidden behind a nearer stopped road user is seen, if at all, over
 its own body: a detection in the occluder's gate beyond it is the occluder's,
 ``occlusion_gate``);
