@@ -546,6 +546,39 @@ def test_a_track_stopping_on_an_alarmed_object_raises_no_second_alarm(same_objec
     assert sorted(alarms) == ([3] if same_object_m else [2, 3])
 
 
+def test_a_stop_ends_only_on_a_radial_speed_that_measures_the_speed_along_the_lane():
+    """A car stopped 8 m past the crossing on the south arm; detections on its body whose
+    radial speed says "moving forwards". From radar_X, across the line of sight (under
+    ``GATE_MIN_COS`` along the lane), those of a road user passing beside it at 10 m/s do
+    not end the stop (fresh seed 1154: the queued car's track followed the passer into the
+    crossing and raised a false alarm on a rail); from radar_B, along the arm, the car's own
+    start at 1 m/s does, within two scans."""
+    tracker = SceneTracker(SITE)
+    cor, _, half_lane = _queue_lane(tracker)
+    u = cor.crossing_u + 8.0
+    radars = {r.name: r for r in SITE.radars}
+    _one_stopped_track(tracker, u, -half_lane, 1.1)
+    rng = np.random.default_rng(7)
+    stopped = {}
+    for name, start_s, speed in (("radar_X", 0.0, 10.0), ("radar_B", 1.0, 1.0)):
+        r = radars[name]
+        stopped[name] = []
+        for k in range(int(0.5 / r.period_s)):
+            z = _body_scan(rng, r, cor, u, -half_lane, 4.0, 1.8, 2)
+            rng_m, az = z[:, 0], z[:, 1]
+            ground = np.asarray(r.position_m) + np.sqrt(rng_m**2 - r.height_m**2)[:, None] * (
+                np.stack([np.sin(az), np.cos(az)], -1)
+            )
+            tangent = cor.path.lane_geometry(np.full(z.shape[0], u), -half_lane)[1]
+            los = ((ground - np.asarray(r.position_m)) * tangent).sum(-1) / rng_m
+            z[:, 2] = speed * los  # forwards (u rising), at each detection's point
+            tracker.step(name, start_s + k * r.period_s, z)
+            stopped[name].append(bool(tracker.tracks.stopped[0]))
+        assert (np.abs(los) < 0.3).all() if name == "radar_X" else (np.abs(los) > 0.5).all()
+    assert all(stopped["radar_X"])
+    assert not stopped["radar_B"][1]
+
+
 def test_a_standstill_seen_only_across_the_line_of_sight_raises_no_alarm_until_measured():
     """A car stalled 8 m past the crossing (between the barriers) on the south arm, where
     radar_X sees it across its line of sight: there its radial speed is near zero whatever

@@ -593,13 +593,15 @@ def update_tracks(  # type: ignore[no-untyped-def]
     detection further than ``bias_gate`` [m] across from the lane centre (another lane, a
     footway) is left out.
 
-    A detection whose radial speed exceeds ``moving_radial`` along the vehicle's ``direction``
-    ends the stop of a vehicle that had moved (speed and acceleration freed with variance
-    ``start_speed_var``; static objects stay); the body spread follows a moving average (rate
-    ``learning_rate``) of the squared along-track residual less the sensor's and the track's
-    share, within ``[spread_lo, spread_hi]``, learnt while the whole body is in view and the
-    road user is not stopped (queued bodies touch: a neighbour's reflections would stretch
-    it, and its gate with it); the second and fourth moments of the along-track residual
+    A detection whose radial speed exceeds ``moving_radial`` along the vehicle's ``direction``,
+    and measures the speed along the lane (as below), ends the stop of a vehicle that had
+    moved (speed and acceleration freed with variance ``start_speed_var``; static objects
+    stay): seen across the line of sight, a road user passing beside the queue would start
+    it; the body spread follows a moving average (rate ``learning_rate``) of the squared
+    along-track residual less the sensor's and the track's share, within ``[spread_lo,
+    spread_hi]``, learnt while the whole body is in view and the road user is not stopped
+    (queued bodies touch: a neighbour's reflections would stretch it, and its gate with it);
+    the second and fourth moments of the along-track residual
     (``along_m2``, ``along_m4``, rate ``shape_rate``: see :func:`split_rows`) are learnt
     while the whole body is in view, stopped or not. A detection whose radial speed measures
     the speed along the lane (the line of sight to its own ground point at least
@@ -649,7 +651,8 @@ def update_tracks(  # type: ignore[no-untyped-def]
         if doppler and abs(los) >= GATE_MIN_COS:
             doppler_seen_s[i] = time_s
         if (
-            stopped[i] and moved[i] and abs(z[j, 2]) > moving_radial
+            stopped[i] and moved[i] and doppler and abs(los) >= GATE_MIN_COS
+            and abs(z[j, 2]) > moving_radial
             and direction[i] * z[j, 2] * h[2, 1] > 0.0
         ):  # fmt: skip
             stopped[i] = False
