@@ -601,9 +601,9 @@ def update_tracks(  # type: ignore[no-untyped-def]
     along-track residual less the sensor's and the track's share, within ``[spread_lo,
     spread_hi]``, learnt while the whole body is in view and the road user is not stopped
     (queued bodies touch: a neighbour's reflections would stretch it, and its gate with it);
-    the second and fourth moments of the along-track residual
-    (``along_m2``, ``along_m4``, rate ``shape_rate``: see :func:`split_rows`) are learnt
-    while the whole body is in view, stopped or not. A detection whose radial speed measures
+    the second and fourth moments of the along-track residual (``along_m2``, ``along_m4``,
+    rate ``shape_rate``: see :func:`split_rows`) are learnt while the whole body is in view,
+    stopped or not. A detection whose radial speed measures
     the speed along the lane (the line of sight to its own ground point at least
     ``GATE_MIN_COS`` along the lane, its alias known; not the track's point: a body's
     detection may lie metres away, across the line of sight) sets the track's
@@ -648,11 +648,11 @@ def update_tracks(  # type: ignore[no-untyped-def]
         innovation_into(z[j], zp, radar, doppler, nu)
         # the radial speed of the detection's own point measures the speed along the lane
         los = ((gx - radar[0]) * tx + (gy - radar[1]) * ty) / z[j, 0]
-        if doppler and abs(los) >= GATE_MIN_COS:
+        measures_speed = doppler and abs(los) >= GATE_MIN_COS
+        if measures_speed:
             doppler_seen_s[i] = time_s
         if (
-            stopped[i] and moved[i] and doppler and abs(los) >= GATE_MIN_COS
-            and abs(z[j, 2]) > moving_radial
+            stopped[i] and moved[i] and measures_speed and abs(z[j, 2]) > moving_radial
             and direction[i] * z[j, 2] * h[2, 1] > 0.0
         ):  # fmt: skip
             stopped[i] = False
