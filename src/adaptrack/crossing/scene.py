@@ -4,9 +4,13 @@ Road users arrive on each flow (entry road -> exit road) as a Poisson stream wit
 class mix and drive along their corridor (:mod:`adaptrack.crossing.corridor`) with the
 Intelligent Driver Model: they keep their desired speed, follow the vehicle ahead, and queue
 at the stop line while the barriers are closed (from ``WARNING_S`` before closure, if they can
-stop at ``STOP_DECEL_MPS2``; those that cannot drive on). Motorcycles, cyclists and pedestrians
-do not block the others (they are overtaken, and motorcycles overtake) and are not blocked by
-them. A stall makes one vehicle stop between the barriers for minutes; the vehicles behind it
+stop at ``STOP_DECEL_MPS2``; those that cannot drive on). A road user follows the nearest one
+ahead in its corridor and direction whose body its own would touch beside it (lateral extents
+overlapping): the vehicles of a lane follow one another; a motorcycle along the centre line,
+a cyclist on the lane's edge and a pedestrian on the footway pass a car queue where there is
+room (they are overtaken, and motorcycles overtake), and queue behind a vehicle they cannot
+pass (a bus or truck leaves no room in the lane; a car that keeps to that side neither). A
+stall makes one vehicle stop between the barriers for minutes; the vehicles behind it
 queue.
 
 Each radar scan reports **detections without identities**: each road user in view gives a
@@ -22,7 +26,6 @@ the centre of its body.
 
 from __future__ import annotations
 
-import itertools
 import math
 from dataclasses import dataclass, field
 from typing import Any
@@ -50,7 +53,6 @@ DESIRED_SPEED_KMH = {  # mean and standard deviation of the desired speed per cl
     "pedestrian": (5.0, 1.0),
     "cyclist": (18.0, 4.0),
 }  # another class: 0.8 of its top speed up to 60 km/h, sigma 20 % of that
-NON_BLOCKING = frozenset({"motorcycle", "cyclist", "pedestrian"})  # filter past a queue
 LONG_M = 7.0  # a body this long gives 2-4 detections per scan (4 m: 1-2; shorter: 1)
 LARGE_WIDTH_M = 2.4  # a body this wide (truck, bus, tractor) casts a radar shadow
 
@@ -302,10 +304,8 @@ def simulate_traffic(site: Site, spec: SceneSpec, rng: np.random.Generator) -> S
         np.isin(classes, ["pedestrian", "cyclist", "motorcycle"]), lateral, lateral + wander
     )
     d_side = -direction * lateral  # corridor offset (right of decreasing u)
-    blocking = ~np.isin(classes, list(NON_BLOCKING))
-    # who follows whom: the vehicles in the lane, each non-blocking class in its own line
-    lane_of = np.where(blocking, "lane", classes)
-    lanes = np.unique(lane_of)
+    # who follows whom: users whose bodies would touch side by side (one direction's users)
+    touch = np.abs(d_side[:, None] - d_side[None, :]) < 0.5 * (width[:, None] + width[None, :])
     # along-corridor distance travelled by the front from the corridor's start of this direction
     x = length_m.copy()  # the whole body is on the corridor when a user appears
     v = v0.copy()
@@ -357,15 +357,19 @@ def simulate_traffic(site: Site, spec: SceneSpec, rng: np.random.Generator) -> S
         gap = np.full(idx.size, np.inf)
         dv = np.zeros(idx.size)
         pos = {int(i): j for j, i in enumerate(idx)}
-        for members, lane in itertools.product(group, lanes):
-            mem = members[active[members] & ~done[members] & (lane_of[members] == lane)]
+        for members in group:
+            mem = members[active[members] & ~done[members]]
             if mem.size < 2:
                 continue
-            order = mem[np.argsort(x[mem])]
-            for a, b in itertools.pairwise(order):  # b is ahead of a
-                j = pos[int(a)]
-                gap[j] = x[b] - length_m[b] - x[a]
-                dv[j] = v[a] - v[b]
+            # gap of each user to the rear of every user ahead it cannot pass
+            rear_gap = x[mem][None, :] - length_m[mem][None, :] - x[mem][:, None]
+            ahead = touch[np.ix_(mem, mem)] & (x[mem][None, :] > x[mem][:, None])
+            rear_gap = np.where(ahead, rear_gap, np.inf)
+            lead = np.argmin(rear_gap, axis=1)
+            has = np.isfinite(rear_gap[np.arange(mem.size), lead])
+            j = np.array([pos[int(a)] for a in mem[has]], dtype=int)
+            gap[j] = rear_gap[np.flatnonzero(has), lead[has]]
+            dv[j] = v[mem[has]] - v[mem[lead[has]]]
         xa, va = x[idx], v[idx]
         # the stop line while the lights flash, for those who can still stop there
         if warn:
