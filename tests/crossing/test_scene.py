@@ -603,6 +603,30 @@ def test_a_track_stopping_on_an_alarmed_object_raises_no_second_alarm(same_objec
     assert sorted(alarms) == ([3] if same_object_m else [2, 3])
 
 
+def test_a_road_user_standing_beside_an_alarmed_one_raises_its_own_alarm():
+    """A car stopped 8 m before the crossing has raised its alarm; a motorcycle that could not
+    pass it stands 1 m behind its centre and 1.55 m beside it, towards the centre line
+    (fresh seed 1196: alarmed 10.6 s late, as the car's duplicate). Its own reflections lie
+    beside the car's body, so it is another road user and raises its alarm; the duplicate
+    of the test above, 1.5 m across but on the car's reflections, raises none."""
+    tracker = SceneTracker(SITE)
+    cor, radar, half_lane = _queue_lane(tracker)
+    car, moto = (cor.crossing_u - 8.0, -half_lane), (cor.crossing_u - 9.0, -half_lane + 1.55)
+    _stopped_tracks(tracker, [(*car, 1.1), (*moto, 0.5)])
+    tracker.tracks.event_raised[0] = True
+    rng = np.random.default_rng(4)
+    for k in range(1, 20):  # 1 s
+        z = np.vstack(
+            [
+                _body_scan(rng, radar, cor, *car, 5.0, 1.8, 2),
+                _body_scan(rng, radar, cor, *moto, 2.2, 0.8, 1),
+            ]
+        )
+        tracker.step(radar.name, k * radar.period_s, z)
+    alarms = [e["track_id"] for e in tracker.events if e["event"] == "stopped_between_barriers"]
+    assert alarms == [2]
+
+
 def test_a_stop_ends_only_on_a_radial_speed_that_measures_the_speed_along_the_lane():
     """A car stopped 8 m past the crossing on the south arm; detections on its body whose
     radial speed says "moving forwards". From radar_X, across the line of sight (under

@@ -34,6 +34,7 @@ from ._radar_kernel import curve_at, in_view
 N_STATE = 4
 BIAS_MIN_SPEED_MPS = 6.0  # azimuth alignment on vehicles, not on cyclists at the lane's edge
 BODY_HALF_SPREADS = 2.0  # a body reaches this many spreads either side of its centre
+DETECTION_D_RATE = 0.2  # moving-average rate of a track's detections' offset across
 VISIBLE_SAMPLES = 17  # points over a body tested against a field of view
 NEAREST_BLOCK = 32  # centreline samples searched as a block once it may hold the nearest
 
@@ -441,7 +442,8 @@ def associate_scan(  # type: ignore[no-untyped-def]
 def apply_scan(  # type: ignore[no-untyped-def]
     time_s, seen, d2, logdet, gate, tracks, dets, z, ids, radar_col, x, p, spread, along_m2,
     along_m4, stopped, moved, direction, slow_since, corridor, miss_run, occluded, anchor_u,
-    doppler_seen_s, sensor_id, history, misses, last_hit_s, confirmed, roads, bounds, radar,
+    doppler_seen_s, detection_d, sensor_id, history, misses, last_hit_s, confirmed, roads,
+    bounds, radar,
     noise_tab, noise_cnt, fields, pd_tab, pd_cnt, across_std, moving_radial, start_speed_var,
     learning_rate, shape_rate, spread_lo, spread_hi, align, lane_half_width, bias, bias_stats,
     bias_forget, bias_gate, confirm_speed_var, window_mask, confirm_hits,
@@ -465,7 +467,8 @@ def apply_scan(  # type: ignore[no-untyped-def]
         owner, order = owners(d2, logdet, gate, tracks, dets)
         update_tracks(
             time_s, order, owner, z, x, p, spread, along_m2, along_m4, stopped, moved,
-            direction, slow_since, doppler_seen_s, corridor, roads, bounds, radar, noise_tab,
+            direction, slow_since, doppler_seen_s, detection_d, corridor, roads, bounds, radar,
+            noise_tab,
             noise_cnt, fields, across_std, moving_radial, start_speed_var, learning_rate,
             shape_rate, spread_lo, spread_hi, align, lane_half_width, bias, bias_stats,
             bias_forget, bias_gate,
@@ -577,7 +580,8 @@ def unambiguous_assignment(d2, gate):  # type: ignore[no-untyped-def]
 @numba.njit(cache=True)
 def update_tracks(  # type: ignore[no-untyped-def]
     time_s, order, owner, z, x, p, spread, along_m2, along_m4, stopped, moved, direction,
-    slow_since, doppler_seen_s, corridor, roads, bounds, radar, noise_tab, noise_cnt, fields,
+    slow_since, doppler_seen_s, detection_d, corridor, roads, bounds, radar, noise_tab,
+    noise_cnt, fields,
     across_std, moving_radial, start_speed_var, learning_rate, shape_rate, spread_lo,
     spread_hi, align, lane_half_width, bias, bias_stats, bias_forget, bias_gate,
 ):  # fmt: skip
@@ -607,7 +611,10 @@ def update_tracks(  # type: ignore[no-untyped-def]
     the speed along the lane (the line of sight to its own ground point at least
     ``GATE_MIN_COS`` along the lane, its alias known; not the track's point: a body's
     detection may lie metres away, across the line of sight) sets the track's
-    ``doppler_seen_s`` to ``time_s``: it shows whether the road user stands.
+    ``doppler_seen_s`` to ``time_s``: it shows whether the road user stands. ``detection_d``
+    follows the detections' own offset across the lane (a moving average, rate
+    ``DETECTION_D_RATE``; NaN before the first): where its reflections lie, not where the
+    track's state says.
     """
     zp, h, rm, jp, jv = _model_scratch()
     xv = np.zeros(N_STATE)
@@ -619,6 +626,11 @@ def update_tracks(  # type: ignore[no-untyped-def]
         cx, cy, tx, ty, _, px, py = _lane_frame(roads, bounds, corridor[i], x[i, 0], x[i, 3])
         gx, gy, rho = _ground_point(z[j], radar)
         along = (gx - px) * tx + (gy - py) * ty
+        across = (gx - cx) * -ty + (gy - cy) * tx  # the detection's offset (as x[i, 3])
+        if math.isnan(detection_d[i]):
+            detection_d[i] = across
+        else:
+            detection_d[i] += DETECTION_D_RATE * (across - detection_d[i])
         fast = abs(x[i, 1]) >= BIAS_MIN_SPEED_MPS
         if align and moved[i] and not stopped[i] and direction[i] != 0.0 and fast:
             # across the lane only (the body's extent along it says nothing on the bias)

@@ -88,6 +88,7 @@ from ..tracking import (
     gnn_assign,
 )
 from ._scene_kernels import (
+    BODY_HALF_SPREADS,
     apply_scan,
     associate_scan,
     confirmed_rows,
@@ -263,6 +264,7 @@ class _Tracks:
     miss_run: FloatArray  # probability of the current run of misses for a moving target
     occluded: np.ndarray  # hidden behind a nearer track at its last scan without a detection
     doppler_seen_s: FloatArray  # last hit whose radial speed measured the speed [s] (-inf)
+    detection_d: FloatArray  # its own detections' offset across (moving average) [m], NaN
     sensor_id: np.ndarray  # (T, radars) the object id each radar last reported for it (-1 none)
 
     @classmethod
@@ -288,7 +290,8 @@ class _Tracks:
             anchor_u=x[:, 0].copy(),
             spread=np.full(n, spread_m), along_m2=np.full(n, m2), along_m4=np.full(n, m4),
             direction=np.zeros(n), miss_run=np.ones(n),
-            occluded=no.copy(), doppler_seen_s=np.full(n, -np.inf), sensor_id=sensor_id,
+            occluded=no.copy(), doppler_seen_s=np.full(n, -np.inf),
+            detection_d=np.full(n, np.nan), sensor_id=sensor_id,
         )  # fmt: skip
 
     @classmethod
@@ -479,8 +482,9 @@ class SceneTracker:
                 time_s, seen, d2, logdet, self._gate, ti, di, z, ids, r_col, tr.x, tr.p,
                 tr.spread, tr.along_m2, tr.along_m4, tr.stopped, tr.moved, tr.direction,
                 tr.slow_since, tr.corridor, tr.miss_run, tr.occluded, tr.anchor_u,
-                tr.doppler_seen_s, tr.sensor_id, book.history, book.misses, book.last_hit_s,
-                book.confirmed, self._roads, self._bounds, radar_row, noise_tab, noise_cnt,
+                tr.doppler_seen_s, tr.detection_d, tr.sensor_id, book.history, book.misses,
+                book.last_hit_s, book.confirmed, self._roads, self._bounds, radar_row, noise_tab,
+                noise_cnt,
                 fields, pd_tab, pd_cnt, cfg.body_across_std_m, cfg.moving_radial_mps,
                 cfg.start_speed_max_mps**2, cfg.spread_learning_rate, cfg.shape_learning_rate,
                 *cfg.spread_limits_m, cfg.estimate_azimuth_bias, self._half_lane, bias, stats,
@@ -557,7 +561,11 @@ class SceneTracker:
         A track stopped within ``same_object_m`` (half a car's length) of a stopped track whose
         alarm is raised stands on that object's body (e.g. a track from the other lane that
         took a stopped car's reflections); it raises no second alarm now, and may later if
-        the other track is gone.
+        the other track is gone. Not one whose own detections lie beside that track, on its
+        corridor ``BODY_HALF_SPREADS`` spreads across (``body_across_std_m``) or more: another
+        road user stands there (a motorcycle beside a car queued between the barriers). Where
+        the detections lie, not the track's state: a duplicate's state may stand beside the
+        body whose reflections it takes.
         """
         if rows.size == 0:
             return rows
@@ -567,8 +575,14 @@ class SceneTracker:
             return rows
         new = self._planar(rows)["position"]
         old = self._planar(alarmed)["position"]
-        gap = np.linalg.norm(new[:, None, :] - old[None, :, :], axis=-1).min(axis=1)
-        same = gap < self.config.same_object_m
+        near = (
+            np.linalg.norm(new[:, None, :] - old[None, :, :], axis=-1) < self.config.same_object_m
+        )
+        across = np.abs(tr.detection_d[rows][:, None] - tr.x[alarmed, 3][None, :])
+        beside = (tr.corridor[rows][:, None] == tr.corridor[alarmed][None, :]) & (
+            across >= BODY_HALF_SPREADS * self.config.body_across_std_m
+        )  # NaN (no detection yet): not beside
+        same = (near & ~beside).any(axis=1)
         tr.event_raised[rows[same]] = False
         return rows[~same]
 
