@@ -443,10 +443,9 @@ def apply_scan(  # type: ignore[no-untyped-def]
     time_s, seen, d2, logdet, gate, tracks, dets, z, ids, radar_col, x, p, spread, along_m2,
     along_m4, stopped, moved, direction, slow_since, corridor, miss_run, occluded, anchor_u,
     doppler_seen_s, detection_d, sensor_id, history, misses, last_hit_s, confirmed, roads,
-    bounds, radar,
-    noise_tab, noise_cnt, fields, pd_tab, pd_cnt, across_std, moving_radial, start_speed_var,
-    learning_rate, shape_rate, spread_lo, spread_hi, align, lane_half_width, bias, bias_stats,
-    bias_forget, bias_gate, confirm_speed_var, window_mask, confirm_hits,
+    bounds, radar, noise_tab, noise_cnt, fields, pd_tab, pd_cnt, across_std, moving_radial,
+    start_speed_var, learning_rate, shape_rate, spread_lo, spread_hi, align, lane_half_width,
+    bias, bias_stats, bias_forget, bias_gate, confirm_speed_var, window_mask, confirm_hits,
 ):  # fmt: skip
     """Update the tracks with a gated scan (:func:`associate_scan`) in place.
 
@@ -468,10 +467,9 @@ def apply_scan(  # type: ignore[no-untyped-def]
         update_tracks(
             time_s, order, owner, z, x, p, spread, along_m2, along_m4, stopped, moved,
             direction, slow_since, doppler_seen_s, detection_d, corridor, roads, bounds, radar,
-            noise_tab,
-            noise_cnt, fields, across_std, moving_radial, start_speed_var, learning_rate,
-            shape_rate, spread_lo, spread_hi, align, lane_half_width, bias, bias_stats,
-            bias_forget, bias_gate,
+            noise_tab, noise_cnt, fields, across_std, moving_radial, start_speed_var,
+            learning_rate, shape_rate, spread_lo, spread_hi, align, lane_half_width, bias,
+            bias_stats, bias_forget, bias_gate,
         )  # fmt: skip
         for j in order:
             used[j] = True
@@ -581,9 +579,8 @@ def unambiguous_assignment(d2, gate):  # type: ignore[no-untyped-def]
 def update_tracks(  # type: ignore[no-untyped-def]
     time_s, order, owner, z, x, p, spread, along_m2, along_m4, stopped, moved, direction,
     slow_since, doppler_seen_s, detection_d, corridor, roads, bounds, radar, noise_tab,
-    noise_cnt, fields,
-    across_std, moving_radial, start_speed_var, learning_rate, shape_rate, spread_lo,
-    spread_hi, align, lane_half_width, bias, bias_stats, bias_forget, bias_gate,
+    noise_cnt, fields, across_std, moving_radial, start_speed_var, learning_rate, shape_rate,
+    spread_lo, spread_hi, align, lane_half_width, bias, bias_stats, bias_forget, bias_gate,
 ):  # fmt: skip
     """Update each owning track with its detections in ``order`` (sequential EKF updates).
 

@@ -304,8 +304,6 @@ def simulate_traffic(site: Site, spec: SceneSpec, rng: np.random.Generator) -> S
         np.isin(classes, ["pedestrian", "cyclist", "motorcycle"]), lateral, lateral + wander
     )
     d_side = -direction * lateral  # corridor offset (right of decreasing u)
-    # who follows whom: users whose bodies would touch side by side (one direction's users)
-    touch = np.abs(d_side[:, None] - d_side[None, :]) < 0.5 * (width[:, None] + width[None, :])
     # along-corridor distance travelled by the front from the corridor's start of this direction
     x = length_m.copy()  # the whole body is on the corridor when a user appears
     v = v0.copy()
@@ -356,19 +354,21 @@ def simulate_traffic(site: Site, spec: SceneSpec, rng: np.random.Generator) -> S
             continue
         gap = np.full(idx.size, np.inf)
         dv = np.zeros(idx.size)
-        pos = {int(i): j for j, i in enumerate(idx)}
         for members in group:
             mem = members[active[members] & ~done[members]]
             if mem.size < 2:
                 continue
-            # gap of each user to the rear of every user ahead it cannot pass
-            rear_gap = x[mem][None, :] - length_m[mem][None, :] - x[mem][:, None]
-            ahead = touch[np.ix_(mem, mem)] & (x[mem][None, :] > x[mem][:, None])
-            rear_gap = np.where(ahead, rear_gap, np.inf)
+            # who follows whom: the nearest user ahead whose body its own would touch beside it
+            xm, dm, wm = x[mem], d_side[mem], width[mem]
+            touch = np.abs(dm[:, None] - dm[None, :]) < 0.5 * (wm[:, None] + wm[None, :])
+            rear_gap = np.where(
+                touch & (xm[None, :] > xm[:, None]), (xm - length_m[mem])[None, :] - xm[:, None],
+                np.inf,
+            )  # fmt: skip
             lead = np.argmin(rear_gap, axis=1)
             has = np.isfinite(rear_gap[np.arange(mem.size), lead])
-            j = np.array([pos[int(a)] for a in mem[has]], dtype=int)
-            gap[j] = rear_gap[np.flatnonzero(has), lead[has]]
+            j = np.searchsorted(idx, mem[has])  # idx: the active users, ascending
+            gap[j] = rear_gap[has, lead[has]]
             dv[j] = v[mem[has]] - v[mem[lead[has]]]
         xa, va = x[idx], v[idx]
         # the stop line while the lights flash, for those who can still stop there
