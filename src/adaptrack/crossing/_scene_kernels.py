@@ -243,11 +243,24 @@ def confirmed_rows(confirmed, time_s, last_hit_s, stopped, moved, coasting_s, co
     return rows, status
 
 
+@numba.njit(cache=True, inline="always")
+def _whitened_square(lo, w):  # type: ignore[no-untyped-def]
+    """Squared norm of ``lo^-1 w`` (``lo`` lower triangular, 3 x 3); ``w`` is overwritten."""
+    acc = 0.0
+    for a in range(3):
+        v = w[a]
+        for c in range(a):
+            v -= lo[a, c] * w[c]
+        w[a] = v / lo[a, a]
+        acc += w[a] * w[a]
+    return acc
+
+
 @numba.njit(cache=True)
 def gate_scan(  # type: ignore[no-untyped-def]
-    x, p, spread, starting, road_user, occluder, direction, corridor, roads, bounds, radar,
-    noise_tab,
-    noise_cnt, fields, across_std, start_speed_max, extent_gate, gate, z, d2, logdet,
+    x, p, spread, starting, road_user, moving, occluder, direction, corridor, roads, bounds,
+    radar, noise_tab, noise_cnt, fields, across_std, start_speed_max, extent_gate,
+    passing_gate, gate, z, d2, logdet,
 ):  # fmt: skip
     """Fill ``d2`` (T, D) with each detection's squared Mahalanobis distance to each track.
 
@@ -272,6 +285,11 @@ def gate_scan(  # type: ignore[no-untyped-def]
     A stopped vehicle may be starting (``starting`` rows): its held zero speed is replaced by
     the speed in ``[0, start_speed_max]`` along its ``direction`` that best explains the
     detection's radial speed (a road user passing by in the other direction does not fit).
+    With ``passing_gate``, a detection in the gate of a road user moving beside it (a
+    ``moving`` row on its corridor, ``BODY_HALF_SPREADS`` across spreads or more across)
+    starts no stopped track: it keeps its held zero speed for it (a motorcycle in a queue
+    whose own reflection is missed would otherwise take the next reflection of a car driving
+    past it, and follow the car).
     Rows of tracks whose predicted detection lies outside
     the radar's view are ``inf``; returns whether each track is in view (T,).
     """
@@ -282,6 +300,7 @@ def gate_scan(  # type: ignore[no-untyped-def]
     s = np.zeros((3, 3))
     lo = np.zeros((3, 3))
     w = np.zeros(3)
+    w0 = np.zeros(3)
     ground = np.zeros((n_d, 6))  # ground point, sight line, range and cross variances
     for j in range(n_d):
         gx, gy, rho = _ground_point(z[j], radar)
@@ -291,6 +310,7 @@ def gate_scan(  # type: ignore[no-untyped-def]
         ground[j, 2], ground[j, 3] = math.sin(z[j, 1]), math.cos(z[j, 1])
         ground[j, 4], ground[j, 5] = sr * sr, sa * sa
     penalty = np.zeros((n_t, n_d))  # beyond the body's end along the lane (see above)
+    held = np.full((n_t, n_d), np.inf)  # a starting row's d2 at its held zero speed
     for i in range(n_t):
         part_spread = _model(
             i, x, spread, corridor, roads, bounds, radar, noise_tab, noise_cnt, fields,
@@ -317,24 +337,33 @@ def gate_scan(  # type: ignore[no-untyped-def]
         half = BODY_HALF_SPREADS * part_spread
         for j in range(n_d):
             innovation_into(z[j], zp, radar, doppler, w)
+            if starting[i] and passing_gate:
+                w0[:] = w
+                held[i, j] = _whitened_square(lo, w0)
             if starting[i] and h[2, 1] != 0.0:
                 v = min(max(direction[i] * w[2] / h[2, 1], 0.0), start_speed_max)
                 for a in range(3):
                     w[a] -= h[a, 1] * direction[i] * v
-            acc = 0.0
-            for a in range(3):
-                v = w[a]
-                for c in range(a):
-                    v -= lo[a, c] * w[c]
-                w[a] = v / lo[a, a]
-                acc += w[a] * w[a]
-            d2[i, j] = acc
+            d2[i, j] = _whitened_square(lo, w)
             along = (ground[j, 0] - px) * tx + (ground[j, 1] - py) * ty
             excess = abs(along) - half
             if excess > 0.0:
                 c = ground[j, 2] * tx + ground[j, 3] * ty
                 var = ground[j, 4] * c * c + ground[j, 5] * (1.0 - c * c) + p[i, 0, 0]
                 penalty[i, j] = excess * excess / var
+    if passing_gate:
+        beside = BODY_HALF_SPREADS * across_std
+        for j in range(n_d):
+            for i in range(n_t):
+                if not starting[i] or d2[i, j] >= held[i, j]:
+                    continue
+                for k in range(n_t):
+                    if (
+                        moving[k] and d2[k, j] <= gate and corridor[k] == corridor[i]
+                        and abs(x[k, 3] - x[i, 3]) >= beside
+                    ):  # fmt: skip
+                        d2[i, j] = held[i, j]
+                        break
     hidden = np.zeros((n_t, n_d), dtype=np.bool_)
     for i in range(n_t):
         k = occluder[i]
@@ -397,7 +426,7 @@ def favour_sensor_ids(d2, sensor_id, ids, bonus, gate):  # type: ignore[no-untyp
 def associate_scan(  # type: ignore[no-untyped-def]
     x, p, spread, stopped, moved, confirmed, clutter, direction, corridor, sensor_id, roads,
     bounds, radar, noise_tab, noise_cnt, fields, across_std, start_speed_max, extent_gate,
-    occlusion_gate, gate, clutter_gate, id_bonus, z, ids,
+    occlusion_gate, passing_gate, gate, clutter_gate, id_bonus, z, ids,
 ):  # fmt: skip
     """Gate a scan's detections ``z`` (D, 3) to the predicted tracks; try the simple assignment.
 
@@ -425,9 +454,9 @@ def associate_scan(  # type: ignore[no-untyped-def]
             if nearest[k] >= 0 and stopped[nearest[k]]:  # else the nearest is moving
                 behind[queued[k]] = nearest[k]
     seen = gate_scan(
-        x, p, spread, stopped & moved, road_user, behind, direction, corridor, roads, bounds,
-        radar, noise_tab, noise_cnt, fields, across_std, start_speed_max, extent_gate, gate, z,
-        d2, logdet,
+        x, p, spread, stopped & moved, road_user, road_user & ~stopped, behind, direction,
+        corridor, roads, bounds, radar, noise_tab, noise_cnt, fields, across_std,
+        start_speed_max, extent_gate, passing_gate, gate, z, d2, logdet,
     )  # fmt: skip
     if n_d == 0:
         return seen, d2, logdet, True, np.zeros(0, np.int64), np.zeros(0, np.int64)

@@ -145,6 +145,7 @@ class SceneTrackerConfig:
     same_object_m: float = 2.5  # a stop this near an alarmed stopped track is its object
     moving_radial_mps: float = 0.3  # a detection this fast (beyond 3 sigma) ends a stop
     start_speed_max_mps: float = 3.0  # a stopped vehicle's gate allows starting up to this
+    passing_gate: bool = True  # ... but not on a detection of a road user passing beside it
     moved_speed_mps: float = 0.8
     moving_speed_std_mps: float = 1.0  # ... known this well (not a first guess) ...
     moved_distance_m: float = 3.0  # ... and has moved this far from where it was confirmed
@@ -472,7 +473,8 @@ class SceneTracker:
                 tr.x, tr.p, tr.spread, tr.stopped, tr.moved, book.confirmed, self._clutter(),
                 tr.direction, tr.corridor, tr.sensor_id[:, r_col], self._roads, self._bounds,
                 radar_row, noise_tab, noise_cnt, fields, cfg.body_across_std_m,
-                cfg.start_speed_max_mps, cfg.body_extent_gate, cfg.occlusion_gate, self._gate,
+                cfg.start_speed_max_mps, cfg.body_extent_gate, cfg.occlusion_gate,
+                cfg.passing_gate, self._gate,
                 self._clutter_gate, cfg.sensor_id_bonus, z, ids,
             )  # fmt: skip
             if not simple:
