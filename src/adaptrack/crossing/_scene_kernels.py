@@ -260,7 +260,7 @@ def _whitened_square(lo, w):  # type: ignore[no-untyped-def]
 def gate_scan(  # type: ignore[no-untyped-def]
     x, p, spread, starting, road_user, moving, occluder, direction, corridor, roads, bounds,
     radar, noise_tab, noise_cnt, fields, across_std, start_speed_max, extent_gate,
-    passing_gate, gate, z, d2, logdet,
+    passing_gate, beside_m, gate, z, d2, logdet,
 ):  # fmt: skip
     """Fill ``d2`` (T, D) with each detection's squared Mahalanobis distance to each track.
 
@@ -286,7 +286,7 @@ def gate_scan(  # type: ignore[no-untyped-def]
     the speed in ``[0, start_speed_max]`` along its ``direction`` that best explains the
     detection's radial speed (a road user passing by in the other direction does not fit).
     With ``passing_gate``, a detection in the gate of a road user moving beside it (a
-    ``moving`` row on its corridor, ``BODY_HALF_SPREADS`` across spreads or more across)
+    ``moving`` row on its corridor, ``beside_m`` [m] or more across)
     starts no stopped track: it keeps its held zero speed for it (a motorcycle in a queue
     whose own reflection is missed would otherwise take the next reflection of a car driving
     past it, and follow the car).
@@ -352,7 +352,6 @@ def gate_scan(  # type: ignore[no-untyped-def]
                 var = ground[j, 4] * c * c + ground[j, 5] * (1.0 - c * c) + p[i, 0, 0]
                 penalty[i, j] = excess * excess / var
     if passing_gate:
-        beside = BODY_HALF_SPREADS * across_std
         for j in range(n_d):
             for i in range(n_t):
                 if not starting[i] or d2[i, j] >= held[i, j]:
@@ -360,7 +359,7 @@ def gate_scan(  # type: ignore[no-untyped-def]
                 for k in range(n_t):
                     if (
                         moving[k] and d2[k, j] <= gate and corridor[k] == corridor[i]
-                        and abs(x[k, 3] - x[i, 3]) >= beside
+                        and abs(x[k, 3] - x[i, 3]) >= beside_m
                     ):  # fmt: skip
                         d2[i, j] = held[i, j]
                         break
@@ -426,7 +425,7 @@ def favour_sensor_ids(d2, sensor_id, ids, bonus, gate):  # type: ignore[no-untyp
 def associate_scan(  # type: ignore[no-untyped-def]
     x, p, spread, stopped, moved, confirmed, clutter, direction, corridor, sensor_id, roads,
     bounds, radar, noise_tab, noise_cnt, fields, across_std, start_speed_max, extent_gate,
-    occlusion_gate, passing_gate, gate, clutter_gate, id_bonus, z, ids,
+    occlusion_gate, passing_gate, beside_m, gate, clutter_gate, id_bonus, z, ids,
 ):  # fmt: skip
     """Gate a scan's detections ``z`` (D, 3) to the predicted tracks; try the simple assignment.
 
@@ -456,7 +455,7 @@ def associate_scan(  # type: ignore[no-untyped-def]
     seen = gate_scan(
         x, p, spread, stopped & moved, road_user, road_user & ~stopped, behind, direction,
         corridor, roads, bounds, radar, noise_tab, noise_cnt, fields, across_std,
-        start_speed_max, extent_gate, passing_gate, gate, z, d2, logdet,
+        start_speed_max, extent_gate, passing_gate, beside_m, gate, z, d2, logdet,
     )  # fmt: skip
     if n_d == 0:
         return seen, d2, logdet, True, np.zeros(0, np.int64), np.zeros(0, np.int64)

@@ -388,6 +388,8 @@ class SceneTracker:
         self._clutter_gate = gate_threshold(3, self.config.clutter_gate_probability)
         self._last_time: dict[str, float] = {}
         self._half_lane = np.array([0.5 * site.roads[c.first].lane_width_m for c in self.corridors])
+        # two road users this far apart across the lane [m] stand side by side (two spreads)
+        self._beside_m = BODY_HALF_SPREADS * self.config.body_across_std_m
         self.azimuth_bias_rad = {r.name: 0.0 for r in site.radars}  # estimated, taken off
         self._bias_stats = {r.name: np.zeros(3) for r in site.radars}
         self.last_scan_s = -np.inf  # when the last scan was made (timestamp less latency) [s]
@@ -474,7 +476,7 @@ class SceneTracker:
                 tr.direction, tr.corridor, tr.sensor_id[:, r_col], self._roads, self._bounds,
                 radar_row, noise_tab, noise_cnt, fields, cfg.body_across_std_m,
                 cfg.start_speed_max_mps, cfg.body_extent_gate, cfg.occlusion_gate,
-                cfg.passing_gate, self._gate,
+                cfg.passing_gate, self._beside_m, self._gate,
                 self._clutter_gate, cfg.sensor_id_bonus, z, ids,
             )  # fmt: skip
             if not simple:
@@ -582,7 +584,7 @@ class SceneTracker:
         )
         across = np.abs(tr.detection_d[rows][:, None] - tr.x[alarmed, 3][None, :])
         beside = (tr.corridor[rows][:, None] == tr.corridor[alarmed][None, :]) & (
-            across >= BODY_HALF_SPREADS * self.config.body_across_std_m
+            across >= self._beside_m
         )  # NaN (no detection yet): not beside
         same = (near & ~beside).any(axis=1)
         tr.event_raised[rows[same]] = False
