@@ -277,6 +277,7 @@ def test_learnt_clutter_reserves_its_own_detections():
     """A static object older than clutter_age_s keeps the detections in its tight gate; a
     young one (a vehicle waiting at a closure may look static) and moving tracks do not."""
     from adaptrack.crossing._scene_kernels import reserve_clutter
+    from adaptrack.crossing._scene_loop import learnt_clutter
     from adaptrack.crossing.scene_tracker import SceneTrackerConfig, _Tracks
 
     tracker = SceneTracker(SITE, SceneTrackerConfig(clutter_age_s=100.0))
@@ -286,7 +287,9 @@ def test_learnt_clutter_reserves_its_own_detections():
     tracker.tracks = _Tracks.opened(np.zeros(3, int), x, p, 200.0, 1.0, _no_ids(3))
     tracker.tracks.stopped[[0, 2]] = True  # rows 0 and 2 never moved: static
     d2 = np.array([[1.0, 50.0, 2.0], [3.0, 4.0, 5.0], [60.0, 0.5, 70.0]])
-    reserve_clutter(d2, tracker._clutter(), tracker._clutter_gate)
+    tr = tracker.tracks
+    clutter = learnt_clutter(tr.stopped, tr.moved, tr.time_s, tracker.book.born_s, 100.0)
+    reserve_clutter(d2, clutter, tracker._settings.clutter_gate)
     # the old object's detections 0 and 2 (gate 11.3 at 0.99) are its own against everyone
     # else; detection 1, within only the young one's gate, stays open to the road user
     np.testing.assert_array_equal(d2[0], [1.0, 50.0, 2.0])
@@ -302,6 +305,7 @@ def test_will_not_stop_before_the_stop_line_rule():
     27.4 / 20 s. At 10 m/s it needs 1.8 m/s^2: none. A car following the first one stops
     behind it: none. Not detected for longer than ``stop_seen_s``: none.
     """
+    from adaptrack.crossing._scene_loop import stop_line_rows, warning_on
     from adaptrack.crossing.scene_tracker import _Tracks
 
     tracker = SceneTracker(SITE, warnings=np.array([[0.0, 100.0]]))
@@ -316,24 +320,22 @@ def test_will_not_stop_before_the_stop_line_rule():
         np.zeros(3, int), x, np.tile(np.eye(4), (3, 1, 1)), 10.0, 1.5, _no_ids(3)
     )
     tracker.tracks.moved[:] = True
-    tracker._stop_line_events(10.0, np.ones(3, bool))  # all in the lane
-    ev = tracker.events
-    assert [e["track_id"] for e in ev] == [1]
+
+    def raised(time_s):  # rows raised now, and their lead times [s]
+        cant, lead = stop_line_rows(
+            tracker._rows(), 3, time_s, np.ones(3, bool), tracker._settings, tracker._tables
+        )  # all in the lane
+        return np.flatnonzero(cant).tolist(), lead
+
+    rows, lead = raised(10.0)
+    assert rows == [0]  # track 1
     front = np.sqrt(3.0) * 1.5
-    assert ev[0]["lead_s"] == pytest.approx((30.0 - front) / 20.0)
-    tracker._stop_line_events(10.05, np.ones(3, bool))
-    assert len(tracker.events) == 1  # once per track
+    assert lead[0] == pytest.approx((30.0 - front) / 20.0)
+    assert raised(10.05)[0] == []  # once per track
     tracker.tracks.line_event_raised[:] = False
-    tracker.events.clear()
-    tracker._stop_line_events(10.5, np.ones(3, bool))  # last detected 0.5 s ago
-    assert tracker.events == []
-    quiet = SceneTracker(SITE)  # no warning: no prediction
-    quiet.book.add(1, 0.0)
-    quiet.book.confirmed[:] = True
-    quiet.tracks = _Tracks.opened(np.zeros(1, int), x[:1], np.eye(4)[None], 10.0, 1.5, _no_ids(1))
-    quiet.tracks.moved[:] = True
-    quiet._modes(10.0)
-    assert quiet.events == []
+    assert raised(10.5)[0] == []  # last detected 0.5 s ago
+    assert warning_on(tracker._tables, 10.0)
+    assert not warning_on(SceneTracker(SITE)._tables, 10.0)  # no warning: no prediction
 
 
 def test_a_sites_own_classes_drive_in_its_scene():

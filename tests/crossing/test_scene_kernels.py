@@ -174,7 +174,7 @@ def test_compiled_clusters_equal_the_kd_tree_clusters():
 def _corridor_tables(site_name):
     site = load_site(site_name)
     tracker = SceneTracker(site)
-    return site, tracker.corridors, tracker._roads, tracker._bounds
+    return site, tracker.corridors, tracker._tables.roads, tracker._tables.bounds
 
 
 @pytest.mark.parametrize("site_name", ["lx_default", "lx_three_arm", "lx_curve_near"])

@@ -30,9 +30,11 @@ open tentative tracks from the detections left over, clustered within ``cluster_
 split a stopped track whose reflections come from two bodies of a queue
 (:meth:`SceneTracker._split`); merge two tracks on one body (two moving parts of one long
 vehicle among them; a young static object whose body overlaps a stopped road user's,
-``absorb_young_static``). The per-track arithmetic runs compiled (:mod:`._scene_kernels`):
-a scan's gating and its update are one call each (``associate_scan``, ``apply_scan``),
-around the global assignment when a detection lies in two tracks' gates.
+``absorb_young_static``). All of it runs compiled: the per-scan kernels of
+:mod:`._scene_kernels` inside one loop over scans (:mod:`._scene_loop`), so that a run of
+scans is one call (:meth:`SceneTracker.run`, :func:`track_scene`) and a single scan too
+(:meth:`SceneTracker.step`); the global assignment of a scan where a detection lies in two
+tracks' gates is SciPy's, called from the loop.
 
 Stopped mode: a confirmed track slower than ``stop_speed_mps`` for ``stop_confirm_s`` (a
 speed estimate within ``stop_exit_sigmas`` sigmas above it does not restart the count: the
@@ -68,7 +70,6 @@ or rejected with a reason (``ScanLog``).
 
 from __future__ import annotations
 
-import bisect
 import itertools
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, fields
@@ -80,25 +81,21 @@ import pandas as pd
 
 from .._toml import load_toml
 from .._typing import FloatArray
-from ..tracking import (
-    LifecycleRules,
-    TrackBook,
-    TrackStatus,
-    gate_threshold,
-    gnn_assign,
-)
-from ._scene_kernels import (
-    BODY_HALF_SPREADS,
-    apply_scan,
-    associate_scan,
-    confirmed_rows,
-    detections_in_view,
-    mode_changes,
-    open_tracks,
-    planar_rows,
-    predict_tracks,
-    retired_rows,
-    split_rows,
+from ..tracking import LifecycleRules, TrackBook, TrackStatus, gate_threshold
+from ._scene_kernels import BODY_HALF_SPREADS
+from ._scene_loop import (
+    EVENT_FIELDS,
+    EVENT_NAMES,
+    LOG_FIELDS,
+    ROW_VALUES,
+    RadarState,
+    RowBuffer,
+    Settings,
+    SiteTables,
+    TrackRows,
+    empty_rows,
+    run_scans,
+    write_rows,
 )
 from .corridor import Corridor, site_corridors
 from .sensor import curve_tables
@@ -308,28 +305,10 @@ class _Tracks:
         """Stopped objects that never moved (clutter: a post, a rail), bool per track."""
         return self.stopped & ~self.moved
 
-    def taken(self, rows: np.ndarray) -> _Tracks:
-        """Return a copy of the tracks in ``rows``."""
-        return _Tracks(**{name: getattr(self, name)[rows] for name in self.__dataclass_fields__})
-
-    def place(self, rows: np.ndarray | slice, u: FloatArray, spread: FloatArray) -> None:
-        """Move stopped ``rows`` to ``u`` along their corridor with a new body ``spread`` [m].
-
-        Their position sigma grows by half a metre; the reflection moments restart at one
-        body's (Gaussian).
-        """
-        self.x[rows, 0] = self.anchor_u[rows] = u
-        self.p[rows, 0, 0] += 0.25
-        self.spread[rows] = spread
-        self.along_m2[rows], self.along_m4[rows] = _one_body_moments(spread)
-
     def append(self, other: _Tracks) -> None:
+        """Add the tracks of ``other`` after these."""
         for name in self.__dataclass_fields__:
             setattr(self, name, np.concatenate([getattr(self, name), getattr(other, name)]))
-
-    def keep(self, mask: np.ndarray) -> None:
-        for name in self.__dataclass_fields__:
-            setattr(self, name, getattr(self, name)[mask])
 
 
 @dataclass
@@ -352,7 +331,8 @@ class SceneTracker:
 
     ``step(radar, time_s, detections)`` processes one scan; ``rows(time_s)`` (or the arrays
     of ``columns``) gives the confirmed tracks after it; ``events`` and ``log`` collect hazard
-    events and detection outcomes.
+    events and detection outcomes. :meth:`run` processes many scans in one compiled call
+    (:func:`._scene_loop.run_scans`), as :func:`track_scene` does.
     """
 
     def __init__(
@@ -363,64 +343,30 @@ class SceneTracker:
     ) -> None:
         self.site = site
         self.config = config or SceneTrackerConfig()
-        # the controller's warning intervals (K, 2) [s]: lights flashing or barriers down
-        self._warning_starts, self._warning_ends = _merged_intervals(
-            np.asarray([] if warnings is None else warnings, float).reshape(-1, 2)
-        )
         self.corridors = site_corridors(site.roads, site.zone_m + site.run_in_m)
         self.book = TrackBook(self.config.rules)
         self.tracks = _Tracks.empty(len(site.radars))
         self.events: list[dict[str, object]] = []
         self.log = ScanLog()
-        self._radars = {r.name: r for r in site.radars}
         self._radar_index = {r.name: i for i, r in enumerate(site.radars)}
-        self._radar_tables = {
-            r.name: (
-                r.kernel_row(), *r.noise_table(), r.field_table(),
-                *curve_tables((r.detection_curve("default"),)),
-            )
-            for r in site.radars
-        }  # fmt: skip
-        self._roads, self._bounds = _corridor_tables(self.corridors)
-        self._crossing_u = np.array([c.crossing_u for c in self.corridors])
-        self._length_m = np.array([c.path.length_m for c in self.corridors])
-        self._gate = gate_threshold(3, self.config.gate_probability)
-        self._clutter_gate = gate_threshold(3, self.config.clutter_gate_probability)
-        self._last_time: dict[str, float] = {}
-        self._half_lane = np.array([0.5 * site.roads[c.first].lane_width_m for c in self.corridors])
-        # two road users this far apart across the lane [m] stand side by side (two spreads)
-        self._beside_m = BODY_HALF_SPREADS * self.config.body_across_std_m
-        self.azimuth_bias_rad = {r.name: 0.0 for r in site.radars}  # estimated, taken off
-        self._bias_stats = {r.name: np.zeros(3) for r in site.radars}
+        self._tables = _site_tables(site, self.corridors, warnings)
+        self._settings = _loop_settings(self.config)
+        n_radars = len(site.radars)
+        self._radar_state = RadarState(
+            np.full(n_radars, -np.inf), np.zeros(n_radars), np.zeros((n_radars, 3))
+        )
         self.last_scan_s = -np.inf  # when the last scan was made (timestamp less latency) [s]
         self.outside_view = np.zeros(0, bool)  # the last scan's detections outside every field
 
-    # -- track opening ----------------------------------------------------------------------
-    def _open(self, z: FloatArray, ids: np.ndarray, radar_name: str, time_s: float) -> int:
-        """Open one tentative track per cluster of detections ``z`` (n, 3); return the count.
+    @property
+    def azimuth_bias_rad(self) -> dict[str, float]:
+        """Each radar's estimated azimuth bias, taken off its scans [rad] (0 until known)."""
+        return {name: float(self._radar_state.azimuth_bias_rad[k])
+                for name, k in self._radar_index.items()}  # fmt: skip
 
-        Each starts with the sensor object id (``ids`` (n,), -1: none) of its first detection.
-        """
-        radar_row, noise_tab, noise_cnt = self._radar_tables[radar_name][:3]
-        cfg = self.config
-        corridor, x, p, _, first = open_tracks(
-            z, radar_row, noise_tab, noise_cnt, self._roads, self._bounds,
-            cfg.cluster_radius_m, cfg.initial_speed_std_mps**2, cfg.body_along_std_m**2,
-        )  # fmt: skip
-        n_new = corridor.size
-        if n_new:
-            self.book.add(n_new, time_s)
-            sensor_id = np.full((n_new, len(self._radars)), -1, np.int64)
-            sensor_id[:, self._radar_index[radar_name]] = ids[first]
-            self.tracks.append(
-                _Tracks.opened(corridor, x, p, time_s, cfg.body_along_std_m, sensor_id)
-            )
-        return n_new
-
-    # -- one scan ---------------------------------------------------------------------------
     def previous_scan_s(self, radar_name: str) -> float:
         """Timestamp of the radar's last scan processed [s] (-inf before its first)."""
-        return self._last_time.get(radar_name, -np.inf)
+        return float(self._radar_state.last_stamp_s[self._radar_index[radar_name]])
 
     def step(
         self, radar_name: str, time_s: float, z: FloatArray, ids: np.ndarray | None = None
@@ -433,10 +379,8 @@ class SceneTracker:
         truth: a detection with the id that radar last gave a track costs
         ``sensor_id_bonus`` less in the assignment, within the same gate.
         """
-        radar = self._radars.get(radar_name)
-        if radar is None:
-            raise ValueError(f"unknown radar {radar_name!r}; the site has {sorted(self._radars)}")
-        last = self._last_time.get(radar_name, -np.inf)
+        r = self._radar(radar_name)
+        last = self._radar_state.last_stamp_s[r]
         if not time_s > last:
             raise ValueError(
                 f"radar {radar_name!r}: scan at {time_s} s is not after its previous scan at "
@@ -446,308 +390,71 @@ class SceneTracker:
         if not np.isfinite(z).all():
             raise ValueError(f"radar {radar_name!r} at {time_s} s: a detection is not finite")
         ids = _sensor_ids(ids, z.shape[0], radar_name, time_s)
-        self._last_time[radar_name] = time_s
-        time_s = float(radar.measured_at(time_s))
-        self.last_scan_s = time_s
-        cfg = self.config
-        bias = self.azimuth_bias_rad[radar_name]
-        if bias:
-            z = z.copy()
-            z[:, 1] = (z[:, 1] - bias + np.pi) % (2 * np.pi) - np.pi
-        tr = self.tracks
-        predict_tracks(
-            tr.x, tr.p, tr.time_s, tr.stopped, tr.direction, time_s,
-            cfg.accel_psd, cfg.lateral_psd, cfg.stopped_psd,
-        )  # fmt: skip
-        radar_row, noise_tab, noise_cnt, fields, pd_tab, pd_cnt = self._radar_tables[radar_name]
-        view = detections_in_view(z, radar_row, fields)
-        self.outside_view = ~view
-        n_out = int(np.count_nonzero(self.outside_view))
-        if n_out:
-            self.log.rejected_outside_view += n_out
-            z = z[view]
-            ids = ids[view]
-        r_col = self._radar_index[radar_name]
-        used = np.zeros(z.shape[0], dtype=bool)
-        if tr.time_s.size:
-            book = self.book
-            seen, d2, logdet, simple, ti, di = associate_scan(
-                tr.x, tr.p, tr.spread, tr.stopped, tr.moved, book.confirmed, self._clutter(),
-                tr.direction, tr.corridor, tr.sensor_id[:, r_col], self._roads, self._bounds,
-                radar_row, noise_tab, noise_cnt, fields, cfg.body_across_std_m,
-                cfg.start_speed_max_mps, cfg.body_extent_gate, cfg.occlusion_gate,
-                cfg.passing_gate, self._beside_m, self._gate,
-                self._clutter_gate, cfg.sensor_id_bonus, z, ids,
-            )  # fmt: skip
-            if not simple:
-                ti, di = gnn_assign(np.where(d2 <= self._gate, d2, np.inf), self._gate)
-            stats = self._bias_stats[radar_name]
-            used = apply_scan(
-                time_s, seen, d2, logdet, self._gate, ti, di, z, ids, r_col, tr.x, tr.p,
-                tr.spread, tr.along_m2, tr.along_m4, tr.stopped, tr.moved, tr.direction,
-                tr.slow_since, tr.corridor, tr.miss_run, tr.occluded, tr.anchor_u,
-                tr.doppler_seen_s, tr.detection_d, tr.sensor_id, book.history, book.misses,
-                book.last_hit_s, book.confirmed, self._roads, self._bounds, radar_row, noise_tab,
-                noise_cnt,
-                fields, pd_tab, pd_cnt, cfg.body_across_std_m, cfg.moving_radial_mps,
-                cfg.start_speed_max_mps**2, cfg.spread_learning_rate, cfg.shape_learning_rate,
-                *cfg.spread_limits_m, cfg.estimate_azimuth_bias, self._half_lane, bias, stats,
-                1.0 - 1.0 / cfg.bias_memory, cfg.bias_gate_m, cfg.confirm_speed_std_mps**2,
-                (1 << book.rules.confirm_window) - 1, book.rules.confirm_hits,
-            )  # fmt: skip
-            if stats[2] >= cfg.bias_min_samples:
-                self.azimuth_bias_rad[radar_name] = float(stats[1] / stats[0])
-        self.log.updated += int(np.count_nonzero(used))
-        left = z[~used]
-        if left.shape[0]:
-            n_new = self._open(left, ids[~used], radar_name, time_s)
-            self.log.opened += n_new
-            self.log.joined_new += left.shape[0] - n_new
-        self._modes(time_s)
-        self._split(time_s)
-        self._retire(time_s)
+        self.run(np.array([r]), np.array([float(time_s)]), np.array([0, z.shape[0]]), z, ids, False)
 
-    def _clutter(self) -> np.ndarray:
-        """Return the static objects older than ``clutter_age_s`` (bool per track).
+    def run(
+        self,
+        radar_rows: np.ndarray,
+        stamps_s: FloatArray,
+        starts: np.ndarray,
+        z: FloatArray,
+        ids: np.ndarray,
+        record: bool,
+    ) -> dict[str, np.ndarray]:
+        """Process checked scans in order (their arrays as :func:`scan_arrays` gives them).
 
-        Barrier posts, rails: their detections are their own (:func:`.reserve_clutter`); a
-        young one may be a vehicle waiting at a closure.
+        Scan ``k`` is ``z[starts[k]:starts[k+1]]`` with sensor ``ids``, of radar row
+        ``radar_rows[k]`` (the site's order), stamped ``stamps_s[k]``; stamps of one radar
+        must increase. Returns the columns of :meth:`rows` after every scan if ``record``
+        (else none).
         """
-        tr = self.tracks
-        return tr.static & (tr.time_s - self.book.born_s >= self.config.clutter_age_s)
-
-    def _split(self, time_s: float) -> None:
-        """Split a stopped track holding two queued bodies (:func:`._scene_kernels.split_rows`).
-
-        Only road users that moved (static clutter stays whole: a rail reflects all along the
-        crossing). The part towards the crossing keeps the track's identity, the other becomes
-        a new confirmed stopped road user; each is placed at its cluster with that spread
-        (within the limits) and half a metre more position sigma (:meth:`_Tracks.place`).
-        """
-        cfg = self.config
-        tr = self.tracks
-        rows, half, body = split_rows(
-            tr.stopped, tr.moved, tr.along_m2, tr.along_m4, cfg.split_kurtosis,
-            cfg.split_min_half_gap_m,
+        book, tr = self.book, self.tracks
+        log = np.array([getattr(self.log, name) for name in LOG_FIELDS], np.int64)
+        outside = np.zeros(z.shape[0], bool)
+        t, n, book.next_id, events, n_events, out, n_out = run_scans(
+            self._rows(), book.ids.size, book.next_id, self._settings, self._tables,
+            self._radar_state, log, z, ids, np.asarray(starts, np.int64),
+            np.asarray(radar_rows, np.int64), np.asarray(stamps_s, float), outside,
+            np.zeros((0, EVENT_FIELDS)), 0, record, empty_rows(0), 0,
         )  # fmt: skip
-        if rows.size == 0:
-            return
-        towards = np.where(self._crossing_u[tr.corridor[rows]] >= tr.x[rows, 0], 1.0, -1.0)
-        u = tr.x[rows, 0]
-        spread = np.clip(body, *cfg.spread_limits_m)
-        rear = tr.taken(rows)
-        tr.place(rows, u + towards * half, spread)
-        rear.place(slice(None), u - towards * half, spread)
-        self.book.add_copies(rows, time_s)
-        tr.append(rear)
+        for name, column in zip(TrackRows._fields, t, strict=True):
+            setattr(book if name in _BOOK_COLUMNS else tr, name, column[:n])
+        for name, count in zip(LOG_FIELDS, log.tolist(), strict=True):
+            setattr(self.log, name, count)
+        self.events.extend(_event_records(events[:n_events]))
+        k = radar_rows[-1]
+        self.last_scan_s = float(stamps_s[-1] - self._tables.latency_s[k])
+        self.outside_view = outside[starts[-2] :]
+        return _columns(out, n_out)
 
-    def _modes(self, time_s: float) -> None:
-        """Update moving and stopped modes (:func:`._scene_kernels.mode_changes`); raise events."""
-        cfg = self.config
-        tr = self.tracks
-        hazard, on_road = mode_changes(
-            time_s, tr.x, tr.p, tr.corridor, self.book.confirmed, self.book.last_hit_s,
-            tr.anchor_u, tr.stopped, tr.moved, tr.direction, tr.slow_since, tr.event_raised,
-            tr.doppler_seen_s, self._crossing_u, self._half_lane, self.site.barrier_m,
-            cfg.moved_speed_mps, cfg.moving_speed_std_mps, cfg.moved_distance_m,
-            cfg.stop_speed_mps, cfg.stop_exit_sigmas, cfg.stop_confirm_s,
-            cfg.stop_seen_s if cfg.stationary_detections else np.inf,
-        )  # fmt: skip
-        if hazard.any():
-            rows = self._new_objects(np.flatnonzero(hazard))
-            self._raise("stopped_between_barriers", rows, time_s)
-        if self._warning(time_s):
-            self._stop_line_events(time_s, on_road)
+    def _rows(self) -> TrackRows:
+        """Return the track book's and the filter's columns (the arrays themselves, not copies)."""
+        book, tr = self.book, self.tracks
+        return TrackRows(**{
+            name: getattr(book if name in _BOOK_COLUMNS else tr, name) for name in TrackRows._fields
+        })  # fmt: skip
 
-    def _new_objects(self, rows: np.ndarray) -> np.ndarray:
-        """Keep the hazard ``rows`` that are not an object already alarmed: one object, one alarm.
-
-        A track stopped within ``same_object_m`` (half a car's length) of a stopped track whose
-        alarm is raised stands on that object's body (e.g. a track from the other lane that
-        took a stopped car's reflections); it raises no second alarm now, and may later if
-        the other track is gone. Not one whose own detections lie beside that track, on its
-        corridor ``BODY_HALF_SPREADS`` spreads across (``body_across_std_m``) or more: another
-        road user stands there (a motorcycle beside a car queued between the barriers). Where
-        the detections lie, not the track's state: a duplicate's state may stand beside the
-        body whose reflections it takes.
-        """
-        if rows.size == 0:
-            return rows
-        tr = self.tracks
-        alarmed = np.setdiff1d(np.flatnonzero(tr.event_raised & tr.stopped), rows)
-        if alarmed.size == 0:
-            return rows
-        new = self._planar(rows)["position"]
-        old = self._planar(alarmed)["position"]
-        near = (
-            np.linalg.norm(new[:, None, :] - old[None, :, :], axis=-1) < self.config.same_object_m
-        )
-        across = np.abs(tr.detection_d[rows][:, None] - tr.x[alarmed, 3][None, :])
-        beside = (tr.corridor[rows][:, None] == tr.corridor[alarmed][None, :]) & (
-            across >= self._beside_m
-        )  # NaN (no detection yet): not beside
-        same = (near & ~beside).any(axis=1)
-        tr.event_raised[rows[same]] = False
-        return rows[~same]
-
-    def _warning(self, time_s: float) -> bool:
-        """Whether the crossing's lights flash or its barriers are down at ``time_s``."""
-        k = bisect.bisect_right(self._warning_starts, time_s) - 1
-        return k >= 0 and time_s < self._warning_ends[k]
-
-    def _stop_line_events(self, time_s: float, on_road: np.ndarray) -> None:
-        """Raise "will not stop before the stop line" for tracks that cannot stop there.
-
-        A moving confirmed road user on the carriageway, detected within ``stop_seen_s``,
-        first in its lane (one who follows another stops behind it), whose front needs more
-        than ``stop_decel_mps2`` to stop at the line even at the low end of its speed's 90 %
-        interval; its lead is the time to reach the line. ``on_road``: tracks on the
-        carriageway (bool per track).
-        """
-        cfg = self.config
-        tr = self.tracks
-        ahead = self._crossing_u[tr.corridor] - tr.x[:, 0]  # towards the crossing: sign(ahead)
-        speed = tr.x[:, 1] * np.sign(ahead)  # > 0 approaching
-        front = np.sqrt(3.0) * tr.spread  # half a uniform body of that spread
-        to_line = np.abs(ahead) - self.site.stop_line_m - front
-        cand = (
-            self.book.confirmed & tr.moved & ~tr.stopped & ~tr.line_event_raised & on_road
-            & (speed > 0.5) & (to_line > -front)
-        )  # fmt: skip
-        seen = time_s - self.book.last_hit_s <= cfg.stop_seen_s
-        slow_bound = speed - 1.645 * np.sqrt(tr.p[:, 1, 1])  # the speed is at least this (95 %)
-        cant = (
-            cand & seen & (slow_bound > np.sqrt(2.0 * cfg.stop_decel_mps2 * np.maximum(to_line, 0)))
-        )
-        road_user = self.book.confirmed & ~tr.static
-        for i in np.flatnonzero(cant):  # one who follows a road user stops behind it
-            ahead_i = (tr.x[:, 0] - tr.x[i, 0]) * np.sign(ahead[i])
-            lane = np.abs(tr.x[:, 3] - tr.x[i, 3]) < self._half_lane[tr.corridor[i]]
-            cant[i] = not np.any(
-                road_user & (tr.corridor == tr.corridor[i]) & lane & (ahead_i > 0)
-                & (np.sign(ahead) == np.sign(ahead[i]))
-            )  # fmt: skip
-        rows = np.flatnonzero(cant)
-        self._raise(
-            "will_not_stop_before_stop_line", rows, time_s,
-            np.maximum(to_line[rows], 0.0) / speed[rows],
-        )  # fmt: skip
-        tr.line_event_raised |= cant
-
-    def _raise(
-        self, event: str, rows: np.ndarray, time_s: float, lead_s: FloatArray | None = None
-    ) -> None:
-        """Record ``event`` for the tracks in ``rows`` (with its lead time [s] if predicted)."""
-        if rows.size == 0:
-            return
-        pos = self._planar(rows)["position"]
-        for k, i in enumerate(rows):
-            self.events.append(
-                {
-                    "time_s": time_s,
-                    "event": event,
-                    "track_id": int(self.book.ids[i]),
-                    "east_m": float(pos[k, 0]),
-                    "north_m": float(pos[k, 1]),
-                    "lead_s": float(lead_s[k]) if lead_s is not None else np.nan,
-                }
+    def _radar(self, radar_name: str) -> int:
+        """Return the site's row of a radar; an unknown name is an error."""
+        r = self._radar_index.get(radar_name)
+        if r is None:
+            raise ValueError(
+                f"unknown radar {radar_name!r}; the site has {sorted(self._radar_index)}"
             )
-
-    def _retire(self, time_s: float) -> None:
-        """Delete the tracks that expired or left their corridor, then merge the rest.
-
-        Of two tracks on one body the younger goes: same corridor, within the bodies'
-        spreads along it (or, moving faster than ``merge_parts_speed_mps``, with overlapping
-        bodies: two parts of one long vehicle), within ``merge_lateral_m`` across, velocities
-        alike (within ``merge_speed_mps`` plus three sigma), both static objects or neither
-        (:func:`._scene_kernels.retired_rows`). A road user followed longer than
-        ``merge_settled_s`` stays when the other is more than ``merge_settled_lateral_m``
-        beside it (two road users side by side, e.g. a motorcycle filtering past a queue).
-        """
-        tr = self.tracks
-        book = self.book
-        cfg = self.config
-        r = cfg.rules
-        dead = retired_rows(
-            time_s, tr.time_s, tr.x, tr.p, tr.corridor, self._length_m, tr.spread, tr.stopped,
-            tr.moved, tr.occluded, book.ids, book.confirmed, book.misses, book.born_s,
-            book.last_hit_s, cfg.stationary_detections, r.tentative_misses, r.max_tentative_s,
-            r.max_coast_s, r.max_coast_stopped_s, r.max_coast_hidden_s, r.max_position_std_m,
-            r.max_stopped_misses, cfg.merge_lateral_m, cfg.merge_speed_mps,
-            cfg.merge_parts_speed_mps, cfg.clutter_age_s, cfg.absorb_young_static,
-            cfg.merge_settled_s, cfg.merge_settled_lateral_m,
-        )  # fmt: skip
-        if dead.any():
-            self._drop(np.flatnonzero(dead))
-
-    def _drop(self, rows: np.ndarray) -> None:
-        """Forget the tracks in ``rows`` (book and filter states)."""
-        if rows.size:
-            keep = np.ones(self.tracks.time_s.size, bool)
-            keep[rows] = False
-            self.book.remove(rows)
-            self.tracks.keep(keep)
-
-    def _planar(self, rows: np.ndarray) -> dict[str, FloatArray]:
-        """Planar position, velocity, position sigma and distance to the crossing of rows."""
-        tr = self.tracks
-        n = rows.size
-        out: dict[str, FloatArray] = {
-            "position": np.zeros((n, 2)),
-            "velocity": np.zeros((n, 2)),
-            "position_std": np.zeros(n),
-            "to_crossing": np.zeros(n),
-        }
-        planar_rows(
-            tr.x[rows], tr.p[rows], tr.corridor[rows], self._roads, self._bounds,
-            self._crossing_u, *out.values(),
-        )  # fmt: skip
-        return out
-
-    def snapshot(self, time_s: float) -> _Snapshot:
-        """Return the confirmed tracks' states at ``time_s`` (:meth:`rows` before geometry)."""
-        tr = self.tracks
-        rows, status = confirmed_rows(
-            self.book.confirmed, tr.time_s, self.book.last_hit_s, tr.stopped, tr.moved,
-            COASTING_S, _STATUS_CODES,
-        )  # fmt: skip
-        return _Snapshot(
-            self.book.ids[rows], np.full(rows.size, time_s), tr.x[rows], tr.p[rows],
-            tr.corridor[rows], status, tr.moved[rows],
-        )  # fmt: skip
-
-    def table(self, snapshots: list[_Snapshot]) -> dict[str, np.ndarray]:
-        """Columns of :meth:`rows` for several snapshots at once (one planar conversion)."""
-        parts = [np.concatenate([getattr(s, f) for s in snapshots]) for f in _SNAPSHOT_FIELDS]
-        ids, times, x, p, corridor, status, moved = (
-            parts if snapshots else (np.zeros(0, np.int64), np.zeros(0), np.zeros((0, N_STATE)),
-                                     np.zeros((0, N_STATE, N_STATE)), np.zeros(0, np.int64),
-                                     np.zeros(0, np.int64), np.zeros(0, bool))
-        )  # fmt: skip
-        n = ids.size
-        pos, vel, pos_std, to_cross = np.zeros((n, 2)), np.zeros((n, 2)), np.zeros(n), np.zeros(n)
-        planar_rows(
-            x, p, corridor, self._roads, self._bounds, self._crossing_u, pos, vel, pos_std,
-            to_cross,
-        )  # fmt: skip
-        return {
-            "track_id": ids,
-            "time_s": times,
-            "east_m": pos[:, 0],
-            "north_m": pos[:, 1],
-            "speed_mps": np.hypot(vel[:, 0], vel[:, 1]),
-            "east_speed_mps": vel[:, 0],
-            "north_speed_mps": vel[:, 1],
-            "from_crossing_m": to_cross,
-            "status": status,
-            "moved": moved,
-            "position_std_m": pos_std,
-            "speed_std_mps": np.sqrt(p[:, 1, 1]),
-        }
+        return r
 
     def columns(self, time_s: float) -> dict[str, np.ndarray]:
         """Columns of :meth:`rows` (arrays, one entry per confirmed track)."""
-        return self.table([self.snapshot(time_s)])
+        out, n_out = write_rows(
+            self._rows(),
+            self.book.ids.size,
+            float(time_s),
+            self._settings,
+            self._tables,
+            empty_rows(0),
+            0,
+        )
+        return _columns(out, n_out)
 
     def rows(self, time_s: float) -> pd.DataFrame:
         """Estimates of every confirmed track at ``time_s`` (after the scan's update).
@@ -758,23 +465,103 @@ class SceneTracker:
         return _frame([self.columns(time_s)])
 
 
-@dataclass(frozen=True)
-class _Snapshot:
-    """Confirmed tracks at one time.
-
-    Ids, time [s], states and covariances, corridor rows, status codes, whether each moved.
-    """
-
-    track_id: np.ndarray
-    time_s: FloatArray
-    x: FloatArray
-    p: FloatArray
-    corridor: np.ndarray
-    status: np.ndarray
-    moved: np.ndarray
+_BOOK_COLUMNS = ("ids", "history", "confirmed", "misses", "last_hit_s", "born_s")
 
 
-_SNAPSHOT_FIELDS = tuple(f.name for f in fields(_Snapshot))
+def _columns(out: RowBuffer, n: int) -> dict[str, np.ndarray]:
+    """Columns of :meth:`SceneTracker.rows` from a row buffer's first ``n`` rows."""
+    values = {name: out.values[:n, k] for k, name in enumerate(ROW_VALUES)}
+    return {
+        "track_id": out.track_id[:n],
+        "time_s": values["time_s"],
+        "east_m": values["east_m"],
+        "north_m": values["north_m"],
+        "speed_mps": values["speed_mps"],
+        "east_speed_mps": values["east_speed_mps"],
+        "north_speed_mps": values["north_speed_mps"],
+        "from_crossing_m": values["from_crossing_m"],
+        "status": out.status[:n],
+        "moved": out.moved[:n],
+        "position_std_m": values["position_std_m"],
+        "speed_std_mps": values["speed_std_mps"],
+    }
+
+
+def _event_records(events: FloatArray) -> list[dict[str, object]]:
+    """Event dicts (``EVENT_COLUMNS``) of an event buffer's rows."""
+    return [
+        {"time_s": float(t), "event": EVENT_NAMES[int(code)], "track_id": int(track),
+         "east_m": float(east), "north_m": float(north), "lead_s": float(lead)}
+        for t, code, track, east, north, lead in events.tolist()
+    ]  # fmt: skip
+
+
+def _loop_settings(cfg: SceneTrackerConfig) -> Settings:
+    """Return the compiled loop's view of the settings (gates as chi-square thresholds)."""
+    r = cfg.rules
+    return Settings(
+        accel_psd=cfg.accel_psd, lateral_psd=cfg.lateral_psd, stopped_psd=cfg.stopped_psd,
+        body_along_std_m=cfg.body_along_std_m, body_across_std_m=cfg.body_across_std_m,
+        start_speed_max_mps=cfg.start_speed_max_mps, body_extent_gate=cfg.body_extent_gate,
+        occlusion_gate=cfg.occlusion_gate, passing_gate=cfg.passing_gate,
+        # two road users this far apart across the lane [m] stand side by side (two spreads)
+        beside_m=BODY_HALF_SPREADS * cfg.body_across_std_m,
+        gate=gate_threshold(3, cfg.gate_probability),
+        clutter_gate=gate_threshold(3, cfg.clutter_gate_probability),
+        sensor_id_bonus=cfg.sensor_id_bonus, clutter_age_s=cfg.clutter_age_s,
+        moving_radial_mps=cfg.moving_radial_mps, spread_learning_rate=cfg.spread_learning_rate,
+        shape_learning_rate=cfg.shape_learning_rate, spread_lo_m=cfg.spread_limits_m[0],
+        spread_hi_m=cfg.spread_limits_m[1], estimate_azimuth_bias=cfg.estimate_azimuth_bias,
+        bias_forget=1.0 - 1.0 / cfg.bias_memory, bias_gate_m=cfg.bias_gate_m,
+        bias_min_samples=cfg.bias_min_samples, confirm_speed_var=cfg.confirm_speed_std_mps**2,
+        window_mask=(1 << r.confirm_window) - 1, confirm_hits=r.confirm_hits,
+        cluster_radius_m=cfg.cluster_radius_m, initial_speed_var=cfg.initial_speed_std_mps**2,
+        moved_speed_mps=cfg.moved_speed_mps, moving_speed_std_mps=cfg.moving_speed_std_mps,
+        moved_distance_m=cfg.moved_distance_m, stop_speed_mps=cfg.stop_speed_mps,
+        stop_exit_sigmas=cfg.stop_exit_sigmas, stop_confirm_s=cfg.stop_confirm_s,
+        stop_seen_s=cfg.stop_seen_s, stationary_detections=cfg.stationary_detections,
+        same_object_m=cfg.same_object_m, stop_decel_mps2=cfg.stop_decel_mps2,
+        split_kurtosis=cfg.split_kurtosis, split_min_half_gap_m=cfg.split_min_half_gap_m,
+        tentative_misses=r.tentative_misses, max_tentative_s=r.max_tentative_s,
+        max_coast_s=r.max_coast_s, max_coast_stopped_s=r.max_coast_stopped_s,
+        max_coast_hidden_s=r.max_coast_hidden_s, max_position_std_m=r.max_position_std_m,
+        max_stopped_misses=r.max_stopped_misses, merge_lateral_m=cfg.merge_lateral_m,
+        merge_speed_mps=cfg.merge_speed_mps, merge_parts_speed_mps=cfg.merge_parts_speed_mps,
+        absorb_young_static=cfg.absorb_young_static, merge_settled_s=cfg.merge_settled_s,
+        merge_settled_lateral_m=cfg.merge_settled_lateral_m, coasting_s=COASTING_S,
+        status_codes=_STATUS_CODES,
+    )  # fmt: skip
+
+
+def _site_tables(site: Site, corridors: list[Corridor], warnings: FloatArray | None) -> SiteTables:
+    """Return the site for the compiled loop; ``warnings`` (K, 2): the controller's intervals."""
+    radars = site.radars
+    starts, ends = _merged_intervals(
+        np.asarray([] if warnings is None else warnings, float).reshape(-1, 2)
+    )
+    roads, bounds = _corridor_tables(corridors)
+    noise_tab, noise_cnt = curve_tables(tuple(
+        c for r in radars for c in (r.range_std_m, r.azimuth_std_rad, r.radial_speed_std_mps)
+    ))  # fmt: skip
+    pd_tab, pd_cnt = curve_tables(tuple(r.detection_curve("default") for r in radars))
+    field_count = np.array([len(r.fields) for r in radars], np.int64)
+    fields = np.zeros((len(radars), int(field_count.max()), 2))
+    for k, r in enumerate(radars):
+        fields[k, : field_count[k]] = r.field_table()
+    n = len(radars)
+    return SiteTables(
+        roads=roads, bounds=bounds,
+        crossing_u=np.array([c.crossing_u for c in corridors]),
+        length_m=np.array([c.path.length_m for c in corridors]),
+        half_lane_m=np.array([0.5 * site.roads[c.first].lane_width_m for c in corridors]),
+        barrier_m=float(site.barrier_m), stop_line_m=float(site.stop_line_m),
+        warning_starts=np.array(starts, float), warning_ends=np.array(ends, float),
+        radar=np.stack([r.kernel_row() for r in radars]),
+        noise_tab=noise_tab.reshape(n, 3, 2, -1), noise_cnt=noise_cnt.reshape(n, 3),
+        fields=fields, field_count=field_count,
+        pd_tab=pd_tab.reshape(n, 1, 2, -1), pd_cnt=pd_cnt.reshape(n, 1),
+        latency_s=np.array([r.latency_s for r in radars], float),
+    )  # fmt: skip
 
 
 def _frame(columns: list[dict[str, np.ndarray]]) -> pd.DataFrame:
@@ -831,17 +618,18 @@ def _corridor_tables(corridors: list[Corridor]) -> tuple[FloatArray, np.ndarray]
     return table, np.stack([stops - [p.s.size for p in paths], stops], -1).astype(np.int64)
 
 
-def iter_scans(
+def scan_arrays(
     detections: pd.DataFrame, latency_s: dict[str, float] | None = None
-) -> Iterator[tuple[str, float, FloatArray, np.ndarray]]:
-    """Yield the scans of a detection table in time order (radar name breaks ties).
+) -> tuple[np.ndarray, FloatArray, np.ndarray, FloatArray, np.ndarray]:
+    """Split a detection table into scans in time order (radar name breaks ties).
 
     A scan is the detections (range_m, azimuth_rad, radial_speed_mps) of one radar at one
     timestamp, with their sensor object ids (the ``object_id`` column of an object list; -1
     without it). With radars' ``latency_s``, the order is that of the times the scans were
-    made (timestamps less latency); the timestamps are yielded.
+    made (timestamps less latency). Returns each scan's radar name and timestamp [s], the
+    scans' start rows (S + 1,) in the sorted detections ``z`` (N, 3) and their ``ids`` (N,).
     """
-    t = detections["time_s"].to_numpy()
+    t = detections["time_s"].to_numpy(dtype=float)
     radar = detections["radar"].astype(str).to_numpy()
     z = detections[["range_m", "azimuth_rad", "radial_speed_mps"]].to_numpy(dtype=float)
     ids = (
@@ -853,9 +641,20 @@ def iter_scans(
     order = np.lexsort((radar, made))
     t, radar, z, ids = t[order], radar[order], z[order], ids[order]
     cut = np.flatnonzero((np.diff(t) != 0) | (radar[1:] != radar[:-1])) + 1
-    starts = np.concatenate([[0], cut, [t.size]]) if t.size else np.zeros(1, int)
-    for a, b in itertools.pairwise(starts):
-        yield str(radar[a]), float(t[a]), z[a:b], ids[a:b]
+    starts = np.concatenate([[0], cut, [t.size]] if t.size else [[0]]).astype(np.int64)
+    return radar[starts[:-1]], t[starts[:-1]], starts, z, ids
+
+
+def iter_scans(
+    detections: pd.DataFrame, latency_s: dict[str, float] | None = None
+) -> Iterator[tuple[str, float, FloatArray, np.ndarray]]:
+    """Yield the scans of :func:`scan_arrays`: radar name, timestamp [s], detections, ids."""
+    names, stamps, starts, z, ids = scan_arrays(detections, latency_s)
+    for k, (a, b) in enumerate(itertools.pairwise(starts)):
+        yield str(names[k]), float(stamps[k]), z[a:b], ids[a:b]
+
+
+SCANS_PER_CALL = 4096  # scans per compiled call of track_scene (progress between calls)
 
 
 def track_scene(
@@ -865,24 +664,39 @@ def track_scene(
     on_scan: Callable[[int, int], None] | None = None,
     warnings: FloatArray | None = None,
 ) -> tuple[pd.DataFrame, pd.DataFrame, ScanLog]:
-    """Track a detection table scan by scan (:func:`iter_scans`).
+    """Track a detection table scan by scan (:func:`scan_arrays`), compiled.
 
     An ``object_id`` column (a radar object list) gives the sensor's ids as association hints
-    (:meth:`SceneTracker.step`).
+    (:meth:`SceneTracker.step`). A radar the site does not have, or a detection that is not
+    finite, is an error naming the scan.
 
-    ``on_scan(done, total)`` is called after each scan (progress); ``warnings`` (K, 2): when
-    the crossing's lights flash or its barriers are down [s] (none: no stop-line prediction).
-    Returns the track rows of every scan, the hazard events and the detection log.
+    ``on_scan(done, total)`` is called after each run of scans (progress); ``warnings`` (K, 2):
+    when the crossing's lights flash or its barriers are down [s] (none: no stop-line
+    prediction). Returns the track rows of every scan, the hazard events and the detection log.
     """
     tracker = SceneTracker(site, config, warnings)
-    scans = list(iter_scans(detections, {r.name: r.latency_s for r in site.radars}))
-    out = []
-    for i, (radar, t, z, ids) in enumerate(scans):
-        tracker.step(radar, t, z, ids)
-        out.append(tracker.snapshot(tracker.last_scan_s))
+    names, stamps, starts, z, ids = scan_arrays(
+        detections, {r.name: r.latency_s for r in site.radars}
+    )
+    known, rows = np.unique(names, return_inverse=True)
+    index = np.array([tracker._radar(str(name)) for name in known], np.int64)  # names unknowns
+    rows = index[rows] if names.size else np.zeros(0, np.int64)
+    for bad, what in ((~np.isfinite(z).all(axis=1), "a detection is not finite"),
+                      (ids < -1, "sensor ids must be integers >= -1")):  # fmt: skip
+        if bad.any():
+            k = int(np.searchsorted(starts, np.flatnonzero(bad)[0], side="right")) - 1
+            raise ValueError(f"radar {names[k]!r} at {stamps[k]} s: {what}")
+    parts = []
+    for a in range(0, names.size, SCANS_PER_CALL):
+        b = min(a + SCANS_PER_CALL, names.size)
+        cols = tracker.run(
+            rows[a:b], stamps[a:b], starts[a : b + 1] - starts[a], z[starts[a] : starts[b]],
+            ids[starts[a] : starts[b]], True,
+        )  # fmt: skip
+        parts.append(cols)
         if on_scan is not None:
-            on_scan(i + 1, len(scans))
-    table = _frame([tracker.table(out)])
+            on_scan(b, names.size)
+    table = _frame(parts)
     return table, pd.DataFrame(tracker.events, columns=EVENT_COLUMNS), tracker.log
 
 
@@ -894,5 +708,6 @@ __all__ = [
     "SceneTrackerConfig",
     "iter_scans",
     "load_scene_config",
+    "scan_arrays",
     "track_scene",
 ]

@@ -27,7 +27,8 @@ from ..crossing.site import Site
 from .messages import Rejected, is_header, parse_line, record_line
 from .reorder import ReorderBuffer, Scan
 
-STATE_VERSION = 4  # 2: merged warning intervals; 3: moments of reflections; 4: sensor ids
+STATE_VERSION = 5  # 2: merged warning intervals; 3: moments of reflections; 4: sensor ids;
+# 5: the compiled scan loop's site tables and per-radar state
 LATENCY_SAMPLES = 1 << 18  # processing times kept for the percentiles (an hour of scans)
 
 Record = dict[str, object]  # an output record before encoding

@@ -1,0 +1,593 @@
+"""The scene tracker's scan loop, compiled: many scans in one call, no Python per scan.
+
+:class:`adaptrack.crossing.scene_tracker.SceneTracker` keeps its tracks as rows of arrays
+(:class:`TrackRows`: the track book's columns and the filter's). :func:`run_scans` takes them
+into arrays with spare rows (a track opened or split is written in place, a deleted one is
+compacted away, in the order of creation), processes a run of scans with the per-scan kernels
+of :mod:`._scene_kernels` and returns them. The global assignment of an ambiguous scan is
+solved by :func:`adaptrack.tracking.gnn_assign` (SciPy), called from the loop in object mode.
+Hazard events and, if asked, every scan's confirmed tracks (:class:`RowBuffer`) are written
+to buffers that grow as needed.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numba
+import numpy as np
+
+from ..tracking import gnn_assign
+from ._scene_kernels import (
+    _lane_frame,
+    apply_scan,
+    associate_scan,
+    confirmed_rows,
+    detections_in_view,
+    mode_changes,
+    open_tracks,
+    planar_rows,
+    predict_tracks,
+    retired_rows,
+    split_rows,
+)
+
+EVENT_NAMES = ("stopped_between_barriers", "will_not_stop_before_stop_line")  # by event code
+EVENT_FIELDS = 6  # time [s], event code, track id, east [m], north [m], lead [s] (NaN: none)
+ROW_VALUES = ("time_s", "east_m", "north_m", "speed_mps", "east_speed_mps", "north_speed_mps",
+              "from_crossing_m", "position_std_m", "speed_std_mps")  # fmt: skip
+LOG_FIELDS = ("updated", "opened", "joined_new", "rejected_outside_view")
+
+
+class TrackRows(NamedTuple):
+    """Live tracks, one row each: the track book's columns, then the filter's."""
+
+    ids: np.ndarray
+    history: np.ndarray
+    confirmed: np.ndarray
+    misses: np.ndarray
+    last_hit_s: np.ndarray
+    born_s: np.ndarray
+    corridor: np.ndarray
+    x: np.ndarray
+    p: np.ndarray
+    time_s: np.ndarray
+    stopped: np.ndarray
+    slow_since: np.ndarray
+    moved: np.ndarray
+    event_raised: np.ndarray
+    line_event_raised: np.ndarray
+    anchor_u: np.ndarray
+    spread: np.ndarray
+    along_m2: np.ndarray
+    along_m4: np.ndarray
+    direction: np.ndarray
+    miss_run: np.ndarray
+    occluded: np.ndarray
+    doppler_seen_s: np.ndarray
+    detection_d: np.ndarray
+    sensor_id: np.ndarray
+
+
+class Settings(NamedTuple):
+    """The tracker's settings as the loop reads them (``SceneTrackerConfig`` and its rules)."""
+
+    accel_psd: float
+    lateral_psd: float
+    stopped_psd: float
+    body_along_std_m: float
+    body_across_std_m: float
+    start_speed_max_mps: float
+    body_extent_gate: bool
+    occlusion_gate: bool
+    passing_gate: bool
+    beside_m: float
+    gate: float
+    clutter_gate: float
+    sensor_id_bonus: float
+    clutter_age_s: float
+    moving_radial_mps: float
+    spread_learning_rate: float
+    shape_learning_rate: float
+    spread_lo_m: float
+    spread_hi_m: float
+    estimate_azimuth_bias: bool
+    bias_forget: float
+    bias_gate_m: float
+    bias_min_samples: float
+    confirm_speed_var: float
+    window_mask: int
+    confirm_hits: int
+    cluster_radius_m: float
+    initial_speed_var: float
+    moved_speed_mps: float
+    moving_speed_std_mps: float
+    moved_distance_m: float
+    stop_speed_mps: float
+    stop_exit_sigmas: float
+    stop_confirm_s: float
+    stop_seen_s: float
+    stationary_detections: bool
+    same_object_m: float
+    stop_decel_mps2: float
+    split_kurtosis: float
+    split_min_half_gap_m: float
+    tentative_misses: int
+    max_tentative_s: float
+    max_coast_s: float
+    max_coast_stopped_s: float
+    max_coast_hidden_s: float
+    max_position_std_m: float
+    max_stopped_misses: int
+    merge_lateral_m: float
+    merge_speed_mps: float
+    merge_parts_speed_mps: float
+    absorb_young_static: bool
+    merge_settled_s: float
+    merge_settled_lateral_m: float
+    coasting_s: float
+    status_codes: np.ndarray  # confirmed, coasting, stopped, static
+
+
+class SiteTables(NamedTuple):
+    """The site for compiled code: corridors, crossing, radars and the controller's warnings.
+
+    Radars are rows: geometry (R, 7), noise curves (R, 3, 2, K) and counts (R, 3), fields of
+    view (R, F, 2) with their counts (R,), detection-probability curves (R, 1, 2, K) and counts
+    (R, 1), latency (R,) [s].
+    """
+
+    roads: np.ndarray
+    bounds: np.ndarray
+    crossing_u: np.ndarray
+    length_m: np.ndarray
+    half_lane_m: np.ndarray
+    barrier_m: float
+    stop_line_m: float
+    warning_starts: np.ndarray
+    warning_ends: np.ndarray
+    radar: np.ndarray
+    noise_tab: np.ndarray
+    noise_cnt: np.ndarray
+    fields: np.ndarray
+    field_count: np.ndarray
+    pd_tab: np.ndarray
+    pd_cnt: np.ndarray
+    latency_s: np.ndarray
+
+
+class RadarState(NamedTuple):
+    """What the tracker keeps per radar.
+
+    The last scan's timestamp [s], the azimuth bias taken off [rad] and the running sums of
+    the alignment that estimates it (R, 3).
+    """
+
+    last_stamp_s: np.ndarray
+    azimuth_bias_rad: np.ndarray
+    bias_stats: np.ndarray
+
+
+class RowBuffer(NamedTuple):
+    """Confirmed tracks after each scan: ids, status codes, moved, and the :data:`ROW_VALUES`."""
+
+    track_id: np.ndarray
+    status: np.ndarray
+    moved: np.ndarray
+    values: np.ndarray
+
+
+def empty_rows(capacity: int) -> RowBuffer:
+    """Return a row buffer with room for ``capacity`` rows."""
+    return RowBuffer(
+        np.zeros(capacity, np.int64), np.zeros(capacity, np.int64), np.zeros(capacity, bool),
+        np.zeros((capacity, len(ROW_VALUES))),
+    )  # fmt: skip
+
+
+@numba.njit(cache=True)
+def _assign(d2, gate):  # type: ignore[no-untyped-def]
+    """Global nearest neighbour of a scan's gated distances (SciPy, in object mode)."""
+    cost = np.where(d2 <= gate, d2, np.inf)
+    with numba.objmode(tracks="int64[:]", dets="int64[:]"):
+        tracks, dets = gnn_assign(cost, gate)
+        tracks, dets = tracks.astype(np.int64), dets.astype(np.int64)
+    return tracks, dets
+
+
+@numba.njit(cache=True)
+def _live(t, n):  # type: ignore[no-untyped-def]
+    """Return the first ``n`` rows of every column (views)."""
+    return TrackRows(
+        t.ids[:n], t.history[:n], t.confirmed[:n], t.misses[:n], t.last_hit_s[:n],
+        t.born_s[:n], t.corridor[:n], t.x[:n], t.p[:n], t.time_s[:n], t.stopped[:n],
+        t.slow_since[:n], t.moved[:n], t.event_raised[:n], t.line_event_raised[:n],
+        t.anchor_u[:n], t.spread[:n], t.along_m2[:n], t.along_m4[:n], t.direction[:n],
+        t.miss_run[:n], t.occluded[:n], t.doppler_seen_s[:n], t.detection_d[:n],
+        t.sensor_id[:n],
+    )  # fmt: skip
+
+
+@numba.njit(cache=True)
+def _grown(a, n, size):  # type: ignore[no-untyped-def]
+    """Return ``a`` with ``size`` rows along its first axis, its first ``n`` kept."""
+    out = np.empty((size,) + a.shape[1:], a.dtype)
+    out[:n] = a[:n]
+    return out
+
+
+@numba.njit(cache=True)
+def _with_room(t, n, need):  # type: ignore[no-untyped-def]
+    """Return ``t`` with room for at least ``need`` rows (capacity doubled as needed)."""
+    size = t.ids.shape[0]
+    if need <= size:
+        return t
+    while size < need:
+        size = 2 * size + 16
+    return TrackRows(
+        _grown(t.ids, n, size), _grown(t.history, n, size), _grown(t.confirmed, n, size),
+        _grown(t.misses, n, size), _grown(t.last_hit_s, n, size), _grown(t.born_s, n, size),
+        _grown(t.corridor, n, size), _grown(t.x, n, size), _grown(t.p, n, size),
+        _grown(t.time_s, n, size), _grown(t.stopped, n, size), _grown(t.slow_since, n, size),
+        _grown(t.moved, n, size), _grown(t.event_raised, n, size),
+        _grown(t.line_event_raised, n, size), _grown(t.anchor_u, n, size),
+        _grown(t.spread, n, size), _grown(t.along_m2, n, size), _grown(t.along_m4, n, size),
+        _grown(t.direction, n, size), _grown(t.miss_run, n, size), _grown(t.occluded, n, size),
+        _grown(t.doppler_seen_s, n, size), _grown(t.detection_d, n, size),
+        _grown(t.sensor_id, n, size),
+    )  # fmt: skip
+
+
+@numba.njit(cache=True)
+def _copy_row(t, src, dst):  # type: ignore[no-untyped-def]
+    """Copy every column of row ``src`` to row ``dst``."""
+    t.ids[dst], t.history[dst], t.confirmed[dst] = t.ids[src], t.history[src], t.confirmed[src]
+    t.misses[dst], t.last_hit_s[dst], t.born_s[dst] = (
+        t.misses[src],
+        t.last_hit_s[src],
+        t.born_s[src],
+    )
+    t.corridor[dst], t.time_s[dst], t.stopped[dst] = t.corridor[src], t.time_s[src], t.stopped[src]
+    t.x[dst], t.p[dst], t.sensor_id[dst] = t.x[src], t.p[src], t.sensor_id[src]
+    t.slow_since[dst], t.moved[dst] = t.slow_since[src], t.moved[src]
+    t.event_raised[dst], t.line_event_raised[dst] = t.event_raised[src], t.line_event_raised[src]
+    t.anchor_u[dst], t.spread[dst] = t.anchor_u[src], t.spread[src]
+    t.along_m2[dst], t.along_m4[dst] = t.along_m2[src], t.along_m4[src]
+    t.direction[dst], t.miss_run[dst], t.occluded[dst] = (
+        t.direction[src],
+        t.miss_run[src],
+        t.occluded[src],
+    )
+    t.doppler_seen_s[dst], t.detection_d[dst] = t.doppler_seen_s[src], t.detection_d[src]
+
+
+@numba.njit(cache=True)
+def _compacted(t, n, dead):  # type: ignore[no-untyped-def]
+    """Remove the ``dead`` rows (bool per live row), keeping order; return the new count."""
+    m = 0
+    for i in range(n):
+        if not dead[i]:
+            if m != i:
+                _copy_row(t, i, m)
+            m += 1
+    return m
+
+
+@numba.njit(cache=True)
+def _place(t, i, u, spread):  # type: ignore[no-untyped-def]
+    """Move stopped row ``i`` to ``u`` along its corridor with body ``spread`` [m].
+
+    Its position sigma grows by half a metre; its reflection moments restart at one body's.
+    """
+    t.x[i, 0] = t.anchor_u[i] = u
+    t.p[i, 0, 0] += 0.25
+    t.spread[i] = spread
+    t.along_m2[i], t.along_m4[i] = spread**2, 3.0 * spread**4
+
+
+@numba.njit(cache=True)
+def _new_row(t, i, track_id, time_s, corridor, x, p, spread, radar_col, sensor_id):  # type: ignore[no-untyped-def]
+    """Write a tentative track (its first hit at ``time_s``) into row ``i``."""
+    t.ids[i], t.history[i], t.confirmed[i], t.misses[i] = track_id, 1, False, 0
+    t.last_hit_s[i] = t.born_s[i] = t.time_s[i] = time_s
+    t.corridor[i], t.x[i], t.p[i] = corridor, x, p
+    t.stopped[i] = t.moved[i] = t.event_raised[i] = t.line_event_raised[i] = False
+    t.slow_since[i] = np.nan
+    t.anchor_u[i] = x[0]
+    t.spread[i], t.along_m2[i], t.along_m4[i] = spread, spread**2, 3.0 * spread**4
+    t.direction[i], t.miss_run[i], t.occluded[i] = 0.0, 1.0, False
+    t.doppler_seen_s[i], t.detection_d[i] = -np.inf, np.nan
+    t.sensor_id[i] = -1
+    t.sensor_id[i, radar_col] = sensor_id
+
+
+@numba.njit(cache=True)
+def _position(t, i, site):  # type: ignore[no-untyped-def]
+    """Planar position of row ``i`` [m]."""
+    frame = _lane_frame(site.roads, site.bounds, t.corridor[i], t.x[i, 0], t.x[i, 3])
+    return frame[5], frame[6]
+
+
+@numba.njit(cache=True)
+def _record_event(events, n_events, t, i, site, time_s, code, lead_s):  # type: ignore[no-untyped-def]
+    """Append an event of row ``i``; return the buffer (grown if full) and the new count."""
+    if n_events == events.shape[0]:
+        events = _grown(events, n_events, 2 * n_events + 16)
+    east, north = _position(t, i, site)
+    e = events[n_events]
+    e[0], e[1], e[2], e[3], e[4], e[5] = time_s, code, t.ids[i], east, north, lead_s
+    return events, n_events + 1
+
+
+@numba.njit(cache=True)
+def new_objects(t, n, hazard, s, site):  # type: ignore[no-untyped-def]
+    """Keep the ``hazard`` rows that are not an object already alarmed: one object, one alarm.
+
+    A track stopped within ``same_object_m`` of a stopped track whose alarm is raised stands on
+    that object's body (e.g. a track from the other lane that took a stopped car's
+    reflections); it raises no second alarm now (``event_raised`` cleared), and may later if
+    the other track is gone. Not one whose own detections (``detection_d``) lie beside that
+    track, on its corridor ``beside_m`` across or more: another road user stands there (a
+    motorcycle beside a car queued between the barriers). Returns the rows to alarm.
+    """
+    out = np.zeros(n, np.bool_)
+    for i in range(n):
+        if not hazard[i]:
+            continue
+        out[i] = True
+        ex, ey = _position(t, i, site)
+        for a in range(n):
+            if hazard[a] or not (t.event_raised[a] and t.stopped[a]):
+                continue
+            ax, ay = _position(t, a, site)
+            near = math.hypot(ex - ax, ey - ay) < s.same_object_m
+            beside = t.corridor[i] == t.corridor[a] and (
+                abs(t.detection_d[i] - t.x[a, 3]) >= s.beside_m
+            )  # NaN (no detection yet): not beside
+            if near and not beside:
+                out[i] = False
+        if not out[i]:
+            t.event_raised[i] = False
+    return out
+
+
+@numba.njit(cache=True)
+def stop_line_rows(t, n, time_s, on_road, s, site):  # type: ignore[no-untyped-def]
+    """Rows that cannot stop before the stop line now, and their lead times [s].
+
+    A moving confirmed road user on the carriageway (``on_road``), detected within
+    ``stop_seen_s``, first in its lane (one who follows another stops behind it), whose front
+    needs more than ``stop_decel_mps2`` to stop at the line even at the low end of its speed's
+    90 % interval; its lead is the time to reach the line. Each is raised once
+    (``line_event_raised`` set).
+    """
+    ahead = np.empty(n)
+    for i in range(n):
+        ahead[i] = site.crossing_u[t.corridor[i]] - t.x[i, 0]  # towards the crossing
+    cant = np.zeros(n, np.bool_)
+    lead = np.zeros(n)
+    for i in range(n):
+        speed = t.x[i, 1] * np.sign(ahead[i])  # > 0 approaching
+        front = math.sqrt(3.0) * t.spread[i]  # half a uniform body of that spread
+        to_line = abs(ahead[i]) - site.stop_line_m - front
+        if not (
+            t.confirmed[i] and t.moved[i] and not t.stopped[i] and not t.line_event_raised[i]
+            and on_road[i] and speed > 0.5 and to_line > -front
+            and time_s - t.last_hit_s[i] <= s.stop_seen_s
+        ):  # fmt: skip
+            continue
+        slow_bound = speed - 1.645 * math.sqrt(t.p[i, 1, 1])  # at least this fast (95 %)
+        if not slow_bound > math.sqrt(2.0 * s.stop_decel_mps2 * max(to_line, 0.0)):
+            continue
+        followed = False
+        for k in range(n):  # a road user ahead of it in its lane, same way
+            if (
+                t.confirmed[k] and not (t.stopped[k] and not t.moved[k])
+                and t.corridor[k] == t.corridor[i]
+                and abs(t.x[k, 3] - t.x[i, 3]) < site.half_lane_m[t.corridor[i]]
+                and (t.x[k, 0] - t.x[i, 0]) * np.sign(ahead[i]) > 0
+                and np.sign(ahead[k]) == np.sign(ahead[i])
+            ):  # fmt: skip
+                followed = True
+                break
+        if not followed:
+            cant[i] = True
+            lead[i] = max(to_line, 0.0) / speed
+    for i in range(n):
+        t.line_event_raised[i] |= cant[i]
+    return cant, lead
+
+
+@numba.njit(cache=True)
+def warning_on(site, time_s):  # type: ignore[no-untyped-def]
+    """Whether the crossing's lights flash or its barriers are down at ``time_s``."""
+    k = np.searchsorted(site.warning_starts, time_s, side="right") - 1
+    return k >= 0 and time_s < site.warning_ends[k]
+
+
+@numba.njit(cache=True)
+def learnt_clutter(stopped, moved, time_s, born_s, clutter_age_s):  # type: ignore[no-untyped-def]
+    """Return the static objects older than ``clutter_age_s`` [s] (bool per track).
+
+    Barrier posts, rails: their detections are their own (:func:`._scene_kernels.reserve_clutter`);
+    a young one may be a vehicle waiting at a closure.
+    """
+    return stopped & ~moved & (time_s - born_s >= clutter_age_s)
+
+
+@numba.njit(cache=True)
+def write_rows(t, n, time_s, s, site, rows_out, n_out):  # type: ignore[no-untyped-def]
+    """Append the confirmed tracks at ``time_s``; return the buffer (grown if full), count."""
+    v = _live(t, n)
+    rows, status = confirmed_rows(
+        v.confirmed, v.time_s, v.last_hit_s, v.stopped, v.moved, s.coasting_s, s.status_codes
+    )
+    m = rows.size
+    if n_out + m > rows_out.track_id.shape[0]:
+        size = 2 * (n_out + m) + 1024
+        rows_out = RowBuffer(
+            _grown(rows_out.track_id, n_out, size), _grown(rows_out.status, n_out, size),
+            _grown(rows_out.moved, n_out, size), _grown(rows_out.values, n_out, size),
+        )  # fmt: skip
+    pos, vel, pos_std, to_cross = np.zeros((m, 2)), np.zeros((m, 2)), np.zeros(m), np.zeros(m)
+    planar_rows(
+        v.x[rows], v.p[rows], v.corridor[rows], site.roads, site.bounds, site.crossing_u, pos,
+        vel, pos_std, to_cross,
+    )  # fmt: skip
+    for k in range(m):
+        i, o = rows[k], n_out + k
+        rows_out.track_id[o], rows_out.status[o], rows_out.moved[o] = (
+            v.ids[i],
+            status[k],
+            v.moved[i],
+        )
+        row = rows_out.values[o]
+        row[0], row[1], row[2] = time_s, pos[k, 0], pos[k, 1]
+        row[3], row[4], row[5] = math.hypot(vel[k, 0], vel[k, 1]), vel[k, 0], vel[k, 1]
+        row[6], row[7], row[8] = to_cross[k], pos_std[k], math.sqrt(v.p[i, 1, 1])
+    return rows_out, n_out + m
+
+
+@numba.njit(cache=True)
+def run_scans(  # type: ignore[no-untyped-def]
+    t, n, next_id, s, site, radars, log, z_all, ids_all, starts, scan_radar, scan_stamp,
+    outside, events, n_events, record, rows_out, n_out,
+):  # fmt: skip
+    """Process scans in order; return ``(t, n, next_id, events, n_events, rows_out, n_out)``.
+
+    ``t`` (:class:`TrackRows`, ``n`` live rows, more may be spare), ``next_id`` the next track
+    id. Scan ``k`` is the detections ``z_all[starts[k]:starts[k+1]]`` (range, azimuth, radial
+    speed) with their sensor ids, of radar ``scan_radar[k]``, stamped ``scan_stamp[k]`` [s]
+    (made at that less the radar's latency). ``radars`` (:class:`RadarState`) and ``log``
+    (counts of :data:`LOG_FIELDS`) are updated in place; ``outside`` (bool per detection) is set
+    for the detections beyond every field of view (rejected). Events go to ``events`` (E,
+    :data:`EVENT_FIELDS`); with ``record``, each scan's confirmed tracks to ``rows_out``.
+    Each scan is the steps of :meth:`adaptrack.crossing.scene_tracker.SceneTracker.step`.
+    """
+    for k in range(scan_radar.size):
+        r = scan_radar[k]
+        radars.last_stamp_s[r] = scan_stamp[k]
+        time_s = scan_stamp[k] - site.latency_s[r]
+        a, b = starts[k], starts[k + 1]
+        z = z_all[a:b].copy()
+        ids = ids_all[a:b]
+        bias = radars.azimuth_bias_rad[r]
+        if bias:
+            for j in range(z.shape[0]):
+                z[j, 1] = (z[j, 1] - bias + np.pi) % (2 * np.pi) - np.pi
+        radar = site.radar[r]
+        noise_tab, noise_cnt = site.noise_tab[r], site.noise_cnt[r]
+        fields = site.fields[r, : site.field_count[r]]
+        v = _live(t, n)
+        predict_tracks(
+            v.x, v.p, v.time_s, v.stopped, v.direction, time_s, s.accel_psd, s.lateral_psd,
+            s.stopped_psd,
+        )  # fmt: skip
+        view = detections_in_view(z, radar, fields)
+        n_out_view = 0
+        for j in range(view.size):
+            outside[a + j] = not view[j]
+            n_out_view += not view[j]
+        if n_out_view:
+            log[3] += n_out_view
+            z, ids = z[view], ids[view]
+        used = np.zeros(z.shape[0], np.bool_)
+        if n:
+            clutter = learnt_clutter(v.stopped, v.moved, v.time_s, v.born_s, s.clutter_age_s)
+            seen, d2, logdet, simple, ti, di = associate_scan(
+                v.x, v.p, v.spread, v.stopped, v.moved, v.confirmed, clutter, v.direction,
+                v.corridor, v.sensor_id[:, r], site.roads, site.bounds, radar, noise_tab,
+                noise_cnt, fields, s.body_across_std_m, s.start_speed_max_mps,
+                s.body_extent_gate, s.occlusion_gate, s.passing_gate, s.beside_m, s.gate,
+                s.clutter_gate, s.sensor_id_bonus, z, ids,
+            )  # fmt: skip
+            if not simple:
+                ti, di = _assign(d2, s.gate)
+            stats = radars.bias_stats[r]
+            used = apply_scan(
+                time_s, seen, d2, logdet, s.gate, ti, di, z, ids, r, v.x, v.p, v.spread,
+                v.along_m2, v.along_m4, v.stopped, v.moved, v.direction, v.slow_since,
+                v.corridor, v.miss_run, v.occluded, v.anchor_u, v.doppler_seen_s,
+                v.detection_d, v.sensor_id, v.history, v.misses, v.last_hit_s, v.confirmed,
+                site.roads, site.bounds, radar, noise_tab, noise_cnt, fields, site.pd_tab[r],
+                site.pd_cnt[r], s.body_across_std_m, s.moving_radial_mps,
+                s.start_speed_max_mps**2, s.spread_learning_rate, s.shape_learning_rate,
+                s.spread_lo_m, s.spread_hi_m, s.estimate_azimuth_bias, site.half_lane_m, bias,
+                stats, s.bias_forget, s.bias_gate_m, s.confirm_speed_var, s.window_mask,
+                s.confirm_hits,
+            )  # fmt: skip
+            if stats[2] >= s.bias_min_samples:
+                radars.azimuth_bias_rad[r] = stats[1] / stats[0]
+        n_used = 0
+        for j in range(used.size):
+            n_used += used[j]
+        log[0] += n_used
+        if n_used < used.size:  # open tentative tracks from the detections left over
+            left = ~used
+            corridor, x, p, _, first = open_tracks(
+                z[left], radar, noise_tab, noise_cnt, site.roads, site.bounds,
+                s.cluster_radius_m, s.initial_speed_var, s.body_along_std_m**2,
+            )  # fmt: skip
+            m = corridor.size
+            t = _with_room(t, n, n + m)
+            left_ids = ids[left]
+            for g in range(m):
+                _new_row(
+                    t, n + g, next_id + g, time_s, corridor[g], x[g], p[g],
+                    s.body_along_std_m, r, left_ids[first[g]],
+                )  # fmt: skip
+            n += m
+            next_id += m
+            log[1] += m
+            log[2] += used.size - n_used - m
+        # modes and hazard events
+        v = _live(t, n)
+        hazard, on_road = mode_changes(
+            time_s, v.x, v.p, v.corridor, v.confirmed, v.last_hit_s, v.anchor_u, v.stopped,
+            v.moved, v.direction, v.slow_since, v.event_raised, v.doppler_seen_s,
+            site.crossing_u, site.half_lane_m, site.barrier_m, s.moved_speed_mps,
+            s.moving_speed_std_mps, s.moved_distance_m, s.stop_speed_mps, s.stop_exit_sigmas,
+            s.stop_confirm_s, s.stop_seen_s if s.stationary_detections else np.inf,
+        )  # fmt: skip
+        if hazard.any():
+            alarm = new_objects(v, n, hazard, s, site)
+            for i in np.flatnonzero(alarm):
+                events, n_events = _record_event(events, n_events, v, i, site, time_s, 0, np.nan)
+        if warning_on(site, time_s):
+            cant, lead = stop_line_rows(v, n, time_s, on_road, s, site)
+            for i in np.flatnonzero(cant):
+                events, n_events = _record_event(events, n_events, v, i, site, time_s, 1, lead[i])
+        # split a stopped track over two queued bodies: the part towards the crossing keeps it
+        rows, half, body = split_rows(
+            v.stopped, v.moved, v.along_m2, v.along_m4, s.split_kurtosis, s.split_min_half_gap_m
+        )
+        if rows.size:
+            t = _with_room(t, n, n + rows.size)
+            for g in range(rows.size):
+                i, j = rows[g], n + g
+                towards = 1.0 if site.crossing_u[t.corridor[i]] >= t.x[i, 0] else -1.0
+                u = t.x[i, 0]
+                spread = min(max(body[g], s.spread_lo_m), s.spread_hi_m)
+                _copy_row(t, i, j)
+                _place(t, i, u + towards * half[g], spread)
+                _place(t, j, u - towards * half[g], spread)
+                t.ids[j], t.born_s[j] = next_id + g, time_s
+            n += rows.size
+            next_id += rows.size
+        # delete the expired, the departed and the younger of two tracks on one body
+        v = _live(t, n)
+        dead = retired_rows(
+            time_s, v.time_s, v.x, v.p, v.corridor, site.length_m, v.spread, v.stopped,
+            v.moved, v.occluded, v.ids, v.confirmed, v.misses, v.born_s, v.last_hit_s,
+            s.stationary_detections, s.tentative_misses, s.max_tentative_s, s.max_coast_s,
+            s.max_coast_stopped_s, s.max_coast_hidden_s, s.max_position_std_m,
+            s.max_stopped_misses, s.merge_lateral_m, s.merge_speed_mps,
+            s.merge_parts_speed_mps, s.clutter_age_s, s.absorb_young_static,
+            s.merge_settled_s, s.merge_settled_lateral_m,
+        )  # fmt: skip
+        if dead.any():
+            n = _compacted(t, n, dead)
+        if record:
+            rows_out, n_out = write_rows(t, n, time_s, s, site, rows_out, n_out)
+    return t, n, next_id, events, n_events, rows_out, n_out
