@@ -60,6 +60,47 @@ def test_gnn_matches_brute_force(seed):
     assert got == pytest.approx(best)
 
 
+@pytest.mark.parametrize("seed", range(40))
+def test_assignment_by_components_matches_brute_force_and_scipy(seed):
+    """Several conflicts in one scan, each solved on its own: the same cheapest total as the
+    brute force over the whole matrix, and the same pairs as SciPy's (the optimum is unique
+    for continuous random costs)."""
+    from adaptrack.tracking.assignment import assignment_by_components
+
+    rng = np.random.default_rng(seed)
+    n_t, n_d = rng.integers(1, 6), rng.integers(1, 6)
+    cost = rng.uniform(0, 15, (n_t, n_d))
+    cost[rng.uniform(size=cost.shape) < 0.5] = np.inf  # gated out; components form
+    gate = 10.0
+    solved, rows, cols = assignment_by_components(cost, gate, 4096)
+    assert solved
+    got = cost[rows, cols].sum() + gate * (n_t - rows.size)
+    best, _ = brute_force_assignment(np.where(cost <= gate, cost, np.inf), np.full(n_t, gate))
+    assert got == pytest.approx(best)
+    ref_rows, ref_cols = gnn_assign(np.where(cost <= gate, cost, np.inf), gate)
+    assert rows.tolist() == ref_rows.tolist() and cols.tolist() == ref_cols.tolist()
+
+
+def test_assignment_by_components_on_a_hand_made_scan():
+    """Tracks 0 and 1 share detection 0 (greedy would give it to 0, the global optimum to 1);
+    track 2 alone has detections 2 and 3 (takes the nearer); track 3 has none in its gate.
+    A component with more choices than allowed is left to the caller."""
+    from adaptrack.tracking.assignment import assignment_by_components
+
+    inf = np.inf
+    cost = np.array([
+        [1.0, 2.0, inf, inf],
+        [1.5, inf, inf, inf],
+        [inf, inf, 4.0, 3.0],
+        [inf, inf, inf, 12.0],
+    ])  # fmt: skip
+    solved, rows, cols = assignment_by_components(cost, 10.0, 4096)
+    assert solved
+    assert list(zip(rows.tolist(), cols.tolist(), strict=True)) == [(0, 1), (1, 0), (2, 3)]
+    solved, rows, cols = assignment_by_components(cost, 10.0, 5)  # 3 x 2 choices: too many
+    assert not solved and rows.size == 0
+
+
 def test_mahalanobis_and_gate():
     s = np.array([[[4.0, 0.0], [0.0, 1.0]]])
     r = np.array([[[2.0, 0.0], [0.0, 3.0], [2.0, 1.0]]])

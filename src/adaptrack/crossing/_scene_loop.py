@@ -19,6 +19,7 @@ import numba
 import numpy as np
 
 from ..tracking import gnn_assign
+from ..tracking.assignment import assignment_by_components
 from ._scene_kernels import (
     _lane_frame,
     apply_scan,
@@ -38,6 +39,7 @@ EVENT_FIELDS = 6  # time [s], event code, track id, east [m], north [m], lead [s
 ROW_VALUES = ("time_s", "east_m", "north_m", "speed_mps", "east_speed_mps", "north_speed_mps",
               "from_crossing_m", "position_std_m", "speed_std_mps")  # fmt: skip
 LOG_FIELDS = ("updated", "opened", "joined_new", "rejected_outside_view")
+MAX_CHOICES = 4096  # a scan's conflict with more choices goes to SciPy's assignment
 
 
 class TrackRows(NamedTuple):
@@ -503,7 +505,9 @@ def run_scans(  # type: ignore[no-untyped-def]
                 s.clutter_gate, s.sensor_id_bonus, z, ids,
             )  # fmt: skip
             if not simple:
-                ti, di = _assign(d2, s.gate)
+                solved, ti, di = assignment_by_components(d2, s.gate, MAX_CHOICES)
+                if not solved:
+                    ti, di = _assign(d2, s.gate)
             stats = radars.bias_stats[r]
             used = apply_scan(
                 time_s, seen, d2, logdet, s.gate, ti, di, z, ids, r, v.x, v.p, v.spread,
