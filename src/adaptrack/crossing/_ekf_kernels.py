@@ -17,7 +17,7 @@ import numpy as np
 from numba import prange
 
 from ..filters._kernels import predict_into, series_transition_into, update_into
-from ._radar_kernel import curve_at, in_view
+from ._radar_kernel import curve_at, in_view, wrapped
 
 ROAD, FREE = 0, 1  # measurement models
 GATE_MIN_COS = 0.3  # the gate informs on speed only where |d v_r / d speed| is at least this
@@ -44,7 +44,7 @@ def _polar_into(px, py, vx, vy, radar, zp, jp, jv):  # type: ignore[no-untyped-d
 @numba.njit(cache=True, inline="always")
 def off_boresight(az, radar):  # type: ignore[no-untyped-def]
     """Angle of azimuth ``az`` off the radar's boresight ``radar[3]``, in ``[0, pi]`` [rad]."""
-    return abs((az - radar[3] + math.pi) % (2.0 * math.pi) - math.pi)
+    return abs(wrapped(az - radar[3], math.pi))
 
 
 @numba.njit(cache=True, inline="always")
@@ -116,11 +116,11 @@ def innovation_into(z, zp, radar, doppler, nu):  # type: ignore[no-untyped-def]
     """
     fold = radar[6]
     nu[0] = z[0] - zp[0]
-    nu[1] = (z[1] - zp[1] + math.pi) % (2.0 * math.pi) - math.pi
+    nu[1] = wrapped(z[1] - zp[1], math.pi)
     if not doppler:
         nu[2] = 0.0
     elif fold > 0.0:
-        nu[2] = (z[2] - zp[2] + fold) % (2.0 * fold) - fold
+        nu[2] = wrapped(z[2] - zp[2], fold)
     else:
         nu[2] = z[2] - zp[2]
 
@@ -138,17 +138,16 @@ def folded_log_likelihood_gap(rm, radar):  # type: ignore[no-untyped-def]
 @numba.njit(cache=True, inline="always")
 def _centreline(road, s):  # type: ignore[no-untyped-def]
     """Centreline x, y, heading and curvature at ``s`` (clipped to the road), as np.interp."""
-    sv = road[0]
-    last = sv.shape[0] - 1
-    q = min(max(s, 0.0), sv[last])
-    # last j with sv[j] <= q (as np.interp); the samples are nearly uniform: guess, then walk
-    j = min(int(q * (last / sv[last])), last - 1)
-    while j < last - 1 and sv[j + 1] <= q:
+    last = road.shape[1] - 1
+    q = min(max(s, 0.0), road[0, last])
+    # last j with s_j <= q (as np.interp); the samples are nearly uniform: guess, then walk
+    j = min(int(q * (last / road[0, last])), last - 1)
+    while j < last - 1 and road[0, j + 1] <= q:
         j += 1
-    while j > 0 and sv[j] > q:
+    while j > 0 and road[0, j] > q:
         j -= 1
-    u = q - sv[j]
-    ds = sv[j + 1] - sv[j]
+    u = q - road[0, j]
+    ds = road[0, j + 1] - road[0, j]
     cx = (road[1, j + 1] - road[1, j]) / ds * u + road[1, j]
     cy = (road[2, j + 1] - road[2, j]) / ds * u + road[2, j]
     th = (road[3, j + 1] - road[3, j]) / ds * u + road[3, j]

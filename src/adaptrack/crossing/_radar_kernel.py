@@ -17,26 +17,31 @@ from numba import prange
 
 
 @numba.njit(cache=True, inline="always")
-def _wrap(a, half):  # type: ignore[no-untyped-def]
-    """Return ``(a + half) % (2 half) - half`` (floored remainder, as Python and NumPy)."""
-    return (a + half) % (2.0 * half) - half
+def wrapped(a, half):  # type: ignore[no-untyped-def]
+    """Return ``(a + half) % (2 half) - half`` (floored remainder, as Python and NumPy).
+
+    Within one turn the remainder is its argument, exactly: it is taken only beyond.
+    """
+    r = a + half
+    if 0.0 <= r < 2.0 * half:
+        return r - half
+    return r % (2.0 * half) - half
 
 
 @numba.njit(cache=True, inline="always")
 def curve_at(table, counts, row, x):  # type: ignore[no-untyped-def]
     """Value of curve ``row`` of a packed table (``curve_tables``) at ``x``, as ``np.interp``."""
     n = counts[row]
-    xs = table[row, 0]
-    ys = table[row, 1]
-    if x <= xs[0] or n == 1:
-        return ys[0]
-    if x >= xs[n - 1]:
-        return ys[n - 1]
+    if x <= table[row, 0, 0] or n == 1:
+        return table[row, 1, 0]
+    if x >= table[row, 0, n - 1]:
+        return table[row, 1, n - 1]
     j = 0
-    while xs[j + 1] < x:
+    while table[row, 0, j + 1] < x:
         j += 1
-    slope = (ys[j + 1] - ys[j]) / (xs[j + 1] - xs[j])
-    return slope * (x - xs[j]) + ys[j]
+    x0, x1, y0, y1 = table[row, 0, j], table[row, 0, j + 1], table[row, 1, j], table[row, 1, j + 1]
+    slope = (y1 - y0) / (x1 - x0)
+    return slope * (x - x0) + y0
 
 
 @numba.njit(cache=True, inline="always")
@@ -87,7 +92,7 @@ def detections_kernel(  # type: ignore[no-untyped-def]
             rng_m = math.hypot(math.hypot(ex, ey), radar[2])
             az = math.atan2(ex, ey)
             vr = (ex * (speed[i, t] * dx) + ey * (speed[i, t] * dy)) / rng_m
-            off_axis = abs(_wrap(az - radar[4], math.pi))
+            off_axis = abs(wrapped(az - radar[4], math.pi))
             det = (
                 in_view(rng_m, off_axis, fields, radar[5])
                 and abs(vr) >= radar[6]
@@ -97,8 +102,8 @@ def detections_kernel(  # type: ignore[no-untyped-def]
             if det:
                 meas[i, t, 0] = rng_m + noise[i, t, 0] * curve_at(noise_tab, noise_cnt, 0, rng_m)
                 sig_az = curve_at(noise_tab, noise_cnt, 1, off_axis)
-                meas[i, t, 1] = _wrap(az + radar[3] + noise[i, t, 1] * sig_az, math.pi)
+                meas[i, t, 1] = wrapped(az + radar[3] + noise[i, t, 1] * sig_az, math.pi)
                 m2 = vr + noise[i, t, 2] * curve_at(noise_tab, noise_cnt, 2, rng_m)
-                meas[i, t, 2] = _wrap(m2, vmax) if vmax > 0.0 else m2
+                meas[i, t, 2] = wrapped(m2, vmax) if vmax > 0.0 else m2
             else:
                 meas[i, t, 0] = meas[i, t, 1] = meas[i, t, 2] = math.nan

@@ -29,7 +29,7 @@ from ._ekf_kernels import (
     measure,
     off_boresight,
 )
-from ._radar_kernel import curve_at, in_view
+from ._radar_kernel import curve_at, in_view, wrapped
 
 N_STATE = 4
 BIAS_MIN_SPEED_MPS = 6.0  # azimuth alignment on vehicles, not on cyclists at the lane's edge
@@ -73,32 +73,41 @@ def predict_tracks(  # type: ignore[no-untyped-def]
     no_input = np.zeros(N_STATE)
     x0 = np.zeros(N_STATE)
     p0 = np.zeros((N_STATE, N_STATE))
+    made_dt, made_stopped = -1.0, False  # the step phi and q were made for (tracks share it)
     for i in range(x.shape[0]):
         dt = max(time_s - t[i], 0.0)
         t[i] = max(t[i], time_s)
         if dt == 0.0:
             continue
-        phi[:, :] = 0.0
-        q[:, :] = 0.0
-        for a in range(N_STATE):
-            phi[a, a] = 1.0
-        if stopped[i]:
-            q[0, 0] = q[3, 3] = stopped_psd * dt
-        else:
-            phi[0, 1] = phi[1, 2] = dt
-            phi[0, 2] = 0.5 * dt * dt
-            q[0, 0] = accel_psd * dt**5 / 20.0
-            q[0, 1] = q[1, 0] = accel_psd * dt**4 / 8.0
-            q[0, 2] = q[2, 0] = accel_psd * dt**3 / 6.0
-            q[1, 1] = accel_psd * dt**3 / 3.0
-            q[1, 2] = q[2, 1] = accel_psd * dt**2 / 2.0
-            q[2, 2] = accel_psd * dt
-            q[3, 3] = lateral_psd * dt
+        if dt != made_dt or stopped[i] != made_stopped:
+            made_dt, made_stopped = dt, stopped[i]
+            _transition_into(dt, stopped[i], accel_psd, lateral_psd, stopped_psd, phi, q)
         x0[:] = x[i]
         p0[:, :] = p[i]
         predict_into(x0, p0, phi, q, no_input, x[i], p[i], tmp)
         if direction[i] != 0 and x[i, 1] * direction[i] < 0.0:
             x[i, 1] = x[i, 2] = 0.0
+
+
+@numba.njit(cache=True, inline="always")
+def _transition_into(dt, stopped, accel_psd, lateral_psd, stopped_psd, phi, q):  # type: ignore[no-untyped-def]
+    """Fill the transition ``phi`` and process noise ``q`` of a step ``dt`` [s]."""
+    phi[:, :] = 0.0
+    q[:, :] = 0.0
+    for a in range(N_STATE):
+        phi[a, a] = 1.0
+    if stopped:
+        q[0, 0] = q[3, 3] = stopped_psd * dt
+    else:
+        phi[0, 1] = phi[1, 2] = dt
+        phi[0, 2] = 0.5 * dt * dt
+        q[0, 0] = accel_psd * dt**5 / 20.0
+        q[0, 1] = q[1, 0] = accel_psd * dt**4 / 8.0
+        q[0, 2] = q[2, 0] = accel_psd * dt**3 / 6.0
+        q[1, 1] = accel_psd * dt**3 / 3.0
+        q[1, 2] = q[2, 1] = accel_psd * dt**2 / 2.0
+        q[2, 2] = accel_psd * dt
+        q[3, 3] = lateral_psd * dt
 
 
 @numba.njit(cache=True, inline="always")
@@ -336,6 +345,10 @@ def gate_scan(  # type: ignore[no-untyped-def]
         _, _, tx, ty, _, px, py = _lane_frame(roads, bounds, corridor[i], xv[0], xv[3])
         half = BODY_HALF_SPREADS * part_spread
         for j in range(n_d):
+            wr = z[j, 0] - zp[0]  # range alone: d2 >= wr^2 / S_rr (start fitting keeps wr)
+            if wr * wr > gate * s[0, 0]:
+                d2[i, j] = np.inf  # beyond the gate; no penalty: every use compares to it
+                continue
             innovation_into(z[j], zp, radar, doppler, w)
             if starting[i] and passing_gate:
                 w0[:] = w
@@ -767,7 +780,7 @@ def occluders(rows, x, spread, corridor, roads, bounds, radar, can_hide):  # typ
             inside = abs(x[i, 0] - x[j, 0]) < BODY_HALF_SPREADS * spread[j]
             if inside and corridor[j] == corridor[i]:
                 continue
-            d = (az[i] - az[j] + math.pi) % (2.0 * math.pi) - math.pi
+            d = wrapped(az[i] - az[j], math.pi)
             if abs(d) < half[j]:
                 out[k] = j
     return out
@@ -826,11 +839,17 @@ def nearest_sample(roads, bounds, px, py):  # type: ignore[no-untyped-def]
 
     ``u`` is the nearest centreline sample's (the first on a tie); ``d`` is to the right of
     increasing ``u``; the corridor is the one of least ``|d|`` (the first on a tie). Blocks of
-    samples that cannot hold a nearer one than found so far are skipped.
+    samples that cannot hold a nearer one than the nearest of their middles, or than found
+    so far, are skipped.
     """
     best_c, best_u, best_d = 0, 0.0, np.inf
     for c in range(bounds.shape[0]):
         k_best, r_best = bounds[c, 0], np.inf
+        for start in range(bounds[c, 0], bounds[c, 1], NEAREST_BLOCK):  # the nearest middle
+            mid = (start + min(start + NEAREST_BLOCK, bounds[c, 1]) - 1) // 2
+            r = (px - roads[1, mid]) ** 2 + (py - roads[2, mid]) ** 2
+            if r < r_best:
+                k_best, r_best = mid, r
         for start in range(bounds[c, 0], bounds[c, 1], NEAREST_BLOCK):
             stop = min(start + NEAREST_BLOCK, bounds[c, 1])
             # no sample of the block lies nearer than its middle one less the arc to its ends
@@ -841,7 +860,7 @@ def nearest_sample(roads, bounds, px, py):  # type: ignore[no-untyped-def]
                 continue
             for k in range(start, stop):
                 r = (px - roads[1, k]) ** 2 + (py - roads[2, k]) ** 2
-                if r < r_best:
+                if r < r_best or (r == r_best and k < k_best):  # the first on a tie
                     k_best, r_best = k, r
         th = roads[3, k_best]
         d = (px - roads[1, k_best]) * -math.cos(th) + (py - roads[2, k_best]) * math.sin(th)

@@ -390,7 +390,7 @@ class SceneTracker:
         if not np.isfinite(z).all():
             raise ValueError(f"radar {radar_name!r} at {time_s} s: a detection is not finite")
         ids = _sensor_ids(ids, z.shape[0], radar_name, time_s)
-        self.run(np.array([r]), np.array([float(time_s)]), np.array([0, z.shape[0]]), z, ids, False)
+        self.run(np.array([r]), np.array([float(time_s)]), np.array([0, z.shape[0]]), z, ids)
 
     def run(
         self,
@@ -399,23 +399,27 @@ class SceneTracker:
         starts: np.ndarray,
         z: FloatArray,
         ids: np.ndarray,
-        record: bool,
-    ) -> dict[str, np.ndarray]:
+        rows_out: RowBuffer | None = None,
+        n_out: int = 0,
+    ) -> tuple[RowBuffer | None, int]:
         """Process checked scans in order (their arrays as :func:`scan_arrays` gives them).
 
         Scan ``k`` is ``z[starts[k]:starts[k+1]]`` with sensor ``ids``, of radar row
         ``radar_rows[k]`` (the site's order), stamped ``stamps_s[k]``; stamps of one radar
-        must increase. Returns the columns of :meth:`rows` after every scan if ``record``
-        (else none).
+        must increase. With ``rows_out`` (:func:`._scene_loop.empty_rows`, ``n_out`` rows
+        used), the confirmed tracks after every scan are appended to it; returns the buffer
+        (grown if it was full) and its rows used.
         """
         book, tr = self.book, self.tracks
         log = np.array([getattr(self.log, name) for name in LOG_FIELDS], np.int64)
         outside = np.zeros(z.shape[0], bool)
+        record = rows_out is not None
         t, n, book.next_id, events, n_events, out, n_out = run_scans(
             self._rows(), book.ids.size, book.next_id, self._settings, self._tables,
             self._radar_state, log, z, ids, np.asarray(starts, np.int64),
             np.asarray(radar_rows, np.int64), np.asarray(stamps_s, float), outside,
-            np.zeros((0, EVENT_FIELDS)), 0, record, empty_rows(0), 0,
+            np.zeros((0, EVENT_FIELDS)), 0, record, rows_out if record else empty_rows(0),
+            n_out,
         )  # fmt: skip
         for name, column in zip(TrackRows._fields, t, strict=True):
             setattr(book if name in _BOOK_COLUMNS else tr, name, column[:n])
@@ -425,7 +429,7 @@ class SceneTracker:
         k = radar_rows[-1]
         self.last_scan_s = float(stamps_s[-1] - self._tables.latency_s[k])
         self.outside_view = outside[starts[-2] :]
-        return _columns(out, n_out)
+        return (out if record else None), n_out
 
     def _rows(self) -> TrackRows:
         """Return the track book's and the filter's columns (the arrays themselves, not copies)."""
@@ -565,13 +569,14 @@ def _site_tables(site: Site, corridors: list[Corridor], warnings: FloatArray | N
 
 
 def _frame(columns: list[dict[str, np.ndarray]]) -> pd.DataFrame:
-    """One table of track rows from the columns of several scans (status named)."""
-    names = np.array(STATUS_NAMES)
+    """One table of track rows from the columns of several scans (status named, categorical)."""
     keys = list(columns[0]) if columns else list(ROW_COLUMNS)
-    table: dict[str, np.ndarray] = {
-        k: np.concatenate([c[k] for c in columns]) if columns else np.zeros(0) for k in keys
-    }
-    table["status"] = names[np.asarray(table["status"], dtype=int)]
+    table: dict[str, Any] = {
+        k: (columns[0][k] if len(columns) == 1 else np.concatenate([c[k] for c in columns]))
+        if columns else np.zeros(0, np.int64 if k == "status" else float)
+        for k in keys
+    }  # fmt: skip
+    table["status"] = pd.Categorical.from_codes(table["status"], categories=STATUS_NAMES)
     return pd.DataFrame(table)
 
 
@@ -620,41 +625,45 @@ def _corridor_tables(corridors: list[Corridor]) -> tuple[FloatArray, np.ndarray]
 
 def scan_arrays(
     detections: pd.DataFrame, latency_s: dict[str, float] | None = None
-) -> tuple[np.ndarray, FloatArray, np.ndarray, FloatArray, np.ndarray]:
+) -> tuple[list[str], np.ndarray, FloatArray, np.ndarray, FloatArray, np.ndarray]:
     """Split a detection table into scans in time order (radar name breaks ties).
 
     A scan is the detections (range_m, azimuth_rad, radial_speed_mps) of one radar at one
     timestamp, with their sensor object ids (the ``object_id`` column of an object list; -1
     without it). With radars' ``latency_s``, the order is that of the times the scans were
-    made (timestamps less latency). Returns each scan's radar name and timestamp [s], the
-    scans' start rows (S + 1,) in the sorted detections ``z`` (N, 3) and their ``ids`` (N,).
+    made (timestamps less latency). Returns the radar names (sorted), each scan's radar (its
+    index in them) and timestamp [s], the scans' start rows (S + 1,) in the sorted
+    detections ``z`` (N, 3) and their ``ids`` (N,).
     """
     t = detections["time_s"].to_numpy(dtype=float)
-    radar = detections["radar"].astype(str).to_numpy()
+    codes, uniques = pd.factorize(detections["radar"])
+    names, rank = np.unique(np.array([str(u) for u in uniques], dtype=object), return_inverse=True)
+    codes = rank[codes] if t.size else codes
     z = detections[["range_m", "azimuth_rad", "radial_speed_mps"]].to_numpy(dtype=float)
     ids = (
         detections["object_id"].to_numpy(dtype=np.int64)
         if "object_id" in detections.columns
         else np.full(t.size, -1, np.int64)
     )
-    made = t - pd.Series(radar).map(latency_s or {}).fillna(0.0).to_numpy()
-    order = np.lexsort((radar, made))
-    t, radar, z, ids = t[order], radar[order], z[order], ids[order]
-    cut = np.flatnonzero((np.diff(t) != 0) | (radar[1:] != radar[:-1])) + 1
+    latency = np.array([(latency_s or {}).get(name, 0.0) for name in names], float)
+    order = np.lexsort((codes, t - latency[codes]))
+    t, codes, z, ids = t[order], codes[order], z[order], ids[order]
+    cut = np.flatnonzero((np.diff(t) != 0) | (codes[1:] != codes[:-1])) + 1
     starts = np.concatenate([[0], cut, [t.size]] if t.size else [[0]]).astype(np.int64)
-    return radar[starts[:-1]], t[starts[:-1]], starts, z, ids
+    return list(names), codes[starts[:-1]], t[starts[:-1]], starts, z, ids
 
 
 def iter_scans(
     detections: pd.DataFrame, latency_s: dict[str, float] | None = None
 ) -> Iterator[tuple[str, float, FloatArray, np.ndarray]]:
     """Yield the scans of :func:`scan_arrays`: radar name, timestamp [s], detections, ids."""
-    names, stamps, starts, z, ids = scan_arrays(detections, latency_s)
+    names, radar, stamps, starts, z, ids = scan_arrays(detections, latency_s)
     for k, (a, b) in enumerate(itertools.pairwise(starts)):
-        yield str(names[k]), float(stamps[k]), z[a:b], ids[a:b]
+        yield names[radar[k]], float(stamps[k]), z[a:b], ids[a:b]
 
 
 SCANS_PER_CALL = 4096  # scans per compiled call of track_scene (progress between calls)
+ROWS_PER_SCAN = 16  # track rows reserved per scan (untouched memory costs nothing; it grows)
 
 
 def track_scene(
@@ -675,28 +684,28 @@ def track_scene(
     prediction). Returns the track rows of every scan, the hazard events and the detection log.
     """
     tracker = SceneTracker(site, config, warnings)
-    names, stamps, starts, z, ids = scan_arrays(
+    names, radar, stamps, starts, z, ids = scan_arrays(
         detections, {r.name: r.latency_s for r in site.radars}
     )
-    known, rows = np.unique(names, return_inverse=True)
-    index = np.array([tracker._radar(str(name)) for name in known], np.int64)  # names unknowns
-    rows = index[rows] if names.size else np.zeros(0, np.int64)
+    rows = np.array([tracker._radar(name) for name in names], np.int64)[radar]
     for bad, what in ((~np.isfinite(z).all(axis=1), "a detection is not finite"),
                       (ids < -1, "sensor ids must be integers >= -1")):  # fmt: skip
         if bad.any():
             k = int(np.searchsorted(starts, np.flatnonzero(bad)[0], side="right")) - 1
-            raise ValueError(f"radar {names[k]!r} at {stamps[k]} s: {what}")
-    parts = []
-    for a in range(0, names.size, SCANS_PER_CALL):
-        b = min(a + SCANS_PER_CALL, names.size)
-        cols = tracker.run(
+            raise ValueError(f"radar {names[radar[k]]!r} at {stamps[k]} s: {what}")
+    n_scans = stamps.size
+    out: RowBuffer | None = empty_rows(ROWS_PER_SCAN * n_scans)
+    n_out = 0
+    for a in range(0, n_scans, SCANS_PER_CALL):
+        b = min(a + SCANS_PER_CALL, n_scans)
+        out, n_out = tracker.run(
             rows[a:b], stamps[a:b], starts[a : b + 1] - starts[a], z[starts[a] : starts[b]],
-            ids[starts[a] : starts[b]], True,
+            ids[starts[a] : starts[b]], out, n_out,
         )  # fmt: skip
-        parts.append(cols)
         if on_scan is not None:
-            on_scan(b, names.size)
-    table = _frame(parts)
+            on_scan(b, n_scans)
+    assert out is not None
+    table = _frame([_columns(out, n_out)])
     return table, pd.DataFrame(tracker.events, columns=EVENT_COLUMNS), tracker.log
 
 
