@@ -642,7 +642,7 @@ def _track_scene_file(
         settings = load_scene_config(config) if config is not None else None
     except (ValueError, OSError) as exc:
         _fail(str(exc))
-    _announce_compilation(TRACK_COMPILE_TIME, "_scene_kernels.gate_scan")
+    _announce_compilation(TRACK_COMPILE_TIME, "_scene_loop.run_scans")
     with progress(Console(), "tracking (scans)") as bar:
         try:
             tracks, events_frame, log = track_scene(
@@ -654,7 +654,7 @@ def _track_scene_file(
             )
         except ValueError as exc:
             _fail(f"{measurements}: {exc}")
-    write_table_atomic(tracks, out)
+    write_table_atomic(tracks.astype({"status": str}), out)  # plain strings in files
     ev_path = events or out.with_name(out.stem + ".events.csv")
     write_table_atomic(events_frame, ev_path)
     Console().print(

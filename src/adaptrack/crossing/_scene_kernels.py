@@ -450,18 +450,22 @@ def associate_scan(  # type: ignore[no-untyped-def]
     :func:`reserve_clutter`). With ``id_bonus`` > 0, a gated detection whose sensor id
     (``ids`` (D,), -1 none) is the one this radar last gave a track (``sensor_id`` (T,))
     costs that much less (:func:`favour_sensor_ids`).
-    Returns ``(seen, d2, logdet, simple, tracks, detections)``: each track in view,
-    distances (T, D), log-determinants (T,) (:func:`gate_scan`) and, if ``simple``, the
-    one-to-one assignment (:func:`unambiguous_assignment`).
+    Returns ``(seen, d2, logdet, simple, tracks, detections, sight)``: each track in view,
+    distances (T, D), log-determinants (T,) (:func:`gate_scan`), if ``simple`` the
+    one-to-one assignment (:func:`unambiguous_assignment`), and the tracks' lines of sight
+    if the occlusion gate computed them (:func:`sight_lines`; else no rows).
     """
     n_t, n_d = x.shape[0], z.shape[0]
     d2 = np.empty((n_t, n_d))
     logdet = np.empty(n_t)
     road_user = moved & confirmed
     behind = np.full(n_t, -1, dtype=np.int64)  # the stopped road user hiding a queued track
-    if occlusion_gate:
-        queued = np.flatnonzero(stopped)
-        nearest = occluders(queued, x, spread, corridor, roads, bounds, radar, road_user)
+    sight = np.zeros((0, 3))  # the tracks' lines of sight, if needed (:func:`sight_lines`)
+    queued = np.flatnonzero(stopped)
+    if occlusion_gate and queued.size:
+        sight = np.zeros((n_t, 3))
+        sight_lines(np.arange(n_t), x, spread, corridor, roads, bounds, radar, sight)
+        nearest = nearer_occluders(queued, x, spread, corridor, sight, road_user)
         for k in range(queued.size):
             if nearest[k] >= 0 and stopped[nearest[k]]:  # else the nearest is moving
                 behind[queued[k]] = nearest[k]
@@ -471,24 +475,24 @@ def associate_scan(  # type: ignore[no-untyped-def]
         start_speed_max, extent_gate, passing_gate, beside_m, gate, z, d2, logdet,
     )  # fmt: skip
     if n_d == 0:
-        return seen, d2, logdet, True, np.zeros(0, np.int64), np.zeros(0, np.int64)
+        return seen, d2, logdet, True, np.zeros(0, np.int64), np.zeros(0, np.int64), sight
     reserve_clutter(d2, clutter, clutter_gate)
     if id_bonus != 0.0:
         favour_sensor_ids(d2, sensor_id, ids, id_bonus, gate)
     simple, tracks, dets = unambiguous_assignment(d2, gate)
-    return seen, d2, logdet, simple, tracks, dets
+    return seen, d2, logdet, simple, tracks, dets, sight
 
 
 @numba.njit(cache=True)
 def apply_scan(  # type: ignore[no-untyped-def]
-    time_s, seen, d2, logdet, gate, tracks, dets, z, ids, radar_col, x, p, spread, along_m2,
+    time_s, seen, d2, logdet, sight, gate, tracks, dets, z, ids, radar_col, x, p, spread, along_m2,
     along_m4, stopped, moved, direction, slow_since, corridor, miss_run, occluded, anchor_u,
     doppler_seen_s, detection_d, sensor_id, history, misses, last_hit_s, confirmed, roads,
     bounds, radar, noise_tab, noise_cnt, fields, pd_tab, pd_cnt, across_std, moving_radial,
     start_speed_var, learning_rate, shape_rate, spread_lo, spread_hi, align, lane_half_width,
     bias, bias_stats, bias_forget, bias_gate, confirm_speed_var, window_mask, confirm_hits,
 ):  # fmt: skip
-    """Update the tracks with a gated scan (:func:`associate_scan`) in place.
+    """Update the tracks with a gated scan (:func:`associate_scan`, its ``sight``) in place.
 
     Every gated detection goes to its owner (:func:`owners`: the assignment's, then the likeliest
     track) and updates it (:func:`update_tracks`, which sets ``doppler_seen_s``); the assigned
@@ -521,7 +525,14 @@ def apply_scan(  # type: ignore[no-untyped-def]
         if hit[i]:
             miss_run[i] = 1.0
     missed = np.flatnonzero(seen & ~hit)
-    nearer = occluders(missed, x, spread, corridor, roads, bounds, radar, np.ones(n_t, np.bool_))
+    nearer = np.full(missed.size, -1, np.int64)
+    if missed.size:  # lines of sight after the updates: those of the updated tracks anew
+        if sight.shape[0] == n_t:
+            sight_lines(np.flatnonzero(hit), x, spread, corridor, roads, bounds, radar, sight)
+        else:
+            sight = np.zeros((n_t, 3))
+            sight_lines(np.arange(n_t), x, spread, corridor, roads, bounds, radar, sight)
+        nearer = nearer_occluders(missed, x, spread, corridor, sight, np.ones(n_t, np.bool_))
     for i in range(n_t):
         if hit[i]:
             occluded[i] = False
@@ -755,21 +766,37 @@ def occluders(rows, x, spread, corridor, roads, bounds, radar, can_hide):  # typ
     no other road user can be there, so that track is a duplicate of its body and its
     misses count. Of several, the nearest to the radar is returned.
     """
-    n = x.shape[0]
     out = np.full(rows.size, -1, dtype=np.int64)
     if rows.size == 0:
         return out
-    rng = np.zeros(n)
-    az = np.zeros(n)
-    half = np.zeros(n)
-    for i in range(n):
+    sight = np.zeros((x.shape[0], 3))
+    sight_lines(np.arange(x.shape[0]), x, spread, corridor, roads, bounds, radar, sight)
+    return nearer_occluders(rows, x, spread, corridor, sight, can_hide)
+
+
+@numba.njit(cache=True)
+def sight_lines(rows, x, spread, corridor, roads, bounds, radar, sight):  # type: ignore[no-untyped-def]
+    """Fill ``sight`` (T, 3) rows ``rows``: range, azimuth and apparent half width [m, rad].
+
+    The half width is twice the body spread along the lane's heading and 1 m across, seen
+    from the radar (:func:`occluders`).
+    """
+    for i in rows:
         _, _, tx, ty, _, px, py = _lane_frame(roads, bounds, corridor[i], x[i, 0], x[i, 3])
         ex, ey = px - radar[0], py - radar[1]
-        rng[i] = math.sqrt(ex * ex + ey * ey)
-        az[i] = math.atan2(ex, ey)
-        ux, uy = ex / max(rng[i], 1e-9), ey / max(rng[i], 1e-9)
+        rng = math.sqrt(ex * ex + ey * ey)
+        ux, uy = ex / max(rng, 1e-9), ey / max(rng, 1e-9)
         across = abs(ux * ty - uy * tx) * 2.0 * spread[i] + abs(ux * tx + uy * ty) * 1.0
-        half[i] = math.atan2(across, max(rng[i], 1e-9))
+        sight[i, 0], sight[i, 1] = rng, math.atan2(ex, ey)
+        sight[i, 2] = math.atan2(across, max(rng, 1e-9))
+
+
+@numba.njit(cache=True)
+def nearer_occluders(rows, x, spread, corridor, sight, can_hide):  # type: ignore[no-untyped-def]
+    """:func:`occluders` from the tracks' lines of sight (:func:`sight_lines`)."""
+    n = x.shape[0]
+    out = np.full(rows.size, -1, dtype=np.int64)
+    rng, az, half = sight[:, 0], sight[:, 1], sight[:, 2]
     for k in range(rows.size):
         i = rows[k]
         for j in range(n):
@@ -815,22 +842,26 @@ def miss_updates(  # type: ignore[no-untyped-def]
 
 @numba.njit(cache=True)
 def planar_rows(  # type: ignore[no-untyped-def]
-    x, p, corridor, roads, bounds, crossing_u, pos, vel, pos_std, to_cross
+    rows, x, p, corridor, roads, bounds, crossing_u, pos, vel, pos_std, to_cross
 ):
-    """Planar position, velocity, position sigma (trace) and distance to the crossing."""
-    for i in range(x.shape[0]):
+    """Planar position, velocity, position sigma (trace) and distance to the crossing.
+
+    Of the tracks in ``rows``, written to entry ``k`` for ``rows[k]``.
+    """
+    for k in range(rows.size):
+        i = rows[k]
         d = x[i, 3]
         _, _, tx, ty, kappa, px, py = _lane_frame(roads, bounds, corridor[i], x[i, 0], d)
-        pos[i, 0], pos[i, 1] = px, py
+        pos[k, 0], pos[k, 1] = px, py
         rx, ry = -ty, tx
         lever = 1.0 + kappa * d
-        vel[i, 0], vel[i, 1] = x[i, 1] * lever * tx, x[i, 1] * lever * ty
+        vel[k, 0], vel[k, 1] = x[i, 1] * lever * tx, x[i, 1] * lever * ty
         # position covariance J P J^T with J = [lever t, right] on (u, d)
         a0, a1 = lever * tx, lever * ty
         puu, pud, pdd = p[i, 0, 0], p[i, 0, 3], p[i, 3, 3]
         trace = (a0 * a0 + a1 * a1) * puu + 2.0 * (a0 * rx + a1 * ry) * pud + pdd
-        pos_std[i] = math.sqrt(max(trace, 0.0))
-        to_cross[i] = abs(crossing_u[corridor[i]] - x[i, 0])
+        pos_std[k] = math.sqrt(max(trace, 0.0))
+        to_cross[k] = abs(crossing_u[corridor[i]] - x[i, 0])
 
 
 @numba.njit(cache=True)
@@ -1020,10 +1051,19 @@ def retired_rows(  # type: ignore[no-untyped-def]
         young[k] = absorb_young_static and age < clutter_age_s
         settled[k] = confirmed[i] and moved[i] and age > settled_s
     static = stopped & ~moved
+    if alive.size < n:  # the survivors' rows (most scans lose none)
+        corridor, x, p, spread, static = (
+            corridor[alive],
+            x[alive],
+            p[alive],
+            spread[alive],
+            static[alive],
+        )
+        stopped, moved, ids, confirmed = stopped[alive], moved[alive], ids[alive], confirmed[alive]
+        born_s = born_s[alive]
     merged = merged_rows(
-        corridor[alive], x[alive], p[alive], spread[alive], static[alive], stopped[alive],
-        moved[alive], ids[alive], confirmed[alive], lateral_m, speed_mps, parts_speed, young,
-        settled, settled_lateral_m, born_s[alive],
+        corridor, x, p, spread, static, stopped, moved, ids, confirmed, lateral_m, speed_mps,
+        parts_speed, young, settled, settled_lateral_m, born_s,
     )  # fmt: skip
     for k in range(alive.size):
         dead[alive[k]] |= merged[k]

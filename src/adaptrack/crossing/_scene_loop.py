@@ -434,8 +434,8 @@ def write_rows(t, n, time_s, s, site, rows_out, n_out):  # type: ignore[no-untyp
         )  # fmt: skip
     pos, vel, pos_std, to_cross = np.zeros((m, 2)), np.zeros((m, 2)), np.zeros(m), np.zeros(m)
     planar_rows(
-        v.x[rows], v.p[rows], v.corridor[rows], site.roads, site.bounds, site.crossing_u, pos,
-        vel, pos_std, to_cross,
+        rows, v.x, v.p, v.corridor, site.roads, site.bounds, site.crossing_u, pos, vel, pos_std,
+        to_cross,
     )  # fmt: skip
     for k in range(m):
         i, o = rows[k], n_out + k
@@ -497,7 +497,7 @@ def run_scans(  # type: ignore[no-untyped-def]
         used = np.zeros(z.shape[0], np.bool_)
         if n:
             clutter = learnt_clutter(v.stopped, v.moved, v.time_s, v.born_s, s.clutter_age_s)
-            seen, d2, logdet, simple, ti, di = associate_scan(
+            seen, d2, logdet, simple, ti, di, sight = associate_scan(
                 v.x, v.p, v.spread, v.stopped, v.moved, v.confirmed, clutter, v.direction,
                 v.corridor, v.sensor_id[:, r], site.roads, site.bounds, radar, noise_tab,
                 noise_cnt, fields, s.body_across_std_m, s.start_speed_max_mps,
@@ -510,7 +510,7 @@ def run_scans(  # type: ignore[no-untyped-def]
                     ti, di = _assign(d2, s.gate)
             stats = radars.bias_stats[r]
             used = apply_scan(
-                time_s, seen, d2, logdet, s.gate, ti, di, z, ids, r, v.x, v.p, v.spread,
+                time_s, seen, d2, logdet, sight, s.gate, ti, di, z, ids, r, v.x, v.p, v.spread,
                 v.along_m2, v.along_m4, v.stopped, v.moved, v.direction, v.slow_since,
                 v.corridor, v.miss_run, v.occluded, v.anchor_u, v.doppler_seen_s,
                 v.detection_d, v.sensor_id, v.history, v.misses, v.last_hit_s, v.confirmed,
