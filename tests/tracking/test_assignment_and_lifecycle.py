@@ -10,6 +10,7 @@ from scipy.stats import chi2
 from adaptrack.tracking import (
     LifecycleRules,
     TrackBook,
+    assignment_by_components,
     cluster_points,
     gate_threshold,
     gnn_assign,
@@ -65,8 +66,6 @@ def test_assignment_by_components_matches_brute_force_and_scipy(seed):
     """Several conflicts in one scan, each solved on its own: the same cheapest total as the
     brute force over the whole matrix, and the same pairs as SciPy's (the optimum is unique
     for continuous random costs)."""
-    from adaptrack.tracking.assignment import assignment_by_components
-
     rng = np.random.default_rng(seed)
     n_t, n_d = rng.integers(1, 6), rng.integers(1, 6)
     cost = rng.uniform(0, 15, (n_t, n_d))
@@ -85,8 +84,6 @@ def test_assignment_by_components_on_a_hand_made_scan():
     """Tracks 0 and 1 share detection 0 (greedy would give it to 0, the global optimum to 1);
     track 2 alone has detections 2 and 3 (takes the nearer); track 3 has none in its gate.
     A component with more choices than allowed is left to the caller."""
-    from adaptrack.tracking.assignment import assignment_by_components
-
     inf = np.inf
     cost = np.array([
         [1.0, 2.0, inf, inf],

@@ -18,8 +18,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from ..tracking import gnn_assign
-from ..tracking.assignment import assignment_by_components
+from ..tracking import assignment_by_components, gnn_assign
 from ._scene_kernels import (
     _lane_frame,
     apply_scan,

@@ -4,7 +4,7 @@ Independent of any application: the level-crossing scene tracker
 (:mod:`adaptrack.crossing.scene_tracker`) builds on it, as any other would.
 """
 
-from .assignment import cluster_labels, cluster_points, gnn_assign
+from .assignment import assignment_by_components, cluster_labels, cluster_points, gnn_assign
 from .gating import gate_threshold, mahalanobis_squared
 from .lifecycle import LifecycleRules, TrackBook, TrackStatus
 
@@ -12,6 +12,7 @@ __all__ = [
     "LifecycleRules",
     "TrackBook",
     "TrackStatus",
+    "assignment_by_components",
     "cluster_labels",
     "cluster_points",
     "gate_threshold",
