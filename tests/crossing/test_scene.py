@@ -1,6 +1,7 @@
 """Mixed-traffic scene: simulated traffic and detections, and the many-object tracker on them."""
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from adaptrack.crossing.scene import (
@@ -170,6 +171,47 @@ def test_stall_between_the_barriers_raises_the_event_in_time(stalled):
     rows = tracks[(tracks["track_id"] == ev["track_id"]) & (tracks["status"] == "stopped")]
     assert rows["time_s"].max() - rows["time_s"].min() > 40.0
     assert rows["position_std_m"].max() < 0.5
+
+
+def test_the_compiled_runs_equal_the_scan_by_scan_steps(stalled, monkeypatch):
+    """track_scene (runs of 4096 scans in one compiled call, one row buffer) gives the same
+    rows and events as SceneTracker.step scan by scan, and as runs of 7 scans whose row
+    buffer starts empty and grows (a stall: alarms, a queue, tracks opened and deleted)."""
+    import adaptrack.crossing.scene_tracker as scene_tracker
+    from adaptrack.crossing.scene_tracker import iter_scans
+
+    tracks, events, log = track_scene(SITE, stalled.detections)
+    assert len(events) >= 1
+    monkeypatch.setattr(scene_tracker, "ROWS_PER_SCAN", 0)
+    monkeypatch.setattr(scene_tracker, "SCANS_PER_CALL", 7)
+    small_runs = track_scene(SITE, stalled.detections)
+    pd.testing.assert_frame_equal(small_runs[0], tracks, check_exact=True)
+    pd.testing.assert_frame_equal(small_runs[1], events, check_exact=True)
+    assert small_runs[2] == log
+    tracker = SceneTracker(SITE)
+    frames = []
+    for radar, t, z, ids in iter_scans(stalled.detections):
+        tracker.step(radar, t, z, ids)
+        frames.append(tracker.rows(tracker.last_scan_s))
+    stepped = pd.concat(frames, ignore_index=True)
+    pd.testing.assert_frame_equal(stepped, tracks, check_exact=True)
+    pd.testing.assert_frame_equal(pd.DataFrame(tracker.events), events, check_exact=True)
+    assert tracker.log == log
+
+
+def test_track_scene_names_the_scan_of_bad_input(free_flow):
+    det = free_flow.detections.iloc[:500].copy()
+    with pytest.raises(ValueError, match="unknown radar 'radar_Q'"):
+        track_scene(
+            SITE, det.assign(radar=det["radar"].where(det.index != det.index[9], "radar_Q"))
+        )
+    bad = det.copy()
+    bad.loc[bad.index[40], "range_m"] = np.inf
+    stamp = bad.loc[bad.index[40], "time_s"]
+    with pytest.raises(ValueError, match=f"at {stamp} s: a detection is not finite"):
+        track_scene(SITE, bad)
+    with pytest.raises(ValueError, match="sensor ids must be integers >= -1"):
+        track_scene(SITE, det.assign(object_id=-2))
 
 
 def test_bad_scans_are_refused_with_a_reason():

@@ -410,6 +410,8 @@ class SceneTracker:
         used), the confirmed tracks after every scan are appended to it; returns the buffer
         (grown if it was full) and its rows used.
         """
+        if len(radar_rows) == 0:
+            return rows_out, n_out
         book, tr = self.book, self.tracks
         log = np.array([getattr(self.log, name) for name in LOG_FIELDS], np.int64)
         outside = np.zeros(z.shape[0], bool)
