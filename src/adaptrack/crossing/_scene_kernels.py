@@ -196,23 +196,24 @@ def _visible_part(i, x, spread, corridor, roads, bounds, radar, fields):  # type
 @numba.njit(cache=True, inline="always")
 def _model(  # type: ignore[no-untyped-def]
     i, x, spread, corridor, roads, bounds, radar, noise_tab, noise_cnt, fields, across_std,
-    xv, zp, h, rm, jp, jv,
+    xv, zp, h, rm, jp, jv, visible,
 ):  # fmt: skip
     """Predicted detection, Jacobian and noise of track ``i`` (body spread along and across).
 
     A body partly outside the field of view is detected over its visible part only
-    (:func:`_visible_part`): the detection is predicted at that part's centre, with its
-    spread. ``xv`` (4,): scratch; it holds the state at the visible part's centre after the
-    call. Returns the visible part's spread [m].
+    (``visible``: :func:`_visible_part` of the track): the detection is predicted at that
+    part's centre, with its spread. ``xv`` (4,): scratch; it holds the state at the visible
+    part's centre after the call. Returns the visible part's spread [m] and the corridor's
+    centreline point and heading there (``cx, cy, th``).
     """
     road = roads[:, bounds[corridor[i], 0] : bounds[corridor[i], 1]]
-    offset, part_spread, slope = _visible_part(i, x, spread, corridor, roads, bounds, radar, fields)
+    offset, part_spread, slope = visible
     xv[:] = x[i]
     xv[0] += offset
     measure(ROAD, xv, 3, radar, noise_tab, noise_cnt, road, 0.0, part_spread, zp, h, rm, jp, jv)
     for a in range(3):
         h[a, 0] *= 1.0 + slope
-    th = _centreline(road, xv[0])[2]
+    cx, cy, th, _ = _centreline(road, xv[0])
     rx, ry = -math.cos(th), math.sin(th)
     b0 = jp[0, 0] * rx + jp[0, 1] * ry
     b1 = jp[1, 0] * rx + jp[1, 1] * ry
@@ -222,7 +223,7 @@ def _model(  # type: ignore[no-untyped-def]
     for a in range(3):
         for c in range(3):
             rm[a, c] += s2 * bb[a] * bb[c]
-    return part_spread
+    return part_spread, cx, cy, th
 
 
 @numba.njit(cache=True)
@@ -321,9 +322,10 @@ def gate_scan(  # type: ignore[no-untyped-def]
     penalty = np.zeros((n_t, n_d))  # beyond the body's end along the lane (see above)
     held = np.full((n_t, n_d), np.inf)  # a starting row's d2 at its held zero speed
     for i in range(n_t):
-        part_spread = _model(
+        part_spread, cx, cy, th = _model(
             i, x, spread, corridor, roads, bounds, radar, noise_tab, noise_cnt, fields,
             across_std, xv, zp, h, rm, jp, jv,
+            _visible_part(i, x, spread, corridor, roads, bounds, radar, fields),
         )  # fmt: skip
         seen[i] = in_view(zp[0], off_boresight(zp[1], radar), fields, radar[4])
         logdet[i] = np.inf
@@ -342,7 +344,8 @@ def gate_scan(  # type: ignore[no-untyped-def]
             d2[i, :] = np.inf
             continue
         logdet[i] = 2.0 * (math.log(lo[0, 0]) + math.log(lo[1, 1]) + math.log(lo[2, 2]))
-        _, _, tx, ty, _, px, py = _lane_frame(roads, bounds, corridor[i], xv[0], xv[3])
+        tx, ty = math.sin(th), math.cos(th)  # the lane frame at the visible part's centre
+        px, py = cx - xv[3] * ty, cy + xv[3] * tx
         half = BODY_HALF_SPREADS * part_spread
         for j in range(n_d):
             wr = z[j, 0] - zp[0]  # range alone: d2 >= wr^2 / S_rr (start fitting keeps wr)
@@ -701,9 +704,10 @@ def update_tracks(  # type: ignore[no-untyped-def]
                 spread[i] = math.sqrt(min(max(var, spread_lo**2), spread_hi**2))
             along_m2[i] += shape_rate * (along * along - along_m2[i])
             along_m4[i] += shape_rate * (along**4 - along_m4[i])
-        _model(
+        _model(  # over the part in view of its body as learnt now
             i, x, spread, corridor, roads, bounds, radar, noise_tab, noise_cnt, fields,
             across_std, xv, zp, h, rm, jp, jv,
+            _visible_part(i, x, spread, corridor, roads, bounds, radar, fields),
         )  # fmt: skip
         doppler = doppler_usable(h, p[i], rm, radar)
         innovation_into(z[j], zp, radar, doppler, nu)
