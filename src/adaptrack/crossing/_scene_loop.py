@@ -35,8 +35,6 @@ from ._scene_kernels import (
 
 EVENT_NAMES = ("stopped_between_barriers", "will_not_stop_before_stop_line")  # by event code
 EVENT_FIELDS = 6  # time [s], event code, track id, east [m], north [m], lead [s] (NaN: none)
-ROW_VALUES = ("time_s", "east_m", "north_m", "speed_mps", "east_speed_mps", "north_speed_mps",
-              "from_crossing_m", "position_std_m", "speed_std_mps")  # fmt: skip
 LOG_FIELDS = ("updated", "opened", "joined_new", "rejected_outside_view")
 MAX_CHOICES = 4096  # a scan's conflict with more choices goes to SciPy's assignment
 
@@ -171,20 +169,29 @@ class RadarState(NamedTuple):
 
 
 class RowBuffer(NamedTuple):
-    """Confirmed tracks after each scan: ids, status codes, moved, and the :data:`ROW_VALUES`."""
+    """Confirmed tracks after each scan, a column each (the columns of ``SceneTracker.rows``).
+
+    Status as codes (``scene_tracker.STATUS_NAMES``); sigmas of position and speed.
+    """
 
     track_id: np.ndarray
+    time_s: np.ndarray
+    east_m: np.ndarray
+    north_m: np.ndarray
+    speed_mps: np.ndarray
+    east_speed_mps: np.ndarray
+    north_speed_mps: np.ndarray
+    from_crossing_m: np.ndarray
     status: np.ndarray
     moved: np.ndarray
-    values: np.ndarray
+    position_std_m: np.ndarray
+    speed_std_mps: np.ndarray
 
 
 def empty_rows(capacity: int) -> RowBuffer:
     """Return a row buffer with room for ``capacity`` rows."""
-    return RowBuffer(
-        np.zeros(capacity, np.int64), np.zeros(capacity, np.int64), np.zeros(capacity, bool),
-        np.zeros((capacity, len(ROW_VALUES))),
-    )  # fmt: skip
+    kinds = {"track_id": np.int64, "status": np.int64, "moved": bool}
+    return RowBuffer(*(np.zeros(capacity, kinds.get(name, float)) for name in RowBuffer._fields))
 
 
 @numba.njit(cache=True)
@@ -427,26 +434,34 @@ def write_rows(t, n, time_s, s, site, rows_out, n_out):  # type: ignore[no-untyp
     m = rows.size
     if n_out + m > rows_out.track_id.shape[0]:
         size = 2 * (n_out + m) + 1024
+        o = rows_out
         rows_out = RowBuffer(
-            _grown(rows_out.track_id, n_out, size), _grown(rows_out.status, n_out, size),
-            _grown(rows_out.moved, n_out, size), _grown(rows_out.values, n_out, size),
+            _grown(o.track_id, n_out, size), _grown(o.time_s, n_out, size),
+            _grown(o.east_m, n_out, size), _grown(o.north_m, n_out, size),
+            _grown(o.speed_mps, n_out, size), _grown(o.east_speed_mps, n_out, size),
+            _grown(o.north_speed_mps, n_out, size), _grown(o.from_crossing_m, n_out, size),
+            _grown(o.status, n_out, size), _grown(o.moved, n_out, size),
+            _grown(o.position_std_m, n_out, size), _grown(o.speed_std_mps, n_out, size),
         )  # fmt: skip
     pos, vel, pos_std, to_cross = np.zeros((m, 2)), np.zeros((m, 2)), np.zeros(m), np.zeros(m)
     planar_rows(
         rows, v.x, v.p, v.corridor, site.roads, site.bounds, site.crossing_u, pos, vel, pos_std,
         to_cross,
     )  # fmt: skip
+    o = rows_out
     for k in range(m):
-        i, o = rows[k], n_out + k
-        rows_out.track_id[o], rows_out.status[o], rows_out.moved[o] = (
+        i, r = rows[k], n_out + k
+        o.track_id[r], o.time_s[r], o.status[r], o.moved[r] = (
             v.ids[i],
+            time_s,
             status[k],
             v.moved[i],
         )
-        row = rows_out.values[o]
-        row[0], row[1], row[2] = time_s, pos[k, 0], pos[k, 1]
-        row[3], row[4], row[5] = math.hypot(vel[k, 0], vel[k, 1]), vel[k, 0], vel[k, 1]
-        row[6], row[7], row[8] = to_cross[k], pos_std[k], math.sqrt(v.p[i, 1, 1])
+        o.east_m[r], o.north_m[r] = pos[k, 0], pos[k, 1]
+        o.speed_mps[r] = math.hypot(vel[k, 0], vel[k, 1])
+        o.east_speed_mps[r], o.north_speed_mps[r] = vel[k, 0], vel[k, 1]
+        o.from_crossing_m[r], o.position_std_m[r] = to_cross[k], pos_std[k]
+        o.speed_std_mps[r] = math.sqrt(v.p[i, 1, 1])
     return rows_out, n_out + m
 
 

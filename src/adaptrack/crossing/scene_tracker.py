@@ -87,7 +87,6 @@ from ._scene_loop import (
     EVENT_FIELDS,
     EVENT_NAMES,
     LOG_FIELDS,
-    ROW_VALUES,
     RadarState,
     RowBuffer,
     Settings,
@@ -108,10 +107,7 @@ COASTING_S = 0.2  # a confirmed track without a detection for longer is coasting
 _STATUS_CODES = np.array(
     [TrackStatus.CONFIRMED, TrackStatus.COASTING, TrackStatus.STOPPED, STATIC], np.int64
 )  # confirmed_rows' codes
-ROW_COLUMNS = (
-    "track_id", "time_s", "east_m", "north_m", "speed_mps", "east_speed_mps", "north_speed_mps",
-    "from_crossing_m", "status", "moved", "position_std_m", "speed_std_mps",
-)  # fmt: skip
+ROW_COLUMNS = RowBuffer._fields  # the columns of a track table
 EVENT_COLUMNS = ["time_s", "event", "track_id", "east_m", "north_m", "lead_s"]
 
 
@@ -475,22 +471,8 @@ _BOOK_COLUMNS = ("ids", "history", "confirmed", "misses", "last_hit_s", "born_s"
 
 
 def _columns(out: RowBuffer, n: int) -> dict[str, np.ndarray]:
-    """Columns of :meth:`SceneTracker.rows` from a row buffer's first ``n`` rows."""
-    values = {name: out.values[:n, k] for k, name in enumerate(ROW_VALUES)}
-    return {
-        "track_id": out.track_id[:n],
-        "time_s": values["time_s"],
-        "east_m": values["east_m"],
-        "north_m": values["north_m"],
-        "speed_mps": values["speed_mps"],
-        "east_speed_mps": values["east_speed_mps"],
-        "north_speed_mps": values["north_speed_mps"],
-        "from_crossing_m": values["from_crossing_m"],
-        "status": out.status[:n],
-        "moved": out.moved[:n],
-        "position_std_m": values["position_std_m"],
-        "speed_std_mps": values["speed_std_mps"],
-    }
+    """Columns of :meth:`SceneTracker.rows` from a row buffer's first ``n`` rows (views)."""
+    return {name: column[:n] for name, column in zip(RowBuffer._fields, out, strict=True)}
 
 
 def _event_records(events: FloatArray) -> list[dict[str, object]]:
@@ -579,7 +561,7 @@ def _frame(columns: list[dict[str, np.ndarray]]) -> pd.DataFrame:
         for k in keys
     }  # fmt: skip
     table["status"] = pd.Categorical.from_codes(table["status"], categories=STATUS_NAMES)
-    return pd.DataFrame(table)
+    return pd.DataFrame(table, copy=False)  # the columns are the buffer's, not copied
 
 
 def _sensor_ids(ids: np.ndarray | None, n: int, radar_name: str, time_s: float) -> np.ndarray:
