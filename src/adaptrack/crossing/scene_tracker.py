@@ -32,7 +32,7 @@ split a stopped track whose reflections come from two bodies of a queue
 vehicle among them; a young static object whose body overlaps a stopped road user's,
 ``absorb_young_static``). All of it runs compiled: the per-scan kernels of
 :mod:`._scene_kernels` inside one loop over scans (:mod:`._scene_loop`), so that a run of
-scans is one call (:meth:`SceneTracker.run`, :func:`track_scene`) and a single scan too
+scans is one call (:func:`track_scene`) and a single scan too
 (:meth:`SceneTracker.step`); the global assignment of a scan where a detection lies in two
 tracks' gates is SciPy's, called from the loop.
 
@@ -327,7 +327,7 @@ class SceneTracker:
 
     ``step(radar, time_s, detections)`` processes one scan; ``rows(time_s)`` (or the arrays
     of ``columns``) gives the confirmed tracks after it; ``events`` and ``log`` collect hazard
-    events and detection outcomes. :meth:`run` processes many scans in one compiled call
+    events and detection outcomes. :func:`track_scene` processes many scans in one compiled call
     (:func:`._scene_loop.run_scans`), as :func:`track_scene` does.
     """
 
@@ -386,9 +386,9 @@ class SceneTracker:
         if not np.isfinite(z).all():
             raise ValueError(f"radar {radar_name!r} at {time_s} s: a detection is not finite")
         ids = _sensor_ids(ids, z.shape[0], radar_name, time_s)
-        self.run(np.array([r]), np.array([float(time_s)]), np.array([0, z.shape[0]]), z, ids)
+        self._run(np.array([r]), np.array([float(time_s)]), np.array([0, z.shape[0]]), z, ids)
 
-    def run(
+    def _run(
         self,
         radar_rows: np.ndarray,
         stamps_s: FloatArray,
@@ -485,40 +485,28 @@ def _event_records(events: FloatArray) -> list[dict[str, object]]:
 
 
 def _loop_settings(cfg: SceneTrackerConfig) -> Settings:
-    """Return the compiled loop's view of the settings (gates as chi-square thresholds)."""
+    """Return the compiled loop's view of the settings (gates as chi-square thresholds).
+
+    Fields named as in the config or its rules are theirs; the others are derived here.
+    """
     r = cfg.rules
-    return Settings(
-        accel_psd=cfg.accel_psd, lateral_psd=cfg.lateral_psd, stopped_psd=cfg.stopped_psd,
-        body_along_std_m=cfg.body_along_std_m, body_across_std_m=cfg.body_across_std_m,
-        start_speed_max_mps=cfg.start_speed_max_mps, body_extent_gate=cfg.body_extent_gate,
-        occlusion_gate=cfg.occlusion_gate, passing_gate=cfg.passing_gate,
+    derived: dict[str, Any] = {
         # two road users this far apart across the lane [m] stand side by side (two spreads)
-        beside_m=BODY_HALF_SPREADS * cfg.body_across_std_m,
-        gate=gate_threshold(3, cfg.gate_probability),
-        clutter_gate=gate_threshold(3, cfg.clutter_gate_probability),
-        sensor_id_bonus=cfg.sensor_id_bonus, clutter_age_s=cfg.clutter_age_s,
-        moving_radial_mps=cfg.moving_radial_mps, spread_learning_rate=cfg.spread_learning_rate,
-        shape_learning_rate=cfg.shape_learning_rate, spread_lo_m=cfg.spread_limits_m[0],
-        spread_hi_m=cfg.spread_limits_m[1], estimate_azimuth_bias=cfg.estimate_azimuth_bias,
-        bias_forget=1.0 - 1.0 / cfg.bias_memory, bias_gate_m=cfg.bias_gate_m,
-        bias_min_samples=cfg.bias_min_samples, confirm_speed_var=cfg.confirm_speed_std_mps**2,
-        window_mask=(1 << r.confirm_window) - 1, confirm_hits=r.confirm_hits,
-        cluster_radius_m=cfg.cluster_radius_m, initial_speed_var=cfg.initial_speed_std_mps**2,
-        moved_speed_mps=cfg.moved_speed_mps, moving_speed_std_mps=cfg.moving_speed_std_mps,
-        moved_distance_m=cfg.moved_distance_m, stop_speed_mps=cfg.stop_speed_mps,
-        stop_exit_sigmas=cfg.stop_exit_sigmas, stop_confirm_s=cfg.stop_confirm_s,
-        stop_seen_s=cfg.stop_seen_s, stationary_detections=cfg.stationary_detections,
-        same_object_m=cfg.same_object_m, stop_decel_mps2=cfg.stop_decel_mps2,
-        split_kurtosis=cfg.split_kurtosis, split_min_half_gap_m=cfg.split_min_half_gap_m,
-        tentative_misses=r.tentative_misses, max_tentative_s=r.max_tentative_s,
-        max_coast_s=r.max_coast_s, max_coast_stopped_s=r.max_coast_stopped_s,
-        max_coast_hidden_s=r.max_coast_hidden_s, max_position_std_m=r.max_position_std_m,
-        max_stopped_misses=r.max_stopped_misses, merge_lateral_m=cfg.merge_lateral_m,
-        merge_speed_mps=cfg.merge_speed_mps, merge_parts_speed_mps=cfg.merge_parts_speed_mps,
-        absorb_young_static=cfg.absorb_young_static, merge_settled_s=cfg.merge_settled_s,
-        merge_settled_lateral_m=cfg.merge_settled_lateral_m, coasting_s=COASTING_S,
-        status_codes=_STATUS_CODES,
-    )  # fmt: skip
+        "beside_m": BODY_HALF_SPREADS * cfg.body_across_std_m,
+        "gate": gate_threshold(3, cfg.gate_probability),
+        "clutter_gate": gate_threshold(3, cfg.clutter_gate_probability),
+        "spread_lo_m": cfg.spread_limits_m[0],
+        "spread_hi_m": cfg.spread_limits_m[1],
+        "bias_forget": 1.0 - 1.0 / cfg.bias_memory,
+        "confirm_speed_var": cfg.confirm_speed_std_mps**2,
+        "window_mask": (1 << r.confirm_window) - 1,
+        "initial_speed_var": cfg.initial_speed_std_mps**2,
+        "coasting_s": COASTING_S,
+        "status_codes": _STATUS_CODES,
+    }
+    named: dict[str, Any] = {f.name: getattr(r, f.name) for f in fields(r)}
+    named.update({f.name: getattr(cfg, f.name) for f in fields(cfg) if f.name != "rules"})
+    return Settings(**{k: derived[k] if k in derived else named[k] for k in Settings._fields})
 
 
 def _site_tables(site: Site, corridors: list[Corridor], warnings: FloatArray | None) -> SiteTables:
@@ -682,7 +670,7 @@ def track_scene(
     n_out = 0
     for a in range(0, n_scans, SCANS_PER_CALL):
         b = min(a + SCANS_PER_CALL, n_scans)
-        out, n_out = tracker.run(
+        out, n_out = tracker._run(
             rows[a:b], stamps[a:b], starts[a : b + 1] - starts[a], z[starts[a] : starts[b]],
             ids[starts[a] : starts[b]], out, n_out,
         )  # fmt: skip
