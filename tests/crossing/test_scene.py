@@ -19,11 +19,6 @@ from adaptrack.crossing.traffic import VEHICLES
 SITE = load_site("lx_default")
 
 
-def _no_ids(n):
-    """No sensor object ids for ``n`` hand-made tracks (one column per radar of SITE)."""
-    return np.full((n, len(SITE.radars)), -1, np.int64)
-
-
 @pytest.fixture(scope="module")
 def free_flow():
     spec = scene_spec(SITE, duration_s=120.0, closure_s=0.0, stalls=())
@@ -326,7 +321,7 @@ def test_learnt_clutter_reserves_its_own_detections():
     tracker.book.add(2, 0.0)  # an old static object and a road user
     tracker.book.add(1, 150.0)  # a young static object
     x, p = np.zeros((3, 4)), np.tile(np.eye(4), (3, 1, 1))
-    tracker.tracks = _Tracks.opened(np.zeros(3, int), x, p, 200.0, 1.0, _no_ids(3))
+    tracker.tracks = _Tracks.opened(np.zeros(3, int), x, p, 200.0, 1.0, len(SITE.radars))
     tracker.tracks.stopped[[0, 2]] = True  # rows 0 and 2 never moved: static
     d2 = np.array([[1.0, 50.0, 2.0], [3.0, 4.0, 5.0], [60.0, 0.5, 70.0]])
     tr = tracker.tracks
@@ -359,7 +354,7 @@ def test_will_not_stop_before_the_stop_line_rule():
     tracker.book.add(3, 10.0)  # detected at 10 s
     tracker.book.confirmed[:] = True
     tracker.tracks = _Tracks.opened(
-        np.zeros(3, int), x, np.tile(np.eye(4), (3, 1, 1)), 10.0, 1.5, _no_ids(3)
+        np.zeros(3, int), x, np.tile(np.eye(4), (3, 1, 1)), 10.0, 1.5, len(SITE.radars)
     )
     tracker.tracks.moved[:] = True
 
@@ -436,7 +431,7 @@ def _one_stopped_track(tracker, u, d, spread):
     p = np.diag([0.01, 1e-4, 1e-4, 0.04])[None]
     tracker.book.add(1, 0.0)
     tracker.book.confirmed[:] = True
-    tracker.tracks = _Tracks.opened(np.zeros(1, int), x, p, 0.0, spread, _no_ids(1))
+    tracker.tracks = _Tracks.opened(np.zeros(1, int), x, p, 0.0, spread, len(SITE.radars))
     tracker.tracks.stopped[:] = tracker.tracks.moved[:] = True
     tracker.tracks.direction[:] = 1.0
 
@@ -507,7 +502,7 @@ def _stopped_tracks(tracker, bodies):
     p = np.tile(np.diag([0.01, 1e-4, 1e-4, 0.04]), (n, 1, 1))
     tracker.book.add(n, 0.0)
     tracker.book.confirmed[:] = True
-    tracker.tracks = _Tracks.opened(np.zeros(n, int), x, p, 0.0, 1.0, _no_ids(n))
+    tracker.tracks = _Tracks.opened(np.zeros(n, int), x, p, 0.0, 1.0, len(SITE.radars))
     tracker.tracks.spread[:] = [b[2] for b in bodies]
     tracker.tracks.stopped[:] = tracker.tracks.moved[:] = True
     tracker.tracks.direction[:] = 1.0
@@ -680,7 +675,7 @@ def _moving_track(tracker, u, d, speed, spread):
     p = np.diag([0.01, 0.01, 0.01, 0.04])[None]
     tracker.book.add(1, 0.0)
     tracker.book.confirmed[:] = True
-    new = _Tracks.opened(np.zeros(1, int), x, p, 0.0, spread, _no_ids(1))
+    new = _Tracks.opened(np.zeros(1, int), x, p, 0.0, spread, len(SITE.radars))
     new.moved[:] = True
     new.direction[:] = 1.0
     tracker.tracks.append(new)

@@ -11,10 +11,11 @@ from adaptrack.crossing._scene_kernels import (
     _visible_part,
     merged_rows,
     mode_changes,
+    nearer_occluders,
     nearest_sample,
-    occluders,
     open_tracks,
     owners,
+    sight_lines,
     split_rows,
     unambiguous_assignment,
 )
@@ -60,6 +61,13 @@ def test_owners_give_an_extra_detection_to_the_likeliest_track_not_the_nearest_i
     owner, _ = owners(d2, 2.0 * np.log(sig), GATE, np.array([0]), np.array([0]))
     density = np.exp(-0.5 * (off / sig) ** 2) / sig
     assert owner[1] == int(np.argmax(density)) == 0
+
+
+def occluders(rows, x, spread, corridor, roads, bounds, radar, can_hide):
+    """The nearer track hiding each of ``rows`` (-1: none), from every track's line of sight."""
+    sight = np.zeros((x.shape[0], 3))
+    sight_lines(np.arange(x.shape[0]), x, spread, corridor, roads, bounds, radar, sight)
+    return nearer_occluders(rows, x, spread, corridor, sight, can_hide)
 
 
 def _road(length=100.0):

@@ -96,6 +96,12 @@ def test_assignment_by_components_on_a_hand_made_scan():
     assert list(zip(rows.tolist(), cols.tolist(), strict=True)) == [(0, 1), (1, 0), (2, 3)]
     solved, rows, cols = assignment_by_components(cost, 10.0, 5)  # 3 x 2 choices: too many
     assert not solved and rows.size == 0
+    cost[1, 0] = np.nan  # a NaN cost is no pair, as in gnn_assign: track 0 takes detection 0
+    solved, rows, cols = assignment_by_components(cost, 10.0, 4096)
+    pairs = list(zip(rows.tolist(), cols.tolist(), strict=True))
+    assert solved and pairs == [(0, 0), (2, 3)]
+    reference = gnn_assign(cost, 10.0)
+    assert list(zip(*(a.tolist() for a in reference), strict=True)) == pairs
 
 
 def test_mahalanobis_and_gate():

@@ -446,7 +446,7 @@ def associate_scan(  # type: ignore[no-untyped-def]
     """Gate a scan's detections ``z`` (D, 3) to the predicted tracks; try the simple assignment.
 
     In a standing queue a stopped track's gate is narrowed behind the stopped road user that
-    hides it (with ``occlusion_gate``; :func:`occluders`, :func:`gate_scan`). A detection in
+    hides it (with ``occlusion_gate``; :func:`nearer_occluders`, :func:`gate_scan`). A detection in
     ``clutter_gate`` of an old static object (``clutter`` rows: never moved, older than the
     clutter age) is its reflection alone (the other rows' ``d2`` set to ``inf``: a road user
     passing over a barrier post would take it and leave a track behind on it:
@@ -500,7 +500,7 @@ def apply_scan(  # type: ignore[no-untyped-def]
     Every gated detection goes to its owner (:func:`owners`: the assignment's, then the likeliest
     track) and updates it (:func:`update_tracks`, which sets ``doppler_seen_s``); the assigned
     detection's sensor id becomes its track's (column ``radar_col`` of ``sensor_id``). A track
-    in view without a detection is hidden if a nearer track covers it (:func:`occluders`; its
+    in view without a detection is hidden if a nearer track covers it (:func:`nearer_occluders`; its
     miss tells nothing), else takes what the miss tells (:func:`miss_updates`, moving ones).
     Tracks in view and not hidden record the hit or miss in the track book's arrays
     (:func:`adaptrack.tracking.lifecycle.record_hits`; confirmed once their speed variance is
@@ -759,31 +759,11 @@ def split_rows(stopped, moved, along_m2, along_m4, kurtosis_max, min_half_gap): 
 
 
 @numba.njit(cache=True)
-def occluders(rows, x, spread, corridor, roads, bounds, radar, can_hide):  # type: ignore[no-untyped-def]
-    """Return the nearer track that may hide each track of ``rows`` from the radar (-1: none).
-
-    Only tracks with ``can_hide`` (bool per track) are taken as occluders.
-
-    A track hides what lies behind it within its apparent half width: twice its body spread
-    along its heading and 1 m across, seen from the radar. It does not hide a track on its
-    corridor whose centre lies within its own body (``BODY_HALF_SPREADS`` spreads along):
-    no other road user can be there, so that track is a duplicate of its body and its
-    misses count. Of several, the nearest to the radar is returned.
-    """
-    out = np.full(rows.size, -1, dtype=np.int64)
-    if rows.size == 0:
-        return out
-    sight = np.zeros((x.shape[0], 3))
-    sight_lines(np.arange(x.shape[0]), x, spread, corridor, roads, bounds, radar, sight)
-    return nearer_occluders(rows, x, spread, corridor, sight, can_hide)
-
-
-@numba.njit(cache=True)
 def sight_lines(rows, x, spread, corridor, roads, bounds, radar, sight):  # type: ignore[no-untyped-def]
     """Fill ``sight`` (T, 3) rows ``rows``: range, azimuth and apparent half width [m, rad].
 
     The half width is twice the body spread along the lane's heading and 1 m across, seen
-    from the radar (:func:`occluders`).
+    from the radar (:func:`nearer_occluders`).
     """
     for i in rows:
         _, _, tx, ty, _, px, py = _lane_frame(roads, bounds, corridor[i], x[i, 0], x[i, 3])
@@ -797,7 +777,16 @@ def sight_lines(rows, x, spread, corridor, roads, bounds, radar, sight):  # type
 
 @numba.njit(cache=True)
 def nearer_occluders(rows, x, spread, corridor, sight, can_hide):  # type: ignore[no-untyped-def]
-    """:func:`occluders` from the tracks' lines of sight (:func:`sight_lines`)."""
+    """Return the nearer track that may hide each track of ``rows`` from the radar (-1: none).
+
+    ``sight``: the tracks' lines of sight (:func:`sight_lines`). Only tracks with
+    ``can_hide`` (bool per track) are taken as occluders. A track hides what lies behind it
+    within its apparent half width: twice its body spread along its heading and 1 m across,
+    seen from the radar. It does not hide a track on its corridor whose centre lies within
+    its own body (``BODY_HALF_SPREADS`` spreads along): no other road user can be there, so
+    that track is a duplicate of its body and its misses count. Of several, the nearest to
+    the radar is returned.
+    """
     n = x.shape[0]
     out = np.full(rows.size, -1, dtype=np.int64)
     rng, az, half = sight[:, 0], sight[:, 1], sight[:, 2]

@@ -226,7 +226,7 @@ def _grown(a, n, size):  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True)
-def _with_room(t, n, need):  # type: ignore[no-untyped-def]
+def with_room(t, n, need):  # type: ignore[no-untyped-def]
     """Return ``t`` with room for at least ``need`` rows (capacity doubled as needed)."""
     size = t.ids.shape[0]
     if need <= size:
@@ -282,6 +282,12 @@ def _compacted(t, n, dead):  # type: ignore[no-untyped-def]
     return m
 
 
+@numba.njit(cache=True, inline="always")
+def one_body_moments(spread):  # type: ignore[no-untyped-def]
+    """Second and fourth moments [m^2, m^4] of one body's reflections (Gaussian, ``spread`` [m])."""
+    return spread**2, 3.0 * spread**4
+
+
 @numba.njit(cache=True)
 def _place(t, i, u, spread):  # type: ignore[no-untyped-def]
     """Move stopped row ``i`` to ``u`` along its corridor with body ``spread`` [m].
@@ -291,11 +297,11 @@ def _place(t, i, u, spread):  # type: ignore[no-untyped-def]
     t.x[i, 0] = t.anchor_u[i] = u
     t.p[i, 0, 0] += 0.25
     t.spread[i] = spread
-    t.along_m2[i], t.along_m4[i] = spread**2, 3.0 * spread**4
+    t.along_m2[i], t.along_m4[i] = one_body_moments(spread)
 
 
 @numba.njit(cache=True)
-def _new_row(t, i, track_id, time_s, corridor, x, p, spread, radar_col, sensor_id):  # type: ignore[no-untyped-def]
+def new_row(t, i, track_id, time_s, corridor, x, p, spread, radar_col, sensor_id):  # type: ignore[no-untyped-def]
     """Write a tentative track (its first hit at ``time_s``) into row ``i``."""
     t.ids[i], t.history[i], t.confirmed[i], t.misses[i] = track_id, 1, False, 0
     t.last_hit_s[i] = t.born_s[i] = t.time_s[i] = time_s
@@ -303,7 +309,8 @@ def _new_row(t, i, track_id, time_s, corridor, x, p, spread, radar_col, sensor_i
     t.stopped[i] = t.moved[i] = t.event_raised[i] = t.line_event_raised[i] = False
     t.slow_since[i] = np.nan
     t.anchor_u[i] = x[0]
-    t.spread[i], t.along_m2[i], t.along_m4[i] = spread, spread**2, 3.0 * spread**4
+    t.spread[i] = spread
+    t.along_m2[i], t.along_m4[i] = one_body_moments(spread)
     t.direction[i], t.miss_run[i], t.occluded[i] = 0.0, 1.0, False
     t.doppler_seen_s[i], t.detection_d[i] = -np.inf, np.nan
     t.sensor_id[i] = -1
@@ -548,10 +555,10 @@ def run_scans(  # type: ignore[no-untyped-def]
                 s.cluster_radius_m, s.initial_speed_var, s.body_along_std_m**2,
             )  # fmt: skip
             m = corridor.size
-            t = _with_room(t, n, n + m)
+            t = with_room(t, n, n + m)
             left_ids = ids[left]
             for g in range(m):
-                _new_row(
+                new_row(
                     t, n + g, next_id + g, time_s, corridor[g], x[g], p[g],
                     s.body_along_std_m, r, left_ids[first[g]],
                 )  # fmt: skip
@@ -581,7 +588,7 @@ def run_scans(  # type: ignore[no-untyped-def]
             v.stopped, v.moved, v.along_m2, v.along_m4, s.split_kurtosis, s.split_min_half_gap_m
         )
         if rows.size:
-            t = _with_room(t, n, n + rows.size)
+            t = with_room(t, n, n + rows.size)
             for g in range(rows.size):
                 i, j = rows[g], n + g
                 towards = 1.0 if site.crossing_u[t.corridor[i]] >= t.x[i, 0] else -1.0

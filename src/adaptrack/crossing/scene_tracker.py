@@ -93,7 +93,9 @@ from ._scene_loop import (
     SiteTables,
     TrackRows,
     empty_rows,
+    new_row,
     run_scans,
+    with_room,
     write_rows,
 )
 from .corridor import Corridor, site_corridors
@@ -269,31 +271,29 @@ class _Tracks:
         p: FloatArray,
         time_s: float,
         spread_m: float,
-        sensor_id: np.ndarray,
+        n_radars: int,
     ) -> _Tracks:
-        """Return new tracks on ``corridor`` rows with states ``x``, ``p`` at ``time_s``.
+        """Return new tentative tracks on ``corridor`` rows with states ``x``, ``p`` at ``time_s``.
 
-        ``sensor_id`` (n, radars): the sensor's object ids they start with (-1: none).
+        Written as the scan loop opens a track (:func:`._scene_loop.new_row`: body ``spread_m``
+        [m], no sensor object id from any of the ``n_radars`` radars).
         """
         n = corridor.size
-        no = np.zeros(n, bool)
-        m2, m4 = _one_body_moments(spread_m)
-        return cls(
-            corridor, x, p, np.full(n, time_s), stopped=no, slow_since=np.full(n, np.nan),
-            moved=no.copy(), event_raised=no.copy(), line_event_raised=no.copy(),
-            anchor_u=x[:, 0].copy(),
-            spread=np.full(n, spread_m), along_m2=np.full(n, m2), along_m4=np.full(n, m4),
-            direction=np.zeros(n), miss_run=np.ones(n),
-            occluded=no.copy(), doppler_seen_s=np.full(n, -np.inf),
-            detection_d=np.full(n, np.nan), sensor_id=sensor_id,
-        )  # fmt: skip
+        rows = with_room(_track_rows(TrackBook(LifecycleRules()), cls.empty(n_radars)), 0, n)
+        for g in range(n):
+            new_row(rows, g, 0, time_s, corridor[g], x[g], p[g], spread_m, 0, -1)
+        return cls(**{name: getattr(rows, name)[:n] for name in cls.__dataclass_fields__})
 
     @classmethod
     def empty(cls, n_radars: int) -> _Tracks:
         """Return no track (sensor ids kept for ``n_radars`` radars)."""
-        return cls.opened(
-            np.zeros(0, int), np.zeros((0, N_STATE)), np.zeros((0, N_STATE, N_STATE)), 0.0, 0.0,
-            np.zeros((0, n_radars), np.int64),
+        real, no = np.zeros(0), np.zeros(0, bool)
+        return cls(
+            corridor=np.zeros(0, np.int64), x=np.zeros((0, N_STATE)),
+            p=np.zeros((0, N_STATE, N_STATE)), time_s=real, stopped=no, slow_since=real,
+            moved=no, event_raised=no, line_event_raised=no, anchor_u=real, spread=real,
+            along_m2=real, along_m4=real, direction=real, miss_run=real, occluded=no,
+            doppler_seen_s=real, detection_d=real, sensor_id=np.zeros((0, n_radars), np.int64),
         )  # fmt: skip
 
     @property
@@ -431,10 +431,7 @@ class SceneTracker:
 
     def _rows(self) -> TrackRows:
         """Return the track book's and the filter's columns (the arrays themselves, not copies)."""
-        book, tr = self.book, self.tracks
-        return TrackRows(**{
-            name: getattr(book if name in _BOOK_COLUMNS else tr, name) for name in TrackRows._fields
-        })  # fmt: skip
+        return _track_rows(self.book, self.tracks)
 
     def _radar(self, radar_name: str) -> int:
         """Return the site's row of a radar; an unknown name is an error."""
@@ -567,9 +564,11 @@ def _sensor_ids(ids: np.ndarray | None, n: int, radar_name: str, time_s: float) 
     return raw.astype(np.int64)
 
 
-def _one_body_moments(spread_m: FloatArray | float) -> tuple[FloatArray | float, ...]:
-    """Second and fourth moments [m^2, m^4] of one body's reflections (Gaussian, that spread)."""
-    return spread_m**2, 3.0 * spread_m**4
+def _track_rows(book: TrackBook, tracks: _Tracks) -> TrackRows:
+    """Return the track book's and the filter's columns as the loop's rows (not copies)."""
+    return TrackRows(**{
+        name: getattr(book if name in _BOOK_COLUMNS else tracks, name) for name in TrackRows._fields
+    })  # fmt: skip
 
 
 def _merged_intervals(intervals: FloatArray) -> tuple[list[float], list[float]]:

@@ -91,6 +91,7 @@ def assignment_by_components(cost, miss_cost, max_choices):  # type: ignore[no-u
     components that do not interact; each is solved exactly on its own by trying every
     one-to-one choice of its tracks (a gated detection or none), when there are at most
     ``max_choices`` of them (the product over its tracks of one plus their gated detections).
+    A cost above ``miss_cost``, ``inf`` or NaN is no pair (as :func:`gnn_assign` takes them).
     Compiled, for the few tracks and detections a scan's conflicts involve. Returns
     ``(solved, tracks, detections)``, the pairs in track order; ``solved`` is False (no pairs)
     when a component has more choices: the caller solves the whole with :func:`gnn_assign`.
