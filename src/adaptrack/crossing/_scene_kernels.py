@@ -131,9 +131,9 @@ def _ground_point(z_row, radar):  # type: ignore[no-untyped-def]
 
 @numba.njit(cache=True, inline="always")
 def _view_uniform(road, u, d, half, radar, fields):  # type: ignore[no-untyped-def]
-    """Whether the lane points within ``half`` [m] of ``(u, d)`` are all in view or all out.
+    """Whether the lane points within ``half`` [m] of ``(u, d)`` are all in view (1), all out (-1).
 
-    False when it cannot tell. A sufficient test from the centre point alone: the points lie
+    0 when it cannot tell. A sufficient test from the centre point alone: the points lie
     within ``half`` of it (the arc is no shorter than its chord), so their slant ranges
     differ from its by at most ``half`` and their bearings by at most
     ``asin(half / ground range)``.
@@ -143,19 +143,19 @@ def _view_uniform(road, u, d, half, radar, fields):  # type: ignore[no-untyped-d
     ey = cy + d * math.sin(th) - radar[1]
     ground = math.sqrt(ex * ex + ey * ey)
     if ground <= half:
-        return False
+        return 0
     rng = math.sqrt(ground * ground + radar[2] * radar[2])
     if rng + half < radar[4]:
-        return True  # all nearer than the minimum range
+        return -1  # all nearer than the minimum range
     off = off_boresight(math.atan2(ex, ey), radar)
     widen = math.asin(half / ground)
     all_in = rng - half >= radar[4]
     some_field = False
     for f in range(fields.shape[0]):
         if rng + half <= fields[f, 0] and off + widen <= fields[f, 1]:
-            return all_in
+            return 1 if all_in else 0
         some_field |= rng - half <= fields[f, 0] and off - widen <= fields[f, 1]
-    return not some_field
+    return 0 if some_field else -1
 
 
 @numba.njit(cache=True, inline="always")
@@ -164,16 +164,19 @@ def _visible_part(i, x, spread, corridor, roads, bounds, radar, fields):  # type
 
     The body spans ``BODY_HALF_SPREADS`` spreads either side of its centre along the lane;
     ``VISIBLE_SAMPLES`` points over it are tested against the field of view (``fields``, the
-    radar's minimum range ``radar[4]``). Returns ``(offset, spread, slope)``: the visible
-    part's centre along the lane from the body's centre [m], its spread [m] (the body's, in
-    proportion to the part's length) and ``d offset / d u`` (-1/2 when one end is cut: the
-    cut stays put while the body moves; -1 when both are). A body wholly in view, or wholly
-    out of it, gives ``(0, spread, 0)``.
+    radar's minimum range ``radar[4]``). Returns ``(offset, spread, slope, out)``: the
+    visible part's centre along the lane from the body's centre [m], its spread [m] (the
+    body's, in proportion to the part's length), ``d offset / d u`` (-1/2 when one end is
+    cut: the cut stays put while the body moves; -1 when both are), and whether the body is
+    known to lie wholly out of view (then its centre, the point its detection is predicted
+    at, is out of view too). A body wholly in view, or wholly out of it, gives
+    ``(0, spread, 0, out)``.
     """
     half = BODY_HALF_SPREADS * spread[i]
     road = roads[:, bounds[corridor[i], 0] : bounds[corridor[i], 1]]
-    if _view_uniform(road, x[i, 0], x[i, 3], half, radar, fields):
-        return 0.0, spread[i], 0.0
+    uniform = _view_uniform(road, x[i, 0], x[i, 3], half, radar, fields)
+    if uniform != 0:
+        return 0.0, spread[i], 0.0, uniform < 0
     n_in, total = 0, 0.0
     first_in = last_in = False
     for k in range(VISIBLE_SAMPLES):
@@ -188,9 +191,9 @@ def _visible_part(i, x, spread, corridor, roads, bounds, radar, fields):  # type
             first_in |= k == 0
             last_in |= k == VISIBLE_SAMPLES - 1
     if n_in == 0 or n_in == VISIBLE_SAMPLES:
-        return 0.0, spread[i], 0.0
+        return 0.0, spread[i], 0.0, False
     slope = -0.5 if first_in != last_in else (-1.0 if not first_in else 0.0)
-    return total / n_in, spread[i] * n_in / VISIBLE_SAMPLES, slope
+    return total / n_in, spread[i] * n_in / VISIBLE_SAMPLES, slope, False
 
 
 @numba.njit(cache=True, inline="always")
@@ -207,7 +210,7 @@ def _model(  # type: ignore[no-untyped-def]
     centreline point and heading there (``cx, cy, th``).
     """
     road = roads[:, bounds[corridor[i], 0] : bounds[corridor[i], 1]]
-    offset, part_spread, slope = visible
+    offset, part_spread, slope, _ = visible
     xv[:] = x[i]
     xv[0] += offset
     measure(ROAD, xv, 3, radar, noise_tab, noise_cnt, road, 0.0, part_spread, zp, h, rm, jp, jv)
@@ -322,13 +325,16 @@ def gate_scan(  # type: ignore[no-untyped-def]
     penalty = np.zeros((n_t, n_d))  # beyond the body's end along the lane (see above)
     held = np.full((n_t, n_d), np.inf)  # a starting row's d2 at its held zero speed
     for i in range(n_t):
+        logdet[i] = np.inf
+        visible = _visible_part(i, x, spread, corridor, roads, bounds, radar, fields)
+        if visible[3]:  # wholly out of view, its predicted detection too (seen stays False)
+            d2[i, :] = np.inf
+            continue
         part_spread, cx, cy, th = _model(
             i, x, spread, corridor, roads, bounds, radar, noise_tab, noise_cnt, fields,
-            across_std, xv, zp, h, rm, jp, jv,
-            _visible_part(i, x, spread, corridor, roads, bounds, radar, fields),
+            across_std, xv, zp, h, rm, jp, jv, visible,
         )  # fmt: skip
         seen[i] = in_view(zp[0], off_boresight(zp[1], radar), fields, radar[4])
-        logdet[i] = np.inf
         if not seen[i] or n_d == 0:
             d2[i, :] = np.inf
             continue

@@ -455,20 +455,19 @@ def write_rows(t, n, time_s, s, site, rows_out, n_out):  # type: ignore[no-untyp
         rows, v.x, v.p, v.corridor, site.roads, site.bounds, site.crossing_u, pos, vel, pos_std,
         to_cross,
     )  # fmt: skip
-    o = rows_out
+    o, ids, moved, p = rows_out, v.ids, v.moved, v.p  # columns taken once, not per row
+    track_id, time_col, status_col, moved_col = o.track_id, o.time_s, o.status, o.moved
+    east, north, speed, east_speed = o.east_m, o.north_m, o.speed_mps, o.east_speed_mps
+    north_speed, from_crossing = o.north_speed_mps, o.from_crossing_m
+    position_std, speed_std = o.position_std_m, o.speed_std_mps
     for k in range(m):
         i, r = rows[k], n_out + k
-        o.track_id[r], o.time_s[r], o.status[r], o.moved[r] = (
-            v.ids[i],
-            time_s,
-            status[k],
-            v.moved[i],
-        )
-        o.east_m[r], o.north_m[r] = pos[k, 0], pos[k, 1]
-        o.speed_mps[r] = math.hypot(vel[k, 0], vel[k, 1])
-        o.east_speed_mps[r], o.north_speed_mps[r] = vel[k, 0], vel[k, 1]
-        o.from_crossing_m[r], o.position_std_m[r] = to_cross[k], pos_std[k]
-        o.speed_std_mps[r] = math.sqrt(v.p[i, 1, 1])
+        track_id[r], time_col[r], status_col[r], moved_col[r] = ids[i], time_s, status[k], moved[i]
+        east[r], north[r] = pos[k, 0], pos[k, 1]
+        speed[r] = math.hypot(vel[k, 0], vel[k, 1])
+        east_speed[r], north_speed[r] = vel[k, 0], vel[k, 1]
+        from_crossing[r], position_std[r] = to_cross[k], pos_std[k]
+        speed_std[r] = math.sqrt(p[i, 1, 1])
     return rows_out, n_out + m
 
 
