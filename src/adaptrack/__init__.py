@@ -5,6 +5,7 @@ smoothing over irregular time steps, observability analysis, and the adaptive mo
 the seed documents. SI units and radians throughout; time is float seconds.
 """
 
+from . import _kernel_cache  # noqa: F401, I001  (first: kernels defined after it are stamped)
 from . import models, simulation
 from .analysis.observability import (
     is_observable,

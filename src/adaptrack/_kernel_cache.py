@@ -1,0 +1,150 @@
+"""numba's on-disk cache of the package's kernels, stamped with every source they compile in.
+
+numba keys a cached kernel on the content of its own file only. A kernel that calls a
+compiled function of another module compiles that function into itself, yet stays cached
+when that module changes: it keeps running the old code (``run_scans`` in
+``crossing/_scene_loop.py`` after an edit of ``crossing/_scene_kernels.py``) until its own
+file changes. An installed package is new as a whole, but in a source tree (an editable
+install) a test or a benchmark after such an edit runs stale kernels and cannot tell.
+
+:func:`register` puts cache locators for a package's files in front of numba's own. Each is
+one of numba's, with the source stamp widened to the module's file and every module of the
+package it imports, directly or through others (``from .x import y``, ``from ..x import y``,
+``import pkg.x``; a name that is a submodule counts as imported). A kernel's cache is then
+reused only while none of those sources changed.
+"""
+
+from __future__ import annotations
+
+import ast
+import hashlib
+import os
+from pathlib import Path
+from typing import Any
+
+from numba.core import caching
+
+_CACHE_IMPL: Any = getattr(caching, "CacheImpl", None) or getattr(caching, "_CacheImpl")  # noqa: B009
+_FILE_BACKED = caching._SourceFileBackedLocatorMixin
+
+
+class _Package:
+    """The modules of one package under ``root`` (named ``name``) and their imports."""
+
+    def __init__(self, root: Path, name: str) -> None:
+        self.root, self.name = root.resolve(), name
+        self._imports: dict[Path, tuple[tuple[int, int], frozenset[Path]]] = {}
+        self._digests: dict[Path, tuple[tuple[int, int], bytes]] = {}
+
+    def holds(self, path: Path) -> bool:
+        """Whether ``path`` is a module file of the package."""
+        return path.suffix == ".py" and self.root in path.parents
+
+    def module_name(self, path: Path) -> str:
+        """Dotted name of a module file of the package (a package's ``__init__.py``: its own)."""
+        parts = [self.name, *path.relative_to(self.root).with_suffix("").parts]
+        return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+    def module_file(self, name: str) -> Path | None:
+        """Return the file of module ``name`` if it is one of the package's, else None."""
+        parts = name.split(".")
+        if parts[0] != self.name:
+            return None
+        base = self.root.joinpath(*parts[1:])
+        for candidate in (base.with_suffix(".py"), base / "__init__.py"):
+            if candidate.is_file():
+                return candidate
+        return None
+
+    def imports(self, path: Path) -> frozenset[Path]:
+        """Return the package's module files that module ``path`` imports directly."""
+        stamp = _stat(path)
+        known = self._imports.get(path)
+        if known is not None and known[0] == stamp:
+            return known[1]
+        name = self.module_name(path)
+        package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+        found: set[Path] = set()
+        for node in ast.walk(ast.parse(path.read_bytes(), str(path))):
+            if isinstance(node, ast.ImportFrom):
+                if node.level:
+                    parts = package.split(".")[: len(package.split(".")) - node.level + 1]
+                    target = ".".join([*parts, node.module] if node.module else parts)
+                else:
+                    target = node.module or ""
+                targets = [target, *(f"{target}.{alias.name}" for alias in node.names)]
+            elif isinstance(node, ast.Import):
+                targets = [alias.name for alias in node.names]
+            else:
+                continue
+            found.update(f for f in map(self.module_file, targets) if f is not None)
+        result = frozenset(found)
+        self._imports[path] = (stamp, result)
+        return result
+
+    def closure(self, path: Path) -> list[Path]:
+        """Return module ``path`` and every package module it imports, directly or not."""
+        seen, todo = {path}, [path]
+        while todo:
+            for nxt in self.imports(todo.pop()):
+                if nxt not in seen:
+                    seen.add(nxt)
+                    todo.append(nxt)
+        return sorted(seen)
+
+    def digest(self, path: Path) -> bytes:
+        """SHA-256 over the relative paths and contents of :meth:`closure` of ``path``."""
+        h = hashlib.sha256()
+        for f in self.closure(path):
+            h.update(str(f.relative_to(self.root)).encode())
+            h.update(self._content_digest(f))
+        return h.digest()
+
+    def _content_digest(self, path: Path) -> bytes:
+        stamp = _stat(path)
+        known = self._digests.get(path)
+        if known is None or known[0] != stamp:
+            known = (stamp, hashlib.sha256(path.read_bytes()).digest())
+            self._digests[path] = known
+        return known[1]
+
+
+def _stat(path: Path) -> tuple[int, int]:
+    st = os.stat(path)
+    return st.st_mtime_ns, st.st_size
+
+
+def register(root: Path, name: str) -> None:
+    """Stamp the cached kernels of package ``name`` (files under ``root``) with their imports.
+
+    For each of numba's file-backed locators (a ``NUMBA_CACHE_DIR``, the source tree's
+    ``__pycache__``, the user-wide cache), a variant is put before it that takes the
+    package's files only and whose source stamp is numba's plus :meth:`_Package.digest`.
+    Registering one package twice changes nothing.
+    """
+    package = _Package(root, name)
+    classes = _CACHE_IMPL._locator_classes
+    if any(getattr(c, "package", None) == (package.root, name) for c in classes):
+        return
+
+    def wrap(base: Any) -> type:
+        def get_source_stamp(self: Any) -> Any:
+            return base.get_source_stamp(self), package.digest(Path(self._py_file).resolve())
+
+        def from_function(cls: type, py_func: Any, py_file: str) -> Any:
+            if not package.holds(Path(py_file).resolve()):
+                return None
+            return base.from_function.__func__(cls, py_func, py_file)
+
+        return type(
+            f"{name}{base.__name__.lstrip('_')}",
+            (base,),
+            {"package": (package.root, name), "get_source_stamp": get_source_stamp,
+             "from_function": classmethod(from_function)},
+        )  # fmt: skip
+
+    ours = [wrap(c) for c in classes if issubclass(c, _FILE_BACKED)]
+    classes[:0] = ours
+
+
+register(Path(__file__).parent, __name__.partition(".")[0])

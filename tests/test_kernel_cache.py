@@ -1,0 +1,95 @@
+"""The on-disk kernel cache is stamped with every package module a kernel's module imports."""
+
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import adaptrack
+from adaptrack import _kernel_cache
+from adaptrack.crossing import _scene_loop
+
+KERNEL = """\
+import numba
+from .helper import value
+
+@numba.njit(cache=True)
+def run():
+    return value()
+"""
+HELPER = """\
+import numba
+
+@numba.njit(cache=True)
+def value():
+    return {}
+"""
+SCRIPT = """\
+import sys
+from pathlib import Path
+if sys.argv[1] == "stamped":
+    from adaptrack._kernel_cache import register
+    register(Path(sys.argv[2]), "stampdemo")
+from stampdemo.kernel import run
+print(run())
+"""
+
+
+def test_a_kernel_recompiles_when_a_module_it_calls_changes(tmp_path):
+    """A cached kernel calls a compiled function of another module; that module changes, the
+    kernel's own file does not. numba alone reuses the stale kernel (the hazard); with the
+    package registered, the kernel is compiled again and returns the new value."""
+    package = tmp_path / "stampdemo"
+    package.mkdir()
+    (package / "__init__.py").write_text("")
+    (package / "kernel.py").write_text(KERNEL)
+    (package / "helper.py").write_text(HELPER.format(1))
+
+    def run(mode):
+        env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / f"cache_{mode}"),
+               "PYTHONPATH": os.pathsep.join([str(tmp_path), *sys.path])}  # fmt: skip
+        out = subprocess.run(
+            [sys.executable, "-c", SCRIPT, mode, str(package)], env=env, cwd=tmp_path,
+            capture_output=True, text=True, check=True,
+        )  # fmt: skip
+        return out.stdout.strip()
+
+    assert run("numba") == run("stamped") == "1"  # both compiled and cached
+    (package / "helper.py").write_text(HELPER.format(2))
+    # if numba ever tracks what a kernel compiles in, this fails and the stamp is not needed
+    assert run("numba") == "1", "numba alone reran the cached kernel with the old helper"
+    assert run("stamped") == "2"
+
+
+def test_the_scene_loop_is_stamped_with_the_kernels_it_compiles_in():
+    root = Path(adaptrack.__file__).parent.resolve()
+    package = _kernel_cache._Package(root, "adaptrack")
+    loop = Path(_scene_loop.__file__).resolve()
+    names = {str(f.relative_to(root)) for f in package.closure(loop)}
+    expected = {
+        "crossing/_scene_loop.py", "crossing/_scene_kernels.py", "crossing/_ekf_kernels.py",
+        "crossing/_radar_kernel.py", "filters/_kernels.py", "tracking/assignment.py",
+        "tracking/lifecycle.py",
+    }  # fmt: skip
+    assert expected <= names
+    assert "cli.py" not in names and "crossing/report.py" not in names
+    locator = _scene_loop.run_scans._cache._impl.locator
+    assert locator.get_source_stamp()[1] == package.digest(loop)
+
+
+def test_relative_imports_resolve_to_the_package_files(tmp_path):
+    root = tmp_path / "pkg"
+    (root / "sub").mkdir(parents=True)
+    for name in ("__init__.py", "sub/__init__.py", "a.py", "b.py", "sub/c.py", "sub/d.py"):
+        (root / name).write_text("")
+    (root / "sub/c.py").write_text(textwrap.dedent("""\
+        from ..a import x
+        from . import d
+        import pkg.b
+        import numpy
+    """))  # fmt: skip
+    root = root.resolve()
+    package = _kernel_cache._Package(root, "pkg")
+    names = {str(f.relative_to(root)) for f in package.closure(root / "sub/c.py")}
+    assert names == {"sub/c.py", "a.py", "sub/__init__.py", "sub/d.py", "b.py"}
