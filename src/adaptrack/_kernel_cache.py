@@ -117,9 +117,10 @@ def _stat(path: Path) -> tuple[int, int]:
 def register(root: Path, name: str) -> None:
     """Stamp the cached kernels of package ``name`` (files under ``root``) with their imports.
 
-    For each of numba's file-backed locators (a ``NUMBA_CACHE_DIR``, the source tree's
-    ``__pycache__``, the user-wide cache), a variant is put before it that takes the
-    package's files only and whose source stamp is numba's plus :meth:`_Package.digest`.
+    For each of numba's locators of files on disk (a ``NUMBA_CACHE_DIR``, the source tree's
+    ``__pycache__``, the user-wide cache; not a zipped package's), a variant is put before
+    it that takes the package's files only, with numba's source stamp and
+    :meth:`_Package.digest`.
     Registering one package twice changes nothing.
     """
     package = _Package(root, name)
@@ -143,7 +144,7 @@ def register(root: Path, name: str) -> None:
              "from_function": classmethod(from_function)},
         )  # fmt: skip
 
-    ours = [wrap(c) for c in classes if issubclass(c, _FILE_BACKED)]
+    ours = [wrap(c) for c in classes if issubclass(c, _FILE_BACKED) and "Zip" not in c.__name__]
     classes[:0] = ours
 
 
