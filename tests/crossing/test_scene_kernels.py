@@ -119,18 +119,24 @@ def test_a_body_reaching_past_the_radars_range_is_seen_over_its_near_part():
     bounds = np.array([[0, roads.shape[1]]])
     radar = np.array([0.0, 0.0, 6.0, 0.0, 1.0, 0.1])  # at the road's start, looking north
     fields = np.array([[40.0, math.pi / 2]])  # 40 m slant range
-    x = np.zeros((2, 4))
-    x[:, 0] = [40.0, 20.0]  # a 16 m body centred at 40 m ground range, one at 20 m
-    spread = np.array([4.0, 4.0]) / BODY_HALF_SPREADS
-    corridor = np.zeros(2, np.int64)
-    offset, part_spread, slope = _visible_part(0, x, spread, corridor, roads, bounds, radar, fields)
+    x = np.zeros((3, 4))
+    x[:, 0] = [40.0, 20.0, 60.0]  # a 16 m body centred at 40 m ground range, at 20 m, at 60 m
+    spread = np.array([4.0, 4.0, 4.0]) / BODY_HALF_SPREADS
+    corridor = np.zeros(3, np.int64)
+    offset, part_spread, slope, out = _visible_part(
+        0, x, spread, corridor, roads, bounds, radar, fields
+    )
     # independently: in view up to the ground range sqrt(40^2 - 6^2) = 39.55 m
     far = math.sqrt(40.0**2 - 6.0**2)
     step = 8.0 / (VISIBLE_SAMPLES - 1)
     assert abs(offset - (0.5 * (36.0 + far) - 40.0)) <= step / 2  # the near part's centre
     assert abs(part_spread / spread[0] - (far - 36.0) / 8.0) <= 1.0 / VISIBLE_SAMPLES + 1e-9
     assert slope == -0.5  # the far end of what is seen stays at the range limit
-    assert _visible_part(1, x, spread, corridor, roads, bounds, radar, fields) == (0.0, 2.0, 0.0)
+    assert not out
+    whole = (0.0, 2.0, 0.0, False)  # in view from 12 to 28 m
+    assert _visible_part(1, x, spread, corridor, roads, bounds, radar, fields) == whole
+    gone = (0.0, 2.0, 0.0, True)  # from 52 to 68 m: known out of view (its detection too)
+    assert _visible_part(2, x, spread, corridor, roads, bounds, radar, fields) == gone
 
 
 @pytest.mark.parametrize("site_name", ["lx_curve_near", "lx_three_arm"])
@@ -138,7 +144,9 @@ def test_the_visible_part_of_a_body_equals_a_sampled_field_of_view_test(site_nam
     """Each radar's visible part of random bodies against RadarSpec.in_view at lane points.
 
     Independent of the kernels' geometry: the points come from the road's own lane
-    geometry, the field test from the radar's NumPy one. Bodies straddle the field edges.
+    geometry, the field test from the radar's NumPy one. Bodies straddle the field edges. A
+    body said to lie wholly out of view has no sample point in view (its centre, where its
+    detection is predicted, included).
     """
     site, corridors, roads, bounds = _corridor_tables(site_name)
     rng = np.random.default_rng(7)
@@ -150,7 +158,7 @@ def test_the_visible_part_of_a_body_equals_a_sampled_field_of_view_test(site_nam
         x[:, 0] = rng.uniform(0.0, [corridors[c].path.length_m for c in corridor])
         x[:, 3] = rng.uniform(-3.0, 3.0, n)
         spread = rng.uniform(0.2, 4.0, n)
-        checked = 0
+        checked = known_out = 0
         for i in range(n):
             path = corridors[corridor[i]].path
             pts = path.lane_geometry(x[i, 0] + BODY_HALF_SPREADS * spread[i] * a[0], x[i, 3])[0]
@@ -165,8 +173,11 @@ def test_the_visible_part_of_a_body_equals_a_sampled_field_of_view_test(site_nam
             got = _visible_part(
                 i, x, spread, corridor, roads, bounds, radar.kernel_row(), radar.field_table()
             )
-            assert got == pytest.approx(want, abs=1e-9), (radar.name, i)
+            assert got[:3] == pytest.approx(want, abs=1e-9), (radar.name, i)
+            assert k == 0 or not got[3], (radar.name, i)
+            known_out += got[3]
         assert checked > 5  # bodies cut by a field's edge were among them
+        assert known_out > 20  # and bodies known to be out of view
 
 
 def test_compiled_clusters_equal_the_kd_tree_clusters():
