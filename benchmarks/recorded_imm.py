@@ -21,6 +21,11 @@ Leave one flight out: every estimator is tuned on the other flights and scored o
   probability chosen by grid search against the truth, on the isotropic grid (one PSD per
   model for all axes) and then, around its best, with the vertical PSDs apart (``split``).
 
+Offline, for a recording (not causal): our IMM smoother (:func:`adaptrack.smoothers.imm_smooth`)
+of the same fitted IMMs, against FilterPy's Kalman filter and RTS smoother (``batch_filter``,
+``rts_smoother``; FilterPy has no IMM smoother) of one model, CV or CA, whose PSD and vertical
+fraction are chosen by grid search against the truth.
+
 Prints the position RMSE of each on each held-out flight and pooled (first three scans of each
 track left out), and the ratios. First the car drive (``ground_*.csv``): a 10 Hz GNSS (2 m
 horizontal, 4 m vertical noise) simulated on it, every estimator tuned on its first half and
@@ -58,7 +63,9 @@ from adaptrack.models import (
     CoordinatedTurn,
     PositionMeasurement,
     RadarMeasurement,
+    filterpy_order,
 )
+from adaptrack.smoothers import imm_smooth
 from adaptrack.tuning.likelihood import fit_by_likelihood
 from adaptrack.tuning.position_log import read_position_log
 
@@ -169,14 +176,7 @@ def filterpy_run(
     """FilterPy's IMM on the converted plots (or GNSS fixes); positions (T, 3)."""
     from filterpy.kalman import IMMEstimator, KalmanFilter
 
-    if gnss:
-        z = track.plots
-        r = np.broadcast_to(np.diag(np.square(GNSS_STD_M)), (z.shape[0], 3, 3))
-        priors = car_priors(track)
-    else:
-        z = polar_to_enu(track.plots)
-        r = polar_to_enu_cov(track.plots, R_POLAR)
-        priors = _priors(track)
+    z, r, priors = _filterpy_inputs(track, gnss)
     order = np.array([0, 3, 6, 1, 4, 7, 2, 5, 8])  # FilterPy (x, vx, ax, y, ...) of ours
     cv, ca = ConstantVelocity(q_cv, n_axes=3), ConstantAcceleration(q_ca, n_axes=3)
     filters = []
@@ -206,6 +206,18 @@ def filterpy_run(
     return out
 
 
+def _filterpy_inputs(
+    track: Track, gnss: bool
+) -> tuple[np.ndarray, np.ndarray, list[at.GaussianState]]:
+    """FilterPy's measurements, their covariances and the priors (CV, CA) of one track: the
+    plots converted to east-north-up with the converted covariance, or the GNSS fixes."""
+    if gnss:
+        z = track.plots
+        r = np.broadcast_to(np.diag(np.square(GNSS_STD_M)), (z.shape[0], 3, 3))
+        return z, r, car_priors(track)
+    return polar_to_enu(track.plots), polar_to_enu_cov(track.plots, R_POLAR), _priors(track)
+
+
 def _padded(model, dt: float, order: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # type: ignore[no-untyped-def]
     """Transition and noise of ``model`` over ``dt`` in the 9-state CA layout, FilterPy order."""
     phi, qd = at.discretize(model, dt)
@@ -213,6 +225,56 @@ def _padded(model, dt: float, order: np.ndarray) -> tuple[np.ndarray, np.ndarray
     f9[: model.state_dim, : model.state_dim] = phi
     q9[: model.state_dim, : model.state_dim] = qd
     return f9[np.ix_(order, order)], q9[np.ix_(order, order)]
+
+
+def ours_smoothed(
+    track: Track, kind: str, v: Mapping[str, float], gnss: bool = False
+) -> np.ndarray:
+    """Our IMM smoother (:func:`adaptrack.smoothers.imm_smooth`) of :func:`ours_run`."""
+    rates = [[-v["rate"], v["rate"]], [v["rate"], -v["rate"]]]
+    run = ours_run(track, kind, v, gnss)
+    return imm_smooth(run, ours_models(kind, v), switching_rates=rates).smoothed.mean[:, :3]
+
+
+def filterpy_smoothed(
+    track: Track, kind: str, q: tuple[float, ...], gnss: bool = False
+) -> np.ndarray:
+    """FilterPy's Kalman filter and RTS smoother (``batch_filter``, ``rts_smoother``) of one
+    model (``kind`` "cv" or "ca", PSDs ``q`` east, north, up) on the converted plots (or GNSS
+    fixes); positions (T, 3)."""
+    from filterpy.kalman import KalmanFilter
+
+    z, r, priors = _filterpy_inputs(track, gnss)
+    model = (ConstantVelocity if kind == "cv" else ConstantAcceleration)(q, n_axes=3)
+    prior = priors[0 if kind == "cv" else 1]
+    n = model.state_dim
+    fp = np.argsort(filterpy_order(model))  # FilterPy's layout: x = ours[fp]
+    kf = KalmanFilter(dim_x=n, dim_z=3)
+    kf.x, kf.P = prior.mean[fp], prior.cov[np.ix_(fp, fp)]
+    kf.H = np.eye(n)[[0, n // 3, 2 * n // 3]]
+    fs, qs = [np.eye(n)], [np.zeros((n, n))]  # the prior is at the first plot's time
+    for dt in np.diff(track.times):
+        phi, qd = at.discretize(model, dt)
+        fs.append(phi[np.ix_(fp, fp)])
+        qs.append(qd[np.ix_(fp, fp)])
+    means, covs, _, _ = kf.batch_filter(z, Fs=fs, Qs=qs, Rs=list(r))
+    smoothed, _, _, _ = kf.rts_smoother(means, covs, Fs=fs, Qs=qs)
+    return smoothed[:, [0, n // 3, 2 * n // 3]]
+
+
+def tune_filterpy_smoother(
+    tracks: list[Track], grids: Mapping[str, tuple[float, ...]], gnss: bool = False
+) -> FilterPyParams:
+    """Grid search against the truth of the training tracks: model (CV or CA), its PSD and
+    the vertical PSD as a fraction of it (:data:`VERTICAL_FACTORS`)."""
+
+    def mse(v: FilterPyParams) -> float:
+        errs = [squared_errors(filterpy_smoothed(tr, **v, gnss=gnss), tr) for tr in tracks]
+        return float(np.mean(np.concatenate(errs)))
+
+    grid = [{"kind": kind, "q": (q, q, q * f)}
+            for kind, qs in grids.items() for q in qs for f in VERTICAL_FACTORS]  # fmt: skip
+    return min(grid, key=mse)
 
 
 def squared_errors(est: np.ndarray, track: Track) -> np.ndarray:
@@ -250,6 +312,8 @@ def describe(params: Mapping[str, Any]) -> str:
     """``name value`` pairs, tuples shown as horizontal / vertical."""
 
     def one(v: Any) -> str:
+        if isinstance(v, str):
+            return v
         return f"{v[0]:.3g}/{v[2]:.3g}" if isinstance(v, tuple) else f"{v:.3g}"
 
     return ", ".join(f"{k} {one(v)}" for k, v in params.items())
@@ -280,6 +344,9 @@ def car_priors(track: Track) -> list[at.GaussianState]:
 
 
 FILTERPY = ("isotropic", "split")  # FilterPy's grids (tune_filterpy)
+OFFLINE = "RTS smoother"  # FilterPy's best smoother of one model (tune_filterpy_smoother)
+CAR_GRIDS = {"cv": (0.1, 0.5, 2.0, 8.0), "ca": (0.1, 1.0, 10.0, 50.0)}  # PSDs searched
+FLIGHT_GRIDS = {"cv": (0.1, 0.5, 2.0, 8.0), "ca": (0.01, 0.1, 1.0, 10.0)}
 
 
 def report(
@@ -295,6 +362,13 @@ def report(
         ratios = ", ".join(f"{k} {r[k] / r[label]:.3f}" for k in kinds)
         extra = f" ({describe(params[label])})" if label in params else ""
         print(f"  FilterPy, {label} grid: {r[label]:.2f} m{extra}; ours / FilterPy: {ratios}")
+    if OFFLINE not in r:
+        return
+    for kind in kinds:
+        print(f"  offline, ours IMM {kind} smoothed: {r[f'{kind} smoothed']:.2f} m")
+    ratios = ", ".join(f"{k} {r[f'{k} smoothed'] / r[OFFLINE]:.3f}" for k in kinds)
+    extra = f" ({describe(params[OFFLINE])})" if OFFLINE in params else ""
+    print(f"  offline, FilterPy {OFFLINE}: {r[OFFLINE]:.2f} m{extra}; ours / FilterPy: {ratios}")
 
 
 def car_comparison(path: Path, rng: np.random.Generator, kinds: list[str]) -> None:
@@ -302,13 +376,17 @@ def car_comparison(path: Path, rng: np.random.Generator, kinds: list[str]) -> No
     the second."""
     train, test = car_halves(path, rng)
     params: dict[str, Any] = {kind: fit_ours([train], kind, gnss=True) for kind in kinds}
-    fp = tune_filterpy([train], (0.1, 0.5, 2.0, 8.0), (0.1, 1.0, 10.0, 50.0),
-                       (0.005, 0.02, 0.1), gnss=True)  # fmt: skip
+    fp = tune_filterpy([train], CAR_GRIDS["cv"], CAR_GRIDS["ca"], (0.005, 0.02, 0.1), gnss=True)
     params |= dict(zip(FILTERPY, fp, strict=True))
+    params[OFFLINE] = tune_filterpy_smoother([train], CAR_GRIDS, gnss=True)
     sq = {kind: [squared_errors(ours_run(test, kind, params[kind], True).filtered.mean[:, :3],
                                 test)] for kind in kinds}  # fmt: skip
     for label in FILTERPY:
         sq[label] = [squared_errors(filterpy_run(test, **params[label], gnss=True), test)]
+    for kind in kinds:
+        sq[f"{kind} smoothed"] = [squared_errors(ours_smoothed(test, kind, params[kind], True),
+                                                 test)]  # fmt: skip
+    sq[OFFLINE] = [squared_errors(filterpy_smoothed(test, **params[OFFLINE], gnss=True), test)]
     raw = rmse([test], lambda tr: tr.plots)
     report(f"car (second half, 10 Hz GNSS of {GNSS_STD_M} m; fixes {raw:.2f} m)", sq, params,
            kinds)  # fmt: skip
@@ -348,17 +426,22 @@ def main() -> None:
     for name, tracks in flights.items():
         n = sum(tr.times.size for tr in tracks)
         print(f"{name}: {len(tracks)} radar stretches, {n} scans")
-    pooled: dict[str, list[np.ndarray]] = {k: [] for k in [*kinds, *FILTERPY]}
+    labels = [*kinds, *FILTERPY, *(f"{k} smoothed" for k in kinds), OFFLINE]
+    pooled: dict[str, list[np.ndarray]] = {k: [] for k in labels}
     for name, test in flights.items():
         train = [tr for other, trs in flights.items() if other != name for tr in trs]
         params: dict[str, Any] = {kind: fit_ours(train, kind) for kind in kinds}
-        grids = tune_filterpy(train, (0.1, 0.5, 2.0, 8.0), (0.01, 0.1, 1.0, 10.0),
-                              (0.01, 0.05, 0.2))  # fmt: skip
+        grids = tune_filterpy(train, FLIGHT_GRIDS["cv"], FLIGHT_GRIDS["ca"], (0.01, 0.05, 0.2))
         params |= dict(zip(FILTERPY, grids, strict=True))
+        params[OFFLINE] = tune_filterpy_smoother(train, FLIGHT_GRIDS)
         sq = {kind: [squared_errors(ours_run(tr, kind, params[kind]).filtered.mean[:, :3], tr)
                      for tr in test] for kind in kinds}  # fmt: skip
         for label in FILTERPY:
             sq[label] = [squared_errors(filterpy_run(tr, **params[label]), tr) for tr in test]
+        for kind in kinds:
+            sq[f"{kind} smoothed"] = [squared_errors(ours_smoothed(tr, kind, params[kind]), tr)
+                                      for tr in test]  # fmt: skip
+        sq[OFFLINE] = [squared_errors(filterpy_smoothed(tr, **params[OFFLINE]), tr) for tr in test]
         for k, v in sq.items():
             pooled[k].extend(v)
         report(f"held out {name}", sq, params, kinds)
