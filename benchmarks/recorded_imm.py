@@ -144,8 +144,7 @@ def ours_models(kind: str, v: Mapping[str, float]) -> list[Any]:
 def ours_run(track: Track, kind: str, v: Mapping[str, float], gnss: bool = False) -> IMMResult:
     """Our IMM (``kind`` of :data:`MODEL_SETS`) on one track's radar plots (IMM-EKF) or
     GNSS fixes, with the parameters ``v`` (PSDs, switching ``rate`` [1/s])."""
-    rate = v["rate"]
-    rates = [[-rate, rate], [rate, -rate]]
+    rates = _switching(v)
     sensor, priors = (GNSS, car_priors(track)) if gnss else (RADAR, _priors(track))
     if kind == "cv+ct":
         ct = np.zeros((7, 7))
@@ -227,13 +226,16 @@ def _padded(model, dt: float, order: np.ndarray) -> tuple[np.ndarray, np.ndarray
     return f9[np.ix_(order, order)], q9[np.ix_(order, order)]
 
 
-def ours_smoothed(
-    track: Track, kind: str, v: Mapping[str, float], gnss: bool = False
-) -> np.ndarray:
-    """Our IMM smoother (:func:`adaptrack.smoothers.imm_smooth`) of :func:`ours_run`."""
-    rates = [[-v["rate"], v["rate"]], [v["rate"], -v["rate"]]]
-    run = ours_run(track, kind, v, gnss)
-    return imm_smooth(run, ours_models(kind, v), switching_rates=rates).smoothed.mean[:, :3]
+def _switching(v: Mapping[str, float]) -> list[list[float]]:
+    """The two modes' switching rate matrix [1/s] of the parameters ``v``."""
+    return [[-v["rate"], v["rate"]], [v["rate"], -v["rate"]]]
+
+
+def ours_smoothed(run: IMMResult, kind: str, v: Mapping[str, float]) -> np.ndarray:
+    """Our IMM smoother (:func:`adaptrack.smoothers.imm_smooth`) of a run of :func:`ours_run`
+    with the same ``kind`` and parameters ``v``; positions (T, 3)."""
+    smoothed = imm_smooth(run, ours_models(kind, v), switching_rates=_switching(v))
+    return smoothed.smoothed.mean[:, :3]
 
 
 def filterpy_smoothed(
@@ -379,12 +381,12 @@ def car_comparison(path: Path, rng: np.random.Generator, kinds: list[str]) -> No
     fp = tune_filterpy([train], CAR_GRIDS["cv"], CAR_GRIDS["ca"], (0.005, 0.02, 0.1), gnss=True)
     params |= dict(zip(FILTERPY, fp, strict=True))
     params[OFFLINE] = tune_filterpy_smoother([train], CAR_GRIDS, gnss=True)
-    sq = {kind: [squared_errors(ours_run(test, kind, params[kind], True).filtered.mean[:, :3],
-                                test)] for kind in kinds}  # fmt: skip
+    runs = {kind: ours_run(test, kind, params[kind], True) for kind in kinds}
+    sq = {kind: [squared_errors(runs[kind].filtered.mean[:, :3], test)] for kind in kinds}
     for label in FILTERPY:
         sq[label] = [squared_errors(filterpy_run(test, **params[label], gnss=True), test)]
     for kind in kinds:
-        sq[f"{kind} smoothed"] = [squared_errors(ours_smoothed(test, kind, params[kind], True),
+        sq[f"{kind} smoothed"] = [squared_errors(ours_smoothed(runs[kind], kind, params[kind]),
                                                  test)]  # fmt: skip
     sq[OFFLINE] = [squared_errors(filterpy_smoothed(test, **params[OFFLINE], gnss=True), test)]
     raw = rmse([test], lambda tr: tr.plots)
@@ -434,13 +436,19 @@ def main() -> None:
         grids = tune_filterpy(train, FLIGHT_GRIDS["cv"], FLIGHT_GRIDS["ca"], (0.01, 0.05, 0.2))
         params |= dict(zip(FILTERPY, grids, strict=True))
         params[OFFLINE] = tune_filterpy_smoother(train, FLIGHT_GRIDS)
-        sq = {kind: [squared_errors(ours_run(tr, kind, params[kind]).filtered.mean[:, :3], tr)
-                     for tr in test] for kind in kinds}  # fmt: skip
+        runs = {kind: [ours_run(tr, kind, params[kind]) for tr in test] for kind in kinds}
+        sq = {
+            kind: [squared_errors(run.filtered.mean[:, :3], tr)
+                   for run, tr in zip(runs[kind], test, strict=True)]
+            for kind in kinds
+        }  # fmt: skip
         for label in FILTERPY:
             sq[label] = [squared_errors(filterpy_run(tr, **params[label]), tr) for tr in test]
         for kind in kinds:
-            sq[f"{kind} smoothed"] = [squared_errors(ours_smoothed(tr, kind, params[kind]), tr)
-                                      for tr in test]  # fmt: skip
+            sq[f"{kind} smoothed"] = [
+                squared_errors(ours_smoothed(run, kind, params[kind]), tr)
+                for run, tr in zip(runs[kind], test, strict=True)
+            ]
         sq[OFFLINE] = [squared_errors(filterpy_smoothed(tr, **params[OFFLINE]), tr) for tr in test]
         for k, v in sq.items():
             pooled[k].extend(v)

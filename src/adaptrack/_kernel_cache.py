@@ -68,7 +68,8 @@ class _Package:
         for node in ast.walk(ast.parse(path.read_bytes(), str(path))):
             if isinstance(node, ast.ImportFrom):
                 if node.level:
-                    parts = package.split(".")[: len(package.split(".")) - node.level + 1]
+                    parts = package.split(".")
+                    parts = parts[: len(parts) - node.level + 1]
                     target = ".".join([*parts, node.module] if node.module else parts)
                 else:
                     target = node.module or ""
