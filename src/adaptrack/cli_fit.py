@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import typer
@@ -42,6 +43,9 @@ def _read(path: Path, measurement: str) -> PositionLog | RadarLog:
     if log.unused:
         err_console.print(f"note: {path}: columns not used: {', '.join(log.unused)}", markup=False)
     return log
+
+
+UNDETERMINED_SPAN = 100.0  # a 95 % interval wider than this factor: the data say little
 
 
 def fit(
@@ -93,6 +97,21 @@ def fit(
     Console().print(table)
     if not result.fit.converged:
         err_console.print(f"warning: the optimiser did not converge: {result.fit.message}")
+    for name in result.fit.names:
+        lo, hi = result.fit.interval(name)
+        if name in result.fit.signed:
+            continue
+        if math.isnan(lo) or math.isnan(hi):
+            why = "gives no interval for it: the likelihood is not curved down there"
+        elif hi > UNDETERMINED_SPAN * lo:
+            span = hi / lo if lo > 0 else math.inf
+            why = f"hardly constrains it: its 95 % interval spans a factor of {span:.2g}"
+        else:
+            continue
+        err_console.print(
+            f"note: {name} = {result.fit.value(name):.4g}: the log {why} (flat, or the value "
+            "at a limit such as 0); a simpler model may explain the log as well"
+        )
     Console().print(f"wrote {out}")
 
 

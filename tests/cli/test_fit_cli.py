@@ -185,6 +185,7 @@ def test_fit_and_filter_a_coordinated_turn(tmp_path, cli):
     )  # fmt: skip
     assert code == 0, err
     assert "q_turn" in out and 'model = "ct"' in (tmp_path / "fit.toml").read_text()
+    assert "hardly constrains" not in err  # the bends determine the turn PSD
     code, out, err = cli(
         "filter", tmp_path / "drive.csv", "--config", tmp_path / "fit.toml", "--out",
         tmp_path / "est.csv",
@@ -199,3 +200,21 @@ def test_fit_and_filter_a_coordinated_turn(tmp_path, cli):
         "--out", tmp_path / "f2.toml",
     )  # fmt: skip
     assert code != 0 and "cv, ca, ct" in err
+
+
+def test_parameters_the_log_does_not_determine_are_pointed_out(tmp_path, cli):
+    """A turn model fitted to a drive without bends (white acceleration): the turn PSD is
+    left undetermined (its interval spans orders of magnitude, or there is none) and `fit`
+    says so; the white acceleration's PSD and the noise it determines, and does not flag."""
+    rng = np.random.default_rng(8)
+    states = cv_states(rng, [[0.0, 12.0], [0.0, 0.5]], 0.1, 0.5, 600)
+    meas = states[:, :, 0] + rng.normal(0.0, 1.5, (600, 2))
+    pd.DataFrame({"time_s": 0.1 * np.arange(1, 601), "east_m": meas[:, 0],
+                  "north_m": meas[:, 1]}).to_csv(tmp_path / "drive.csv", index=False)  # fmt: skip
+    code, _, err = cli(
+        "fit", tmp_path / "drive.csv", "--measurement", "position", "--model", "ct",
+        "--out", tmp_path / "fit.toml",
+    )  # fmt: skip
+    assert code == 0, err
+    notes = [line for line in err.splitlines() if line.startswith("note:")]
+    assert len(notes) == 1 and notes[0].startswith("note: q_turn"), err

@@ -129,3 +129,31 @@ def test_a_filter_error_at_the_starting_values_is_the_callers():
 
     with pytest.raises(at.CovarianceError, match="step 1"):
         fit_by_likelihood(loglik, {"q": 1.0})
+
+
+def test_a_nearly_flat_likelihood_gives_an_unbounded_interval_not_an_overflow():
+    """A parameter whose standard error is 1e6 times its value (a turn PSD on a straight
+    drive): the log-scale interval is (0, inf), as exp(+-1.96e6) rounds; a moderate one keeps
+    its finite interval."""
+    from adaptrack.tuning.likelihood import LikelihoodFit
+
+    fit = LikelihoodFit(("q", "r"), np.array([1e-8, 2.0]), np.diag([1e-4, 0.01]), 0.0, True, "")
+    assert fit.interval("q") == (0.0, math.inf)
+    lo, hi = fit.interval("r")
+    half = 1.959963984540054 * 0.1 / 2.0
+    assert (lo, hi) == pytest.approx((2.0 * math.exp(-half), 2.0 * math.exp(half)), rel=1e-12)
+
+
+def test_trial_steps_beyond_the_float_range_are_infeasible_not_fatal():
+    """A maximum far out (log q = 100): L-BFGS-B's trial steps overflow exp (q = inf), which a
+    model refuses (as ``CoordinatedTurn`` refuses an infinite PSD). Such a step is infinitely
+    unlikely and the search goes on to the maximum."""
+
+    def loglik(v):
+        if not (math.isfinite(v["q"]) and v["q"] > 0):
+            raise ValueError(f"q must be finite and > 0; got {v['q']}")
+        return -abs(math.log(v["q"]) - 100.0) - (v["r"] - 2.0) ** 2
+
+    fit = fit_by_likelihood(loglik, {"q": 1.0, "r": 1.0})
+    assert math.log(fit.value("q")) == pytest.approx(100.0, abs=1e-3)
+    assert fit.value("r") == pytest.approx(2.0, abs=1e-3)

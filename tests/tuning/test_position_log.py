@@ -141,3 +141,41 @@ def test_the_coordinated_turn_fits_a_drive_with_bends_better_than_cv(tmp_path):
     true_rate = rate[bend].mean()  # pi / 20 rad/s
     assert abs(table["turn_rate_radps"][bend].mean() - true_rate) < 0.1 * true_rate
     assert np.all(table["turn_rate_std_radps"] > 0)
+
+
+@pytest.mark.parametrize(
+    ("layout", "model", "values"),
+    [
+        ("position", "ct", {"q_horizontal": 2.0, "q_turn": 1e-3, "r_horizontal": 2.0}),
+        ("radar2d", "cv", {"q_horizontal": 0.5, "r_range": 50.0, "r_azimuth": 1e-6,
+                           "r_range_rate": 0.2}),
+        ("radar3d", "ca", {"q_horizontal": 0.1, "q_vertical": 0.01, "r_range": 60.0,
+                           "r_azimuth": 2e-6, "r_elevation": 3e-6, "r_range_rate": 0.1}),
+        ("radar3d", "ct", {"q_horizontal": 0.7, "q_vertical": 0.05, "q_turn": 1e-4,
+                           "r_range": 70.0, "r_azimuth": 1e-6, "r_elevation": 2e-6,
+                           "r_range_rate": 0.3}),
+    ],
+)  # fmt: skip
+def test_the_fit_s_compiled_likelihood_is_the_ekf_s(tmp_path, layout, model, values):
+    """The fit's log-likelihood (the IMM kernel with one model) equals the sum over the
+    NumPy EKF's steps (``ekf_filter``, what `adaptrack filter` runs), at parameters away from
+    the fit's maximum."""
+    from adaptrack.io.radar_plots import read_radar_log
+    from adaptrack.tuning.position_log import _log_likelihood, _run
+    from tests.tuning.test_radar_log import radar_plot_list
+
+    if layout == "position":
+        t, _, _, meas = turning_drive(2)
+        pd.DataFrame({"time_s": t, "east_m": meas[:, 0], "north_m": meas[:, 1]}).to_csv(
+            tmp_path / "log.csv", index=False
+        )
+        log = read_position_log(tmp_path / "log.csv", "position")
+    else:
+        radar_plot_list(tmp_path / "log.csv", n=120)
+        frame = pd.read_csv(tmp_path / "log.csv")
+        if layout == "radar2d":
+            frame = frame.drop(columns=["elevation_deg", "snr_db"])
+        frame.to_csv(tmp_path / "log.csv", index=False)
+        log = read_radar_log(tmp_path / "log.csv", layout)
+    ekf = float(_run(log, model, values).info.log_likelihood.sum())
+    assert _log_likelihood(log, model, values) == pytest.approx(ekf, rel=1e-9, abs=1e-6)

@@ -25,6 +25,7 @@ log-likelihood at the maximum (central differences in log space, then the delta 
 from __future__ import annotations
 
 import math
+import sys
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
@@ -78,8 +79,9 @@ class LikelihoodFit:
         value, z = self.value(name), norm.ppf(0.5 + level / 2)
         if name in self.signed:
             return value - z * self.std_error(name), value + z * self.std_error(name)
-        half = z * self.std_error(name) / value
-        return value * math.exp(-half), value * math.exp(half)
+        half = z * self.std_error(name) / value  # huge where the likelihood is nearly flat
+        high = math.inf if half > math.log(sys.float_info.max) else value * math.exp(half)
+        return value * math.exp(-half), high
 
 
 def fit_by_likelihood(
@@ -109,7 +111,8 @@ def fit_by_likelihood(
 
     Values at which the log-likelihood is not finite, or at which the filter cannot run (it
     raises :class:`~adaptrack.filters.kalman.CovarianceError`, e.g. an innovation covariance
-    not positive definite at extreme noise values), are infinitely unlikely. Gradient steps
+    not positive definite at extreme noise values), are infinitely unlikely, as are trial
+    steps so long that a positive parameter overflows to inf or underflows to 0. Gradient steps
     assume a finite cost everywhere (L-BFGS-B reported convergence far from the maximum when
     a trial step met such values), so once one is met the search goes on from where it
     stopped with the Nelder-Mead simplex, which steps around them, and ends with L-BFGS-B
@@ -153,9 +156,13 @@ def fit_by_likelihood(
 
     def cost(theta: FloatArray) -> float:
         nonlocal infeasible
-        try:
-            value = log_likelihood(dict(zip(names, values_of(theta).tolist(), strict=True)))
-        except CovarianceError:  # values the filter cannot run with
+        values = values_of(theta)
+        if np.all(np.isfinite(values)) and np.all(values[:k] > 0):
+            try:
+                value = log_likelihood(dict(zip(names, values.tolist(), strict=True)))
+            except CovarianceError:  # values the filter cannot run with
+                value = math.nan
+        else:  # a step so long that exp over- or underflowed
             value = math.nan
         if np.isfinite(value):
             return -value

@@ -20,6 +20,7 @@ import pandas as pd
 from .._typing import FloatArray
 from ..coords.geodetic import ecef_to_enu, ecef_to_geodetic, enu_to_ecef, geodetic_to_ecef
 from ..filters.ekf import ekf_filter
+from ..filters.imm import imm_filter
 from ..filters.run import kalman_filter
 from ..io.radar_plots import RADAR_LAYOUTS, RadarLog
 from ..io.tables import (
@@ -34,6 +35,7 @@ from ..models import (
     ConstantAcceleration,
     ConstantVelocity,
     CoordinatedTurn,
+    MeasurementModel,
     NonlinearMotionModel,
     PositionMeasurement,
 )
@@ -42,7 +44,7 @@ from ..smoothers import rts_smooth
 from ..types import FilterResult, GaussianState
 from .calibration import fit_clock_offset
 from .likelihood import LikelihoodFit, fit_by_likelihood
-from .radar_log import TURN_PRIOR_STD, radar_parameters, run_radar
+from .radar_log import TURN_PRIOR_STD, radar_inputs, radar_parameters
 
 Measurement = Literal["gnss", "position"]
 Model = Literal["cv", "ca", "ct"]
@@ -200,12 +202,14 @@ def motion_model(
     return ConstantAcceleration(jerk_psd=q, n_axes=n_axes)
 
 
-def _run(log: PositionLog | RadarLog, model: str, values: dict[str, float]) -> FilterResult:
-    """Filter ``log`` with these parameters (prior from the first fix or plot)."""
+def _inputs(
+    log: PositionLog | RadarLog, model: str, values: dict[str, float]
+) -> tuple[MotionModel | NonlinearMotionModel, MeasurementModel, GaussianState]:
+    """Return the filter's motion model, measurement model and prior (at the first fix or plot)."""
     k = log.n_axes
     motion = motion_model(model, values, k)
     if isinstance(log, RadarLog):
-        return run_radar(log, motion, values)
+        return motion, *radar_inputs(log, motion, values)
     r = [values["r_horizontal"]] * 2 + ([values["r_vertical"]] if k == 3 else [])
     n = motion.state_dim
     mean = np.zeros(n)
@@ -215,12 +219,41 @@ def _run(log: PositionLog | RadarLog, model: str, values: dict[str, float]) -> F
     if isinstance(motion, NonlinearMotionModel):
         prior_var[-1] = TURN_PRIOR_STD**2
     prior = GaussianState(mean, np.diag(prior_var), np.asarray(log.times[0]))
-    if isinstance(motion, NonlinearMotionModel):
-        sensor = PositionMeasurement(np.array(r), _AXES[:k])
-        return ekf_filter(log.times, log.enu, motion, sensor, prior)
+    return motion, PositionMeasurement(np.array(r), _AXES[:k]), prior
+
+
+def _measured(log: PositionLog | RadarLog) -> FloatArray:
+    """Return the log's measurements: radar plots, or fixes in the local frame."""
+    return log.plots if isinstance(log, RadarLog) else log.enu
+
+
+def _run(log: PositionLog | RadarLog, model: str, values: dict[str, float]) -> FilterResult:
+    """Filter ``log`` with these parameters (prior from the first fix or plot)."""
+    motion, sensor, prior = _inputs(log, model, values)
+    if isinstance(log, RadarLog) or isinstance(motion, NonlinearMotionModel):
+        return ekf_filter(log.times, _measured(log), motion, sensor, prior)
+    k = log.n_axes
     return kalman_filter(
-        log.times, log.enu, motion, list(_AXES[:k]), np.diag(r), prior, backend="numba"
+        log.times, log.enu, motion, list(_AXES[:k]), sensor.noise_cov, prior, backend="numba"
     )
+
+
+def _log_likelihood(log: PositionLog | RadarLog, model: str, values: dict[str, float]) -> float:
+    """Log-likelihood of the log's measurements under the filter of :func:`_run`.
+
+    An EKF (a radar log, or the coordinated turn) runs compiled, as the IMM kernel with this
+    one model: the same predictions and Joseph-form updates (a test checks that the
+    log-likelihoods agree), some fifty times faster on one track than ``ekf_filter``, which
+    steps in NumPy. A fit evaluates it hundreds of times.
+    """
+    motion, sensor, prior = _inputs(log, model, values)
+    if not (isinstance(log, RadarLog) or isinstance(motion, NonlinearMotionModel)):
+        return float(_run(log, model, values).info.log_likelihood.sum())
+    result = imm_filter(
+        log.times, _measured(log), [motion], sensor, None, [prior], transition_probs=[[1.0]],
+        initial_probs=[1.0], backend="numba",
+    )  # fmt: skip
+    return float(result.log_likelihood.sum())
 
 
 def fit_motion(
@@ -260,7 +293,7 @@ def fit_motion(
         initial |= {"r_horizontal": 1.0} | ({"r_vertical": 1.0} if log.n_axes == 3 else {})
 
     def loglik(values: dict[str, float]) -> float:
-        return float(_run(log, model, values).info.log_likelihood.sum())
+        return _log_likelihood(log, model, values)
 
     return MotionFit(model, log.n_axes, fit_by_likelihood(loglik, initial), clock)
 

@@ -11,12 +11,11 @@ from __future__ import annotations
 import numpy as np
 
 from ..coords.radar import polar_to_enu
-from ..filters.ekf import ekf_filter
 from ..io.radar_plots import RadarLog
 from ..models.continuous import MotionModel
 from ..models.measurement import RadarMeasurement
 from ..models.turn import NonlinearMotionModel
-from ..types import FilterResult, GaussianState
+from ..types import GaussianState
 
 START_VARIANCE = {  # starting values of the noise variances for the fit
     "range": 10.0**2,
@@ -33,10 +32,10 @@ def radar_parameters(log: RadarLog) -> dict[str, float]:
     return {f"r_{c}": START_VARIANCE[c] for c in log.components}
 
 
-def run_radar(
+def radar_inputs(
     log: RadarLog, motion: MotionModel | NonlinearMotionModel, values: dict[str, float]
-) -> FilterResult:
-    """EKF of ``log`` with the given noise variances; prior at the first plot."""
+) -> tuple[RadarMeasurement, GaussianState]:
+    """Return the EKF's measurement model (these noise variances) and prior at the first plot."""
     k = log.n_axes
     radar = RadarMeasurement(
         noise_cov=np.array([values[f"r_{c}"] for c in log.components]),
@@ -53,8 +52,7 @@ def run_radar(
     var[:k] = values["r_range"] + cross
     if isinstance(motion, NonlinearMotionModel):
         var[-1] = TURN_PRIOR_STD**2
-    prior = GaussianState(mean, np.diag(var), np.asarray(log.times[0]))
-    return ekf_filter(log.times, log.plots, motion, radar, prior)
+    return radar, GaussianState(mean, np.diag(var), np.asarray(log.times[0]))
 
 
-__all__ = ["radar_parameters", "run_radar"]
+__all__ = ["radar_inputs", "radar_parameters"]
