@@ -15,6 +15,7 @@ from .analysis.consistency import innovation_consistency
 from .io.radar_plots import RADAR_LAYOUTS, RadarLog, read_radar_log
 from .io.tables import DataFormatError, write_table_atomic, write_text_atomic
 from .smoothers import rts_smooth
+from .tuning.likelihood import LikelihoodFit
 from .tuning.position_log import (
     ALL_MEASUREMENTS,
     MODELS,
@@ -46,6 +47,34 @@ def _read(path: Path, measurement: str) -> PositionLog | RadarLog:
 
 
 UNDETERMINED_SPAN = 100.0  # a 95 % interval wider than this factor: the data say little
+
+
+def _fit_notes(fit: LikelihoodFit) -> list[str]:
+    """Return notes on the intervals: a rough likelihood, or parameters the log hardly fixes."""
+    if fit.rough:
+        return [
+            f"the likelihood is rough in {', '.join(fit.rough)} (its curvature differs "
+            "between steps of 1 % and 0.5 %): the filter's estimates jump with small changes "
+            "of the parameters, so the model may not suit the log; no standard error for "
+            "them, and the others', where shown, hold them at their values"
+        ]
+    notes = []
+    for name in fit.names:
+        lo, hi = fit.interval(name)
+        if name in fit.signed:
+            continue
+        if math.isnan(lo) or math.isnan(hi):
+            why = "the log gives no interval for it: the likelihood is not curved down there"
+        elif hi > UNDETERMINED_SPAN * lo:
+            span = hi / lo if lo > 0 else math.inf
+            why = f"the log hardly constrains it: its 95 % interval spans a factor of {span:.2g}"
+        else:
+            continue
+        notes.append(
+            f"{name} = {fit.value(name):.4g}: {why} (flat, or the value at a limit such as 0); "
+            "a simpler model may explain the log as well"
+        )
+    return notes
 
 
 def fit(
@@ -97,21 +126,8 @@ def fit(
     Console().print(table)
     if not result.fit.converged:
         err_console.print(f"warning: the optimiser did not converge: {result.fit.message}")
-    for name in result.fit.names:
-        lo, hi = result.fit.interval(name)
-        if name in result.fit.signed:
-            continue
-        if math.isnan(lo) or math.isnan(hi):
-            why = "gives no interval for it: the likelihood is not curved down there"
-        elif hi > UNDETERMINED_SPAN * lo:
-            span = hi / lo if lo > 0 else math.inf
-            why = f"hardly constrains it: its 95 % interval spans a factor of {span:.2g}"
-        else:
-            continue
-        err_console.print(
-            f"note: {name} = {result.fit.value(name):.4g}: the log {why} (flat, or the value "
-            "at a limit such as 0); a simpler model may explain the log as well"
-        )
+    for note in _fit_notes(result.fit):
+        err_console.print(f"note: {note}")
     Console().print(f"wrote {out}")
 
 

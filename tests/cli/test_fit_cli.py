@@ -218,3 +218,13 @@ def test_parameters_the_log_does_not_determine_are_pointed_out(tmp_path, cli):
     assert code == 0, err
     notes = [line for line in err.splitlines() if line.startswith("note:")]
     assert len(notes) == 1 and notes[0].startswith("note: q_turn"), err
+
+
+def test_a_rough_likelihood_is_one_note_naming_its_parameters():
+    from adaptrack.cli_fit import _fit_notes
+    from adaptrack.tuning.likelihood import LikelihoodFit
+
+    cov = np.diag([np.nan, 0.01])
+    fit = LikelihoodFit(("q_turn", "r"), np.array([0.3, 2.0]), cov, 0.0, True, "", (), ("q_turn",))
+    (note,) = _fit_notes(fit)
+    assert note.startswith("the likelihood is rough in q_turn") and "no standard error" in note

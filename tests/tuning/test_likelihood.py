@@ -157,3 +157,26 @@ def test_trial_steps_beyond_the_float_range_are_infeasible_not_fatal():
     fit = fit_by_likelihood(loglik, {"q": 1.0, "r": 1.0})
     assert math.log(fit.value("q")) == pytest.approx(100.0, abs=1e-3)
     assert fit.value("r") == pytest.approx(2.0, abs=1e-3)
+
+
+def test_a_rough_likelihood_gives_no_standard_error_not_a_false_one():
+    """A ripple of period 0.9 % in log q (as a filter whose estimates jump with small
+    parameter changes gives): the curvature over 1 % steps is the ripple's, which would
+    make a tiny interval. The fit names q rough and gives it no standard error; r, smooth
+    and independent of q, keeps its own (the curvature 2 / 0.02 of its quadratic)."""
+
+    def loglik(v):
+        lq = math.log(v["q"])
+        return -100.0 * lq**2 + 5.0 * math.sin(700.0 * lq) - (v["r"] - 2.0) ** 2 / 0.02
+
+    fit = fit_by_likelihood(loglik, {"q": 1.0, "r": 1.0})
+    assert fit.rough == ("q",)
+    assert math.isnan(fit.std_error("q"))
+    assert fit.std_error("r") == pytest.approx(0.1, rel=0.01)
+
+
+def test_a_smooth_likelihood_is_not_called_rough():
+    fit = fit_by_likelihood(lambda v: -((v["q"] - 3.0) ** 2) - math.log(v["r"]) ** 2,
+                            {"q": 1.0, "r": 2.0})  # fmt: skip
+    assert fit.rough == ()
+    assert fit.std_error("q") == pytest.approx(math.sqrt(0.5), rel=0.01)

@@ -53,6 +53,7 @@ class LikelihoodFit:
     converged: bool
     message: str
     signed: tuple[str, ...] = ()  # parameters of either sign, fitted on a linear scale
+    rough: tuple[str, ...] = ()  # the log-likelihood is not smooth in these: no std error
 
     @property
     def std_errors(self) -> FloatArray:
@@ -116,7 +117,10 @@ def fit_by_likelihood(
     assume a finite cost everywhere (L-BFGS-B reported convergence far from the maximum when
     a trial step met such values), so once one is met the search goes on from where it
     stopped with the Nelder-Mead simplex, which steps around them, and ends with L-BFGS-B
-    from the simplex's best.
+    from the simplex's best. Where the log-likelihood is rough at the maximum (its curvature
+    differs between two step sizes), the parameter is listed in ``rough`` and has no
+    standard error (NaN): a curvature there would give a false, often tiny, interval; the
+    others' standard errors then hold the rough ones at their values.
 
     Raises
     ------
@@ -181,12 +185,15 @@ def fit_by_likelihood(
             opt = polished if polished.fun <= simplex.fun else simplex
     theta = np.asarray(opt.x, dtype=float)
     hess = _hessian(cost, theta, float(opt.fun))
+    rough = _rough(cost, theta, float(opt.fun), np.diag(hess))
+    smooth = np.ix_(~rough, ~rough)  # the rough ones held at their values
+    cov_theta = np.full_like(hess, np.nan)  # none where there is no maximum to measure
     try:
-        cov_theta = np.linalg.inv(hess)
+        cov_theta[smooth] = np.linalg.inv(hess[smooth])
     except np.linalg.LinAlgError:
-        cov_theta = np.full_like(hess, np.nan)
-    if not np.all(np.isfinite(cov_theta)) or np.any(np.diag(cov_theta) < 0):
-        cov_theta = np.full_like(hess, np.nan)  # not a maximum: no curvature to report
+        pass
+    if not np.all(np.isfinite(cov_theta[smooth])) or np.any(np.diag(cov_theta) < 0):
+        cov_theta[:] = np.nan  # not a maximum: no curvature to report
     values = values_of(theta)
     jac = np.concatenate([values[:k], scale])  # d value / d theta
     return LikelihoodFit(
@@ -197,10 +204,34 @@ def fit_by_likelihood(
         bool(opt.success),
         str(opt.message),
         free,
+        tuple(n for n, r in zip(names, rough, strict=True) if r),
     )
 
 
 SIMPLEX = {"xatol": 1e-6, "fatol": 1e-8, "maxfev": 4000}  # Nelder-Mead, log parameters
+
+
+ROUGH_RATIO = 1.5  # curvatures over two steps further apart than this: a rough likelihood
+
+
+def _rough(
+    cost: Callable[[FloatArray], float], theta: FloatArray, f0: float, curvature: FloatArray
+) -> np.ndarray:
+    """Parameters in which the log-likelihood is not smooth at the maximum (bool each).
+
+    A smooth maximum has the same curvature over steps of ``HESSIAN_STEP`` and half of it.
+    Where they differ by more than :data:`ROUGH_RATIO` (a filter whose estimates jump with
+    small parameter changes, such as a turn rate wandering off in a model that does not
+    suit the data) the curvature, and the standard error from it, mean nothing.
+    """
+    h = HESSIAN_STEP / 2.0
+    out = np.zeros(theta.size, dtype=bool)
+    for i in range(theta.size):
+        e_i = np.eye(theta.size)[i] * h
+        half = (cost(theta + e_i) - 2.0 * f0 + cost(theta - e_i)) / h**2
+        ratio = half / curvature[i] if curvature[i] != 0.0 else math.nan
+        out[i] = not (1.0 / ROUGH_RATIO <= ratio <= ROUGH_RATIO)
+    return out
 
 
 def _hessian(cost: Callable[[FloatArray], float], theta: FloatArray, f0: float) -> FloatArray:

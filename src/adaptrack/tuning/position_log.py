@@ -44,7 +44,7 @@ from ..smoothers import rts_smooth
 from ..types import FilterResult, GaussianState
 from .calibration import fit_clock_offset
 from .likelihood import LikelihoodFit, fit_by_likelihood
-from .radar_log import TURN_PRIOR_STD, radar_inputs, radar_parameters
+from .radar_log import TURN_PRIOR_STD, VELOCITY_PRIOR_STD_MPS, radar_inputs, radar_parameters
 
 Measurement = Literal["gnss", "position"]
 Model = Literal["cv", "ca", "ct"]
@@ -214,7 +214,7 @@ def _inputs(
     n = motion.state_dim
     mean = np.zeros(n)
     mean[:k] = log.enu[0]
-    prior_var = np.full(n, 100.0)  # velocity [m^2/s^2] (and acceleration): unknown at first
+    prior_var = np.full(n, VELOCITY_PRIOR_STD_MPS**2)  # velocity (and acceleration): unknown
     prior_var[:k] = r
     if isinstance(motion, NonlinearMotionModel):
         prior_var[-1] = TURN_PRIOR_STD**2
