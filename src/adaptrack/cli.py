@@ -747,28 +747,19 @@ def _evaluate_flights(files: list[Path], seed: int, json_path: Path | None) -> N
             except ValueError as exc:
                 _fail(str(exc))
             bar.advance(path.name)
-    table = Table(title=f"navigation smoothing on recorded flights (seed {seed})")
-    for col in (
-        "flight",
-        "scan [s]",
-        "method",
-        "position RMSE [m]",
-        "velocity RMSE [m/s]",
-        "scored / scans",
-        "radars",
-    ):
-        table.add_column(col, justify="left" if col in ("flight", "method") else "right")
-    for r in rows:
-        table.add_row(
-            r.flight,
-            f"{r.scan_s:g}",
-            r.method,
-            f"{r.position_rmse_m:.2f}",
-            f"{r.velocity_rmse_mps:.2f}",
-            f"{r.n_scored} / {r.n_scans}",
-            str(r.n_radars),
-        )
-    console.print(table)
+    for name in dict.fromkeys(r.flight for r in rows):  # one table a flight, in file order
+        table = Table(title=f"{name}: navigation smoothing (seed {seed})")
+        columns = ("scan [s]", "method", "position RMSE [m]", "velocity RMSE [m/s]",
+                   "scored / scans", "radars")  # fmt: skip
+        for col in columns:
+            table.add_column(col, justify="left" if col == "method" else "right")
+        for r in rows:
+            if r.flight == name:
+                table.add_row(
+                    f"{r.scan_s:g}", r.method, f"{r.position_rmse_m:.2f}",
+                    f"{r.velocity_rmse_mps:.2f}", f"{r.n_scored} / {r.n_scans}", str(r.n_radars),
+                )  # fmt: skip
+        console.print(table)
     if json_path is not None:
         _write_json(json_path, {"seed": seed, "rows": [dataclasses.asdict(r) for r in rows]})
         console.print(f"wrote {json_path}")

@@ -137,6 +137,8 @@ def test_evaluate_flights_cli(tmp_path):
     assert {r["method"] for r in rows} == {"lsq_triple", "lsq_position", "kf", "rts"}
     assert {r["flight"] for r in rows} == {REGA.stem, AFR.stem}
     assert all({"position_rmse_m", "velocity_rmse_mps"} <= set(r) for r in rows)
+    for path in (REGA, AFR):  # a table each, titled with the flight's whole name
+        assert f"{path.stem}: navigation smoothing" in proc.stdout
     proc = run("evaluate", "flights")
     assert proc.returncode == 1 and "needs at least one flight CSV" in proc.stderr
 
