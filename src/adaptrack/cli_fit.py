@@ -12,9 +12,9 @@ from rich.table import Table
 from ._cli_errors import check_outputs, err_console, fail
 from ._toml import load_toml
 from .analysis.consistency import innovation_consistency
+from .filters.imm import IMMResult
 from .io.radar_plots import RADAR_LAYOUTS, RadarLog, read_radar_log
 from .io.tables import DataFormatError, write_table_atomic, write_text_atomic
-from .smoothers import rts_smooth
 from .tuning.likelihood import LikelihoodFit
 from .tuning.position_log import (
     ALL_MEASUREMENTS,
@@ -89,8 +89,9 @@ def fit(
     model: str = typer.Option(
         "cv",
         "--model",
-        help="cv (white acceleration), ca (jerk) or ct (coordinated turn: constant speed, "
-        "a wandering turn rate; EKF).",
+        help="cv (white acceleration), ca (jerk), ct (coordinated turn: constant speed, "
+        "a wandering turn rate; EKF), or an IMM of CV and a manoeuvre model switching at a "
+        "fitted rate: cv+ca, cv+ct.",
     ),
     clock_offset: bool = typer.Option(
         False,
@@ -147,18 +148,26 @@ def filter_log(
     log = _read(log_file, measurement)
     try:
         run = result.run(log)
-        check = innovation_consistency(run)
+        check = None if isinstance(run, IMMResult) else innovation_consistency(run)
+        est, mode_probs = result.estimate(run, smooth)
     except ValueError as exc:
         fail(f"{log_file}: {exc}")
-    est = rts_smooth(run) if smooth else run.filtered
-    table = estimates_table(log, est.mean, est.cov, result.offset_s, result.model == "ct")
-    write_table_atomic(table, out)
-    lo, hi = check.mean_nis_band
-    Console().print(
-        f"innovations: mean NIS {check.mean_nis:.2f} (95 % band {lo:.2f}-{hi:.2f} for "
-        f"{check.dof:.0f} dof), lag-1 correlation {check.lag1:+.2f} (band "
-        f"+-{check.lag1_limit:.2f}): {check.verdict}"
+    probabilities = None
+    if mode_probs is not None:  # an IMM's, one column a model
+        probabilities = dict(zip(result.model.split("+"), mode_probs.T, strict=True))
+    table = estimates_table(
+        log, est.mean, est.cov, result.offset_s, result.model == "ct", probabilities
     )
+    write_table_atomic(table, out)
+    if check is None:
+        Console().print("innovations: not checked (an IMM's differ from model to model)")
+    else:
+        lo, hi = check.mean_nis_band
+        Console().print(
+            f"innovations: mean NIS {check.mean_nis:.2f} (95 % band {lo:.2f}-{hi:.2f} for "
+            f"{check.dof:.0f} dof), lag-1 correlation {check.lag1:+.2f} (band "
+            f"+-{check.lag1_limit:.2f}): {check.verdict}"
+        )
     Console().print(
         f"wrote {out} ({log.times.size} epochs, {'smoothed' if smooth else 'filtered'})"
     )

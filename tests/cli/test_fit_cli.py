@@ -228,3 +228,39 @@ def test_a_rough_likelihood_is_one_note_naming_its_parameters():
     fit = LikelihoodFit(("q_turn", "r"), np.array([0.3, 2.0]), cov, 0.0, True, "", (), ("q_turn",))
     (note,) = _fit_notes(fit)
     assert note.startswith("the likelihood is rough in q_turn") and "no standard error" in note
+
+
+def test_fit_and_filter_an_imm_of_cv_and_the_coordinated_turn(tmp_path, cli):
+    """`--model cv+ct`: both models' PSDs and the switching rate by maximum likelihood; the
+    estimates (filtered and IMM-smoothed) with each model's probability, the turn model's
+    higher in the bends than on the straights; smoothing brings the positions nearer the
+    truth than the fixes."""
+    from tests.tuning.test_position_log import turning_drive
+
+    t, pos, _rate, meas = turning_drive(9)
+    pd.DataFrame({"time_s": t, "east_m": meas[:, 0], "north_m": meas[:, 1]}).to_csv(
+        tmp_path / "drive.csv", index=False
+    )
+    code, out, err = cli(
+        "fit", tmp_path / "drive.csv", "--measurement", "position", "--model", "cv+ct",
+        "--out", tmp_path / "fit.toml",
+    )  # fmt: skip
+    assert code == 0, err
+    for name in ("q_horizontal", "q_ct_horizontal", "q_turn", "switch_rate", "r_horizontal"):
+        assert name in out
+    for smooth in ((), ("--smooth",)):
+        code, out, err = cli(
+            "filter", tmp_path / "drive.csv", "--config", tmp_path / "fit.toml", *smooth,
+            "--out", tmp_path / "est.csv",
+        )  # fmt: skip
+        assert code == 0, err
+        assert "not checked" in out  # an IMM has no single innovation sequence
+        est = pd.read_csv(tmp_path / "est.csv")
+        p = est[["probability_cv", "probability_ct"]].to_numpy()
+        assert np.allclose(p.sum(axis=1), 1.0)
+        bends = ((t > 17) & (t <= 25)) | ((t > 42) & (t <= 50))
+        straight = (t > 30) & (t <= 38)
+        assert est.probability_ct[bends].mean() > est.probability_ct[straight].mean() + 0.2
+    raw = np.sqrt(np.mean(np.sum((meas - pos) ** 2, axis=1)))
+    smoothed = np.sqrt(np.mean(np.sum((est[["east_m", "north_m"]].to_numpy() - pos) ** 2, 1)))
+    assert smoothed < 0.6 * raw, (smoothed, raw)

@@ -163,10 +163,14 @@ def imm_smooth(
             )  # fmt: skip
         else:
             log_c = np.zeros(mu_f.shape + (n_models,))
-        back = pik * ratio[..., None, :] * np.exp(log_c - log_c.max(axis=(-2, -1), keepdims=True))
+        with np.errstate(divide="ignore"):  # log 0: a pair with no weight
+            log_back = np.log(pik) + np.log(ratio)[..., None, :] + log_c
+        top = log_back.max(axis=(-2, -1), keepdims=True)  # of the pairs with weight
+        back = np.exp(log_back - np.where(np.isfinite(top), top, 0.0))
         total = back.sum(axis=-1)
         mu_k = mu_f * total
-        mu_s[..., k, :] = mu_k / mu_k.sum(axis=-1, keepdims=True)
+        norm = mu_k.sum(axis=-1, keepdims=True)
+        mu_s[..., k, :] = np.divide(mu_k, norm, out=np.array(mu_f), where=norm > 0)
         w = np.divide(back, total[..., None], out=np.zeros_like(back), where=total[..., None] > 0)
         for i in range(n_models):
             pair = pairs[i]

@@ -20,7 +20,7 @@ import pandas as pd
 from .._typing import FloatArray
 from ..coords.geodetic import ecef_to_enu, ecef_to_geodetic, enu_to_ecef, geodetic_to_ecef
 from ..filters.ekf import ekf_filter
-from ..filters.imm import imm_filter
+from ..filters.imm import IMMResult, imm_filter
 from ..filters.run import kalman_filter
 from ..io.radar_plots import RADAR_LAYOUTS, RadarLog
 from ..io.tables import (
@@ -40,17 +40,18 @@ from ..models import (
     PositionMeasurement,
 )
 from ..models.continuous import MotionModel
-from ..smoothers import rts_smooth
+from ..smoothers import imm_smooth, rts_smooth
 from ..types import FilterResult, GaussianState
 from .calibration import fit_clock_offset
 from .likelihood import LikelihoodFit, fit_by_likelihood
 from .radar_log import TURN_PRIOR_STD, VELOCITY_PRIOR_STD_MPS, radar_inputs, radar_parameters
 
 Measurement = Literal["gnss", "position"]
-Model = Literal["cv", "ca", "ct"]
+Model = Literal["cv", "ca", "ct", "cv+ca", "cv+ct"]
 MEASUREMENTS: tuple[str, ...] = ("gnss", "position")
 ALL_MEASUREMENTS: tuple[str, ...] = MEASUREMENTS + RADAR_LAYOUTS  # what `adaptrack fit` reads
-MODELS: tuple[str, ...] = ("cv", "ca", "ct")
+MODELS: tuple[str, ...] = ("cv", "ca", "ct", "cv+ca", "cv+ct")
+IMM_MODELS: tuple[str, ...] = ("cv+ca", "cv+ct")  # CV and a manoeuvre model, switching
 _AXES = ("x", "y", "z")
 _COLUMNS = {  # measured columns of each layout (the last is optional: a planar log)
     "gnss": ("lat_deg", "lon_deg", "alt_m"),
@@ -146,9 +147,12 @@ def _velocity_reports(
 class MotionFit:
     """Maximum-likelihood motion model of a position log.
 
-    ``model`` "cv" (white acceleration, PSD [m^2/s^3]) or "ca" (white jerk, [m^2/s^5]);
-    parameters ``q_horizontal``, ``r_horizontal`` [m^2] (and ``q_vertical``, ``r_vertical``
-    for a 3-D log) with their standard errors and intervals in ``fit``; ``clock``: how late the
+    ``model`` "cv" (white acceleration, PSD [m^2/s^3]), "ca" (white jerk, [m^2/s^5]), "ct"
+    (coordinated turn, turn PSD ``q_turn`` [rad^2/s^3]), or an IMM of CV and one of them
+    ("cv+ca", "cv+ct": the manoeuvre model's PSDs ``q_ca_*`` or ``q_ct_*``, and the rate of
+    switching between the two, ``switch_rate`` [1/s]); parameters ``q_horizontal``,
+    ``r_horizontal`` [m^2] (and ``q_vertical``, ``r_vertical`` for a 3-D log) with their
+    standard errors and intervals in ``fit``; ``clock``: how late the
     fixes are stamped against the log's velocity reports (``offset_s``,
     :func:`~adaptrack.tuning.calibration.fit_clock_offset`), if fitted.
     """
@@ -166,14 +170,30 @@ class MotionFit:
     def filter(self, log: PositionLog, smooth: bool = False) -> tuple[FloatArray, FloatArray]:
         """Estimates at the log's times: state means (T, n) and covariances (T, n, n).
 
-        State order ``x, y(, z), vx, vy(, vz)`` (and accelerations for "ca"), east-north-up.
+        State order ``x, y(, z), vx, vy(, vz)`` (and accelerations for "ca", the turn rate
+        for "ct"; an IMM's, the states its models share), east-north-up.
         """
-        res = self.run(log)
-        est = rts_smooth(res) if smooth else res.filtered
+        est, _ = self.estimate(self.run(log), smooth)
         return est.mean, est.cov
 
-    def run(self, log: PositionLog | RadarLog) -> FilterResult:
-        """Return the filter's full result on ``log`` (its innovations included)."""
+    def estimate(
+        self, run: FilterResult | IMMResult, smooth: bool = False
+    ) -> tuple[GaussianState, FloatArray | None]:
+        """Return a :meth:`run`'s estimates and an IMM's model probabilities (T, 2).
+
+        Filtered, or smoothed (RTS, or the IMM smoother); no probabilities for one model.
+        """
+        if isinstance(run, FilterResult):
+            return (rts_smooth(run) if smooth else run.filtered), None
+        if not smooth:
+            return run.filtered, run.mode_probabilities
+        values = {name: self.fit.value(name) for name in self.fit.names}
+        models = motion_models(self.model, values, self.n_axes)
+        out = imm_smooth(run, models, switching_rates=_switching(values))
+        return out.smoothed, out.mode_probabilities
+
+    def run(self, log: PositionLog | RadarLog) -> FilterResult | IMMResult:
+        """Return the filter's full result on ``log`` (an IMM's, or its innovations included)."""
         if log.n_axes != self.n_axes:
             raise ValueError(f"the fit is {self.n_axes}-D; the log has {log.n_axes} axes")
         if isinstance(log, RadarLog):
@@ -185,16 +205,39 @@ class MotionFit:
         return _run(log, self.model, {name: self.fit.value(name) for name in self.fit.names})
 
 
-def _psds(values: dict[str, float], n_axes: int) -> list[float]:
-    """Per-axis PSDs from the horizontal / vertical parameters."""
-    return [values["q_horizontal"]] * 2 + ([values["q_vertical"]] if n_axes == 3 else [])
+def _psds(values: dict[str, float], n_axes: int, prefix: str = "q") -> list[float]:
+    """Per-axis PSDs from the horizontal / vertical parameters (``<prefix>_horizontal``...)."""
+    horizontal = [values[f"{prefix}_horizontal"]] * 2
+    return horizontal + ([values[f"{prefix}_vertical"]] if n_axes == 3 else [])
+
+
+def motion_models(
+    model: str, values: dict[str, float], n_axes: int
+) -> list[MotionModel | NonlinearMotionModel]:
+    """Return the fit's motion models: one, or an IMM's CV and its manoeuvre model."""
+    if model not in IMM_MODELS:
+        return [motion_model(model, values, n_axes)]
+    manoeuvre = model.split("+")[1]
+    return [
+        motion_model("cv", values, n_axes),
+        motion_model(manoeuvre, values, n_axes, prefix=f"q_{manoeuvre}"),
+    ]
+
+
+def _switching(values: dict[str, float]) -> list[list[float]]:
+    """Return an IMM's generator of switching between its two models [1/s]."""
+    rate = values["switch_rate"]
+    return [[-rate, rate], [rate, -rate]]
 
 
 def motion_model(
-    model: str, values: dict[str, float], n_axes: int
+    model: str, values: dict[str, float], n_axes: int, prefix: str = "q"
 ) -> MotionModel | NonlinearMotionModel:
-    """Return the fit's motion model: CV, CA or the coordinated turn (``q_turn`` [rad^2/s^3])."""
-    q = _psds(values, n_axes)
+    """Return a motion model: CV, CA or the coordinated turn (``q_turn`` [rad^2/s^3]).
+
+    Its PSDs are the parameters ``<prefix>_horizontal`` (and ``<prefix>_vertical``).
+    """
+    q = _psds(values, n_axes, prefix)
     if model == "ct":
         return CoordinatedTurn(q[0], values["q_turn"], q[-1], n_axes)
     if model == "cv":
@@ -204,22 +247,25 @@ def motion_model(
 
 def _inputs(
     log: PositionLog | RadarLog, model: str, values: dict[str, float]
-) -> tuple[MotionModel | NonlinearMotionModel, MeasurementModel, GaussianState]:
-    """Return the filter's motion model, measurement model and prior (at the first fix or plot)."""
+) -> tuple[list[MotionModel | NonlinearMotionModel], MeasurementModel, list[GaussianState]]:
+    """Return the filter's motion models, measurement model and priors (one a model)."""
     k = log.n_axes
-    motion = motion_model(model, values, k)
+    models = motion_models(model, values, k)
     if isinstance(log, RadarLog):
-        return motion, *radar_inputs(log, motion, values)
+        pairs = [radar_inputs(log, motion, values) for motion in models]
+        return models, pairs[0][0], [prior for _, prior in pairs]
     r = [values["r_horizontal"]] * 2 + ([values["r_vertical"]] if k == 3 else [])
-    n = motion.state_dim
-    mean = np.zeros(n)
-    mean[:k] = log.enu[0]
-    prior_var = np.full(n, VELOCITY_PRIOR_STD_MPS**2)  # velocity (and acceleration): unknown
-    prior_var[:k] = r
-    if isinstance(motion, NonlinearMotionModel):
-        prior_var[-1] = TURN_PRIOR_STD**2
-    prior = GaussianState(mean, np.diag(prior_var), np.asarray(log.times[0]))
-    return motion, PositionMeasurement(np.array(r), _AXES[:k]), prior
+    priors = []
+    for motion in models:
+        n = motion.state_dim
+        mean = np.zeros(n)
+        mean[:k] = log.enu[0]
+        prior_var = np.full(n, VELOCITY_PRIOR_STD_MPS**2)  # velocity (acceleration): unknown
+        prior_var[:k] = r
+        if isinstance(motion, NonlinearMotionModel):
+            prior_var[-1] = TURN_PRIOR_STD**2
+        priors.append(GaussianState(mean, np.diag(prior_var), np.asarray(log.times[0])))
+    return models, PositionMeasurement(np.array(r), _AXES[:k]), priors
 
 
 def _measured(log: PositionLog | RadarLog) -> FloatArray:
@@ -227,9 +273,30 @@ def _measured(log: PositionLog | RadarLog) -> FloatArray:
     return log.plots if isinstance(log, RadarLog) else log.enu
 
 
-def _run(log: PositionLog | RadarLog, model: str, values: dict[str, float]) -> FilterResult:
-    """Filter ``log`` with these parameters (prior from the first fix or plot)."""
-    motion, sensor, prior = _inputs(log, model, values)
+def _imm(
+    log: PositionLog | RadarLog,
+    models: list[MotionModel | NonlinearMotionModel],
+    sensor: MeasurementModel,
+    priors: list[GaussianState],
+    values: dict[str, float],
+) -> IMMResult:
+    """Run the compiled IMM kernel: an IMM's two models, or one model alone (the EKF)."""
+    z = _measured(log)
+    if len(models) == 1:
+        return imm_filter(log.times, z, models, sensor, None, priors, transition_probs=[[1.0]],
+                          initial_probs=[1.0], backend="numba")  # fmt: skip
+    return imm_filter(log.times, z, models, sensor, None, priors, initial_probs=[0.5, 0.5],
+                      switching_rates=_switching(values), backend="numba")  # fmt: skip
+
+
+def _run(
+    log: PositionLog | RadarLog, model: str, values: dict[str, float]
+) -> FilterResult | IMMResult:
+    """Filter ``log`` with these parameters (priors from the first fix or plot)."""
+    models, sensor, priors = _inputs(log, model, values)
+    if model in IMM_MODELS:
+        return _imm(log, models, sensor, priors, values)
+    (motion,), (prior,) = models, priors
     if isinstance(log, RadarLog) or isinstance(motion, NonlinearMotionModel):
         return ekf_filter(log.times, _measured(log), motion, sensor, prior)
     k = log.n_axes
@@ -246,14 +313,15 @@ def _log_likelihood(log: PositionLog | RadarLog, model: str, values: dict[str, f
     log-likelihoods agree), some fifty times faster on one track than ``ekf_filter``, which
     steps in NumPy. A fit evaluates it hundreds of times.
     """
-    motion, sensor, prior = _inputs(log, model, values)
-    if not (isinstance(log, RadarLog) or isinstance(motion, NonlinearMotionModel)):
-        return float(_run(log, model, values).info.log_likelihood.sum())
-    result = imm_filter(
-        log.times, _measured(log), [motion], sensor, None, [prior], transition_probs=[[1.0]],
-        initial_probs=[1.0], backend="numba",
-    )  # fmt: skip
-    return float(result.log_likelihood.sum())
+    models, sensor, priors = _inputs(log, model, values)
+    if len(models) == 1 and not (
+        isinstance(log, RadarLog) or isinstance(models[0], NonlinearMotionModel)
+    ):  # the linear Kalman filter, compiled already
+        return float(kalman_filter(
+            log.times, log.enu, models[0], list(_AXES[: log.n_axes]), sensor.noise_cov,
+            priors[0], backend="numba",
+        ).info.log_likelihood.sum())  # fmt: skip
+    return float(_imm(log, models, sensor, priors, values).log_likelihood.sum())
 
 
 def fit_motion(
@@ -284,8 +352,15 @@ def fit_motion(
         raise ValueError(f"model must be one of {MODELS}; got {model!r}")
     if log.times.size < 10:
         raise ValueError(f"a fit needs at least 10 fixes; the log has {log.times.size}")
-    initial = {"q_horizontal": 1.0} | ({"q_vertical": 0.1} if log.n_axes == 3 else {})
-    if model == "ct":
+    vertical = log.n_axes == 3
+    initial = {"q_horizontal": 1.0} | ({"q_vertical": 0.1} if vertical else {})
+    if model in IMM_MODELS:  # a quiet CV and a manoeuvre model, switching now and then
+        manoeuvre = model.split("+")[1]
+        initial = {"q_horizontal": 0.1} | ({"q_vertical": 0.01} if vertical else {})
+        initial |= {f"q_{manoeuvre}_horizontal": 1.0}
+        initial |= {f"q_{manoeuvre}_vertical": 0.1} if vertical else {}
+        initial |= {"switch_rate": 0.05}
+    if model.endswith("ct"):
         initial |= {"q_turn": 1e-3}
     if isinstance(log, RadarLog):
         initial |= radar_parameters(log)
@@ -304,12 +379,14 @@ def estimates_table(
     cov: FloatArray,
     offset_s: float = 0.0,
     turn_rate: bool = False,
+    probabilities: dict[str, FloatArray] | None = None,
 ) -> pd.DataFrame:
     """Estimates as a table: position, velocity, their sigmas, the position covariance.
 
     ``time_s, east_m, north_m(, up_m), velocity_east_mps, ...``, ``*_std_*``, ``cov_e_n`` (and
     ``cov_e_u``, ``cov_n_u``); ``turn_rate_radps`` and its sigma if ``turn_rate`` (the
-    coordinated turn's last state, counter-clockwise positive); with a clock offset [s]
+    coordinated turn's last state, counter-clockwise positive); ``probability_<model>``
+    for each of an IMM's ``probabilities`` (name: (T,)); with a clock offset [s]
     (fixes stamped that late), ``corrected_time_s``: when each fix was made; for a GNSS log
     also ``lat_deg, lon_deg, alt_m``.
     """
@@ -329,6 +406,8 @@ def estimates_table(
             cols[f"cov_{names[a][0]}_{names[b][0]}"] = cov[:, a, b]
     if turn_rate:
         cols["turn_rate_radps"], cols["turn_rate_std_radps"] = mean[:, -1], np.sqrt(cov[:, -1, -1])
+    for name, p in (probabilities or {}).items():
+        cols[f"probability_{name}"] = p
     if offset_s:
         cols["corrected_time_s"] = log.times - offset_s
     if log.origin is not None:
@@ -371,8 +450,11 @@ def fit_toml(fit: MotionFit, measurement: str, source: str) -> str:
 
 def _parameter_names(measurement: str, model: str, axes: int, range_rate: bool) -> set[str]:
     """Return the parameters a fit of this layout has (``range_rate``: radar range-rates)."""
-    names = {"q_horizontal"} | ({"q_vertical"} if axes == 3 else set())
-    names |= {"q_turn"} if model == "ct" else set()
+    prefixes = ["q"] + ([f"q_{model.split('+')[1]}"] if model in IMM_MODELS else [])
+    names = {f"{p}_horizontal" for p in prefixes}
+    names |= {f"{p}_vertical" for p in prefixes} if axes == 3 else set()
+    names |= {"q_turn"} if model.endswith("ct") else set()
+    names |= {"switch_rate"} if model in IMM_MODELS else set()
     if measurement in RADAR_LAYOUTS:
         comps = ["range", "azimuth"] + (["elevation"] if axes == 3 else [])
         return names | {f"r_{c}" for c in comps + (["range_rate"] if range_rate else [])}
