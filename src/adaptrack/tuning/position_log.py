@@ -354,23 +354,36 @@ def fit_motion(
         raise ValueError(f"a fit needs at least 10 fixes; the log has {log.times.size}")
     vertical = log.n_axes == 3
     initial = {"q_horizontal": 1.0} | ({"q_vertical": 0.1} if vertical else {})
-    if model in IMM_MODELS:  # a quiet CV and a manoeuvre model, switching now and then
-        manoeuvre = model.split("+")[1]
-        initial = {"q_horizontal": 0.1} | ({"q_vertical": 0.01} if vertical else {})
-        initial |= {f"q_{manoeuvre}_horizontal": 1.0}
-        initial |= {f"q_{manoeuvre}_vertical": 0.1} if vertical else {}
-        initial |= {"switch_rate": 0.05}
-    if model.endswith("ct"):
-        initial |= {"q_turn": 1e-3}
     if isinstance(log, RadarLog):
         initial |= radar_parameters(log)
     else:
-        initial |= {"r_horizontal": 1.0} | ({"r_vertical": 1.0} if log.n_axes == 3 else {})
+        initial |= {"r_horizontal": 1.0} | ({"r_vertical": 1.0} if vertical else {})
+    cv = fit_by_likelihood(lambda values: _log_likelihood(log, "cv", values), initial)
+    if model == "cv":
+        return MotionFit(model, log.n_axes, cv, clock)
+    # The others start from the CV fit: far from it (noise variances off by 100x) their
+    # likelihood can be too rough for the optimiser to leave its start.
+    initial = {name: cv.value(name) for name in cv.names if not name.startswith("r_")}
+    noise = {name: cv.value(name) for name in cv.names if name.startswith("r_")}
+    if model in IMM_MODELS:  # a quieter CV and a manoeuvre model, switching now and then
+        manoeuvre = model.split("+")[1]
+        for axis in ("horizontal", "vertical") if vertical else ("horizontal",):
+            initial[f"q_{manoeuvre}_{axis}"] = initial[f"q_{axis}"]
+            initial[f"q_{axis}"] *= IMM_QUIET
+        initial["switch_rate"] = IMM_START_RATE
+    if model.endswith("ct"):
+        initial["q_turn"] = START_TURN_PSD
+    initial |= noise
 
     def loglik(values: dict[str, float]) -> float:
         return _log_likelihood(log, model, values)
 
     return MotionFit(model, log.n_axes, fit_by_likelihood(loglik, initial), clock)
+
+
+IMM_QUIET = 0.1  # an IMM's CV starts at this fraction of the CV fit's PSDs
+IMM_START_RATE = 0.05  # an IMM's switching rate to start from [1/s]
+START_TURN_PSD = 1e-3  # the turn PSD to start from [rad^2/s^3]
 
 
 def estimates_table(
