@@ -334,7 +334,9 @@ def fit_motion(
     measured component. Standard errors come from the curvature of
     the log-likelihood (they assume independent measurement noise). ``clock_offset``: also
     fit how late the fixes are stamped against the log's velocity reports (horizontal
-    components; epochs with a report), which the log must have.
+    components; epochs with a report), which the log must have. Every model but CV starts
+    from the CV fit's values (module constants ``IMM_QUIET``, ``IMM_START_RATE``,
+    ``START_TURN_PSD`` for what CV does not have).
     """
     clock = None
     if clock_offset:
