@@ -17,7 +17,7 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
-from . import __version__, cli_fit
+from . import __version__, cli_fit, cli_score
 from ._backend import kernels_cached
 from ._cli_errors import check_outputs as _outputs
 from ._cli_errors import err_console
@@ -55,6 +55,7 @@ from .crossing.mixed_traffic import MixedTraffic, mixed_traffic_study
 from .crossing.radar_sim import simulate_site_case
 from .crossing.report import build_report, render_html, sample_tracks
 from .crossing.scene import scene_spec, simulate_scene
+from .crossing.scene_metrics import TRUTH_COLUMNS
 from .crossing.scene_tracker import load_scene_config, track_scene
 from .crossing.selection import (
     CRITERIA,
@@ -100,6 +101,7 @@ app.command("replay")(service_commands.replay)
 app.add_typer(site_app, name="site")
 app.command("fit")(cli_fit.fit)
 app.command("filter")(cli_fit.filter_log)
+app.command("score")(cli_score.score)
 
 
 def _print_version(value: bool) -> None:
@@ -463,9 +465,7 @@ def simulate(
         rec = simulate_scene(st, spec, seed)
         write_table_atomic(rec.detections, out)
         if truth is not None:
-            cols = ["object_id", "vehicle_class", "time_s", "east_m", "north_m", "speed_mps",
-                    "in_zone"]  # fmt: skip
-            write_table_atomic(rec.truth.table[cols], truth)
+            write_table_atomic(rec.truth.table[TRUTH_COLUMNS], truth)
         if warnings is not None:
             write_table_atomic(pd.DataFrame(spec.warnings(), columns=WARNING_COLUMNS), warnings)
         Console().print(

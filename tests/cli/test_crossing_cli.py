@@ -201,6 +201,12 @@ def test_scene_simulate_then_track_with_the_controllers_warnings(tmp_path):
     events = pd.read_csv(tmp_path / "tracks.events.csv")
     assert list(events.columns) == ["time_s", "event", "track_id", "east_m", "north_m", "lead_s"]
     assert pd.read_csv(out)["track_id"].nunique() > 5
+    # scored against the truth the simulation wrote: the tracks lie on the road users
+    proc = run("score", str(out), "--truth", str(truth), "--site", "lx_default", "--json",
+               str(tmp_path / "score.json"))  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    score = json.loads((tmp_path / "score.json").read_text())
+    assert score["gospa_localisation_m2"] < 0.5 and len(score["classes"]) >= 2
     # a warnings file that is not one: a one-line error naming the row
     bad = tmp_path / "bad.csv"
     bad.write_text("start_s,end_s\n10,5\n")
@@ -208,3 +214,65 @@ def test_scene_simulate_then_track_with_the_controllers_warnings(tmp_path):
     assert proc.returncode != 0
     assert "row 1: start_s must be before end_s" in proc.stderr
     assert "Traceback" not in proc.stderr
+
+
+def _hand_made_scene(tmp_path):
+    """Two cars in the zone at 0, 0.5 and 1 s; one track 1 m east of the first, none of the
+    second, and a static track (not a road user). Per epoch GOSPA^2 (c = 5 m, p = 2) is
+    1 (localisation) + 12.5 (the missed car: c^2 / 2)."""
+    times = [0.0, 0.5, 1.0]
+    truth = pd.DataFrame(
+        [(oid, "car", t, 0.0, y + 10.0 * t, 10.0, True)
+         for t in times for oid, y in ((1, 10.0), (2, -40.0))],
+        columns=["object_id", "vehicle_class", "time_s", "east_m", "north_m", "speed_mps",
+                 "in_zone"],
+    )  # fmt: skip
+    tracks = pd.DataFrame(
+        [(tid, t, x, y, s, 0.0, s, 20.0, status)
+         for t in times for tid, x, y, s, status in ((7, 1.0, 10.0 + 10.0 * t, 10.0, "confirmed"),
+                                                     (9, 30.0, 5.0, 0.0, "static"))],
+        columns=["track_id", "time_s", "east_m", "north_m", "speed_mps", "east_speed_mps",
+                 "north_speed_mps", "from_crossing_m", "status"],
+    )  # fmt: skip
+    truth.to_csv(tmp_path / "truth.csv", index=False)
+    tracks.to_csv(tmp_path / "tracks.csv", index=False)
+    return truth, tracks
+
+
+def test_score_a_hand_made_scene_with_a_known_answer(tmp_path):
+    _hand_made_scene(tmp_path)
+    out = tmp_path / "score.json"
+    proc = run("score", str(tmp_path / "tracks.csv"), "--truth", str(tmp_path / "truth.csv"),
+               "--site", "lx_default", "--json", str(out))  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    score = json.loads(out.read_text())
+    assert score["epochs"] == 3
+    assert score["gospa_mean_m"] == pytest.approx(np.sqrt(13.5))
+    assert score["gospa_localisation_m2"] == pytest.approx(1.0)
+    assert score["gospa_missed_m2"] == pytest.approx(12.5)
+    assert score["gospa_false_m2"] == 0.0  # the static track is no road user
+    assert score["id_switches"] == 0
+    (car,) = score["classes"]
+    assert car["class"] == "car" and car["vehicles"] == 1 and car["epochs"] == 3
+    assert car["position_rms_m"] == pytest.approx(1.0) and car["coverage"] == pytest.approx(0.5)
+    assert "identity switches 0" in proc.stdout
+
+
+@pytest.mark.parametrize(
+    ("which", "edit", "message"),
+    [
+        ("truth", lambda f: f.drop(columns="in_zone"), "missing column(s) ['in_zone']"),
+        ("truth", lambda f: f.assign(east_m=f.east_m.where(f.index != 2, np.nan)),
+         "row 3, column 'east_m'"),
+        ("truth", lambda f: f.assign(in_zone=f.in_zone.astype(object).where(f.index != 1, "maybe")),
+         "row 2, column 'in_zone': 'maybe' is not true or false"),
+        ("tracks", lambda f: f.drop(columns="status"), "missing column(s) ['status']"),
+    ],
+)  # fmt: skip
+def test_score_bad_input_is_one_line_naming_the_place(tmp_path, which, edit, message):
+    frames = dict(zip(("truth", "tracks"), _hand_made_scene(tmp_path), strict=True))
+    edit(frames[which]).to_csv(tmp_path / f"{which}.csv", index=False)
+    proc = run("score", str(tmp_path / "tracks.csv"), "--truth", str(tmp_path / "truth.csv"),
+               "--site", "lx_default")  # fmt: skip
+    assert proc.returncode == 1
+    assert message in proc.stderr and len(proc.stderr.strip().splitlines()) == 1, proc.stderr

@@ -22,13 +22,18 @@ from ..analysis.gospa import gospa, identity_counts
 from .compliance import CONFIDENCE, POSITION_LIMIT_M, SPEED_LIMIT_KMH, bound_level, verdict_of
 from .scene import STEP_S, STOPPED_MPS, SceneTruth
 
+TRUTH_COLUMNS = ["object_id", "vehicle_class", "time_s", "east_m", "north_m", "speed_mps",
+                 "in_zone"]  # fmt: skip  # what scoring reads of the truth (`simulate --truth`)
+TRACK_COLUMNS = ["track_id", "time_s", "east_m", "north_m", "speed_mps", "east_speed_mps",
+                 "north_speed_mps", "from_crossing_m", "status"]  # fmt: skip  # and of tracks
+
 
 @dataclass(frozen=True)
 class SceneScore:
     """Scores of one scene (see module docstring); per-class rows in ``classes``."""
 
-    gospa_mean: float
-    gospa_localisation: float
+    gospa_mean: float  # [m]
+    gospa_localisation: float  # the mean parts of GOSPA^2 [m^2] (analysis.gospa)
     gospa_missed: float
     gospa_false: float
     id_switches: int
@@ -39,7 +44,7 @@ class SceneScore:
 
 
 def score_scene(
-    truth: SceneTruth,
+    truth: SceneTruth | pd.DataFrame,
     tracks: pd.DataFrame,
     zone_m: float,
     *,
@@ -49,11 +54,12 @@ def score_scene(
 ) -> SceneScore:
     """Score ``tracks`` (rows of :func:`~adaptrack.crossing.scene_tracker.track_scene`).
 
-    Per class, the RMS bounds at ``confidence`` take the vehicle as the sampling unit (its
-    epochs are one track's, correlated) and give the verdict as in
+    ``truth``: the scene's, or its table (:data:`TRUTH_COLUMNS`, as ``adaptrack simulate
+    --truth`` writes it). Per class, the RMS bounds at ``confidence`` take the vehicle as the
+    sampling unit (its epochs are one track's, correlated) and give the verdict as in
     :mod:`adaptrack.crossing.compliance` (0.7 m, 2 km/h).
     """
-    tab = truth.table
+    tab = truth.table if isinstance(truth, SceneTruth) else truth
     k_truth = np.rint(tab["time_s"].to_numpy() / STEP_S).astype(np.int64)
     stride = max(1, round(every_s / STEP_S))
     reported = tracks[tracks["status"] != "static"] if len(tracks) else tracks
@@ -233,4 +239,12 @@ def stop_line_outcomes(
     return runs.assign(lead_s=np.array(lead, dtype=float)), ev[~used]
 
 
-__all__ = ["SceneScore", "event_outcomes", "hazard_stops", "score_scene", "stop_line_outcomes"]
+__all__ = [
+    "TRACK_COLUMNS",
+    "TRUTH_COLUMNS",
+    "SceneScore",
+    "event_outcomes",
+    "hazard_stops",
+    "score_scene",
+    "stop_line_outcomes",
+]

@@ -1,0 +1,115 @@
+"""The ``adaptrack score`` command: a scene's tracks against its truth.
+
+GOSPA with its parts, identity switches and fragmentations, and each class's accuracy through
+association with its verdict against the crossing's limits
+(:func:`adaptrack.crossing.scene_metrics.score_scene`).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from ._cli_errors import check_outputs, fail
+from .crossing.scene_metrics import TRACK_COLUMNS, TRUTH_COLUMNS, SceneScore, score_scene
+from .crossing.site import load_site
+from .io.tables import numeric_column, read_table, require_columns, write_text_atomic
+
+
+def _table(path: Path, columns: list[str], numeric: list[str]) -> pd.DataFrame:
+    """Read ``path`` with ``columns``; the ``numeric`` ones finite (errors name row and column)."""
+    frame = read_table(path)
+    require_columns(frame, columns, path)
+    for col in numeric:
+        values = numeric_column(frame, col, path)
+        bad = np.flatnonzero(~np.isfinite(values))
+        if bad.size:
+            raise ValueError(
+                f"{path}: row {bad[0] + 1}, column {col!r}: {values[bad[0]]} is not finite"
+            )
+        frame[col] = values
+    return frame
+
+
+def _truth(path: Path) -> pd.DataFrame:
+    """Read the truth table, its ``in_zone`` column as booleans."""
+    frame = _table(path, TRUTH_COLUMNS, ["object_id", "time_s", "east_m", "north_m", "speed_mps"])
+    zone = frame["in_zone"].astype(str).str.lower()
+    bad = np.flatnonzero(~zone.isin(["true", "false", "1", "0"]).to_numpy())
+    if bad.size:
+        raise ValueError(
+            f"{path}: row {bad[0] + 1}, column 'in_zone': {frame['in_zone'].iloc[bad[0]]!r} is "
+            "not true or false"
+        )
+    return frame.assign(
+        in_zone=zone.isin(["true", "1"]).to_numpy(),
+        vehicle_class=frame["vehicle_class"].astype(str),
+    )
+
+
+def _summary(score: SceneScore) -> dict[str, object]:
+    """Return the scores as plain values (JSON)."""
+    classes = score.classes.replace({math.nan: None}).to_dict(orient="records")
+    return {
+        "gospa_mean_m": score.gospa_mean, "gospa_localisation_m2": score.gospa_localisation,
+        "gospa_missed_m2": score.gospa_missed, "gospa_false_m2": score.gospa_false,
+        "id_switches": score.id_switches, "fragmentations": score.fragmentations,
+        "epochs": score.n_epochs, "classes": classes,
+    }  # fmt: skip
+
+
+def score(
+    tracks: Path = typer.Argument(..., help="Tracks of `adaptrack track` (CSV or Parquet)."),
+    truth: Path = typer.Option(
+        ..., "--truth", help="Truth of `adaptrack simulate --scene --truth` (or its columns)."
+    ),
+    site: str = typer.Option(..., "--site", help="Built-in site name or a .toml (its zone)."),
+    cutoff: float = typer.Option(5.0, "--cutoff", help="GOSPA cut-off c [m] (p = 2)."),
+    json_path: Path | None = typer.Option(None, "--json", help="Also write the scores as JSON."),
+) -> None:
+    """Score a scene's tracks against its truth: GOSPA, identities, accuracy per class.
+
+    Every half second the road users in the controlled zone are paired with the moving or
+    stopped confirmed tracks in the zone by GOSPA's assignment; each class's position and
+    speed RMS over its users' epochs (stopped ones included), with 95 % upper bounds and the
+    verdict against 0.7 m and 2 km/h.
+    """
+    check_outputs(json_path)
+    if not (math.isfinite(cutoff) and cutoff > 0):
+        fail(f"--cutoff must be a positive number of metres; got {cutoff}")
+    try:
+        st = load_site(site)
+        truth_table = _truth(truth)
+        track_table = _table(tracks, TRACK_COLUMNS, TRACK_COLUMNS[:-1])
+    except ValueError as exc:
+        fail(str(exc))
+    result = score_scene(truth_table, track_table, st.zone_m, c=cutoff)
+    console = Console()
+    console.print(
+        f"GOSPA (c = {cutoff:g} m, p = 2) over {result.n_epochs} epochs: mean "
+        f"{result.gospa_mean:.2f} m; its square's parts, mean: localisation "
+        f"{result.gospa_localisation:.2f} m^2, missed {result.gospa_missed:.2f} m^2, false "
+        f"{result.gospa_false:.2f} m^2; identity switches {result.id_switches}, "
+        f"fragmentations {result.fragmentations}"
+    )
+    table = Table(title="accuracy per class through association (95 % upper bounds)")
+    for col in ("class", "users", "epochs", "coverage", "position RMS [m]", "speed RMS [km/h]",
+                "verdict"):  # fmt: skip
+        table.add_column(col, justify="left" if col in ("class", "verdict") else "right")
+    for row in result.classes.itertuples():
+        table.add_row(
+            str(row[1]), str(row.vehicles), str(row.epochs), f"{row.coverage:.0%}",
+            f"{row.position_rms_m:.2f} ({row.position_upper_m:.2f})",
+            f"{row.speed_rms_kmh:.2f} ({row.speed_upper_kmh:.2f})", str(row.verdict),
+        )  # fmt: skip
+    console.print(table)
+    if json_path is not None:
+        write_text_atomic(json_path, json.dumps(_summary(result), indent=2) + "\n")
+        console.print(f"wrote {json_path}")
