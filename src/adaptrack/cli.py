@@ -55,7 +55,7 @@ from .crossing.mixed_traffic import MixedTraffic, mixed_traffic_study
 from .crossing.radar_sim import simulate_site_case
 from .crossing.report import build_report, render_html, sample_tracks
 from .crossing.scene import scene_spec, simulate_scene
-from .crossing.scene_metrics import TRUTH_COLUMNS
+from .crossing.scene_metrics import HAZARD_COLUMNS, TRUTH_COLUMNS
 from .crossing.scene_tracker import load_scene_config, track_scene
 from .crossing.selection import (
     CRITERIA,
@@ -465,7 +465,7 @@ def simulate(
         rec = simulate_scene(st, spec, seed)
         write_table_atomic(rec.detections, out)
         if truth is not None:
-            write_table_atomic(rec.truth.table[TRUTH_COLUMNS], truth)
+            write_table_atomic(rec.truth.table[TRUTH_COLUMNS + HAZARD_COLUMNS], truth)
         if warnings is not None:
             write_table_atomic(pd.DataFrame(spec.warnings(), columns=WARNING_COLUMNS), warnings)
         Console().print(

@@ -18,7 +18,14 @@ from rich.console import Console
 from rich.table import Table
 
 from ._cli_errors import check_outputs, fail
-from .crossing.scene_metrics import TRACK_COLUMNS, TRUTH_COLUMNS, SceneScore, score_scene
+from .crossing.scene_metrics import (
+    HAZARD_COLUMNS,
+    TRACK_COLUMNS,
+    TRUTH_COLUMNS,
+    SceneScore,
+    event_outcomes,
+    score_scene,
+)
 from .crossing.site import load_site
 from .io.tables import numeric_column, read_table, require_columns, write_text_atomic
 
@@ -72,6 +79,12 @@ def score(
     ),
     site: str = typer.Option(..., "--site", help="Built-in site name or a .toml (its zone)."),
     cutoff: float = typer.Option(5.0, "--cutoff", help="GOSPA cut-off c [m] (p = 2)."),
+    events: Path | None = typer.Option(
+        None,
+        "--events",
+        help="Hazard events of `adaptrack track` (its .events.csv): matched with the road users "
+        "that truly stood between the barriers (the truth's to_crossing_m needed).",
+    ),
     json_path: Path | None = typer.Option(None, "--json", help="Also write the scores as JSON."),
 ) -> None:
     """Score a scene's tracks against its truth: GOSPA, identities, accuracy per class.
@@ -79,7 +92,10 @@ def score(
     Every half second the road users in the controlled zone are paired with the moving or
     stopped confirmed tracks in the zone by GOSPA's assignment; each class's position and
     speed RMS over its users' epochs (stopped ones included), with 95 % upper bounds and the
-    verdict against 0.7 m and 2 km/h.
+    verdict against 0.7 m and 2 km/h. With ``--events``, each road user that stood still
+    between the barriers for 0.5 s takes the first "stopped between the barriers" event
+    within 5 m of it, from 2 s before its stop to 30 s after (its delay; none: missed); the
+    events left over are false.
     """
     check_outputs(json_path)
     if not (math.isfinite(cutoff) and cutoff > 0):
@@ -88,9 +104,16 @@ def score(
         st = load_site(site)
         truth_table = _truth(truth)
         track_table = _table(tracks, TRACK_COLUMNS, TRACK_COLUMNS[:-1])
+        event_table = None
+        if events is not None:
+            require_columns(truth_table, HAZARD_COLUMNS, truth)
+            truth_table[HAZARD_COLUMNS[0]] = numeric_column(truth_table, HAZARD_COLUMNS[0], truth)
+            event_table = _table(events, ["time_s", "event", "east_m", "north_m"],
+                                 ["time_s", "east_m", "north_m"])  # fmt: skip
     except ValueError as exc:
         fail(str(exc))
     result = score_scene(truth_table, track_table, st.zone_m, c=cutoff)
+    summary = _summary(result)
     console = Console()
     console.print(
         f"GOSPA (c = {cutoff:g} m, p = 2) over {result.n_epochs} epochs: mean "
@@ -110,6 +133,21 @@ def score(
             f"{row.speed_rms_kmh:.2f} ({row.speed_upper_kmh:.2f})", str(row.verdict),
         )  # fmt: skip
     console.print(table)
+    if event_table is not None:
+        hazards, false_events = event_outcomes(truth_table, event_table, st.barrier_m)
+        delays = hazards["delay_s"].to_numpy()
+        found = delays[np.isfinite(delays)]
+        summary["stopped_between_barriers"] = {
+            "true_stops": len(hazards), "detected": int(found.size),
+            "delays_s": [float(d) for d in delays if np.isfinite(d)],
+            "missed": int(len(hazards) - found.size), "false_events": len(false_events),
+        }  # fmt: skip
+        late = f", delays {found.min():.2f}-{found.max():.2f} s" if found.size else ""
+        console.print(
+            f"stopped between the barriers: {len(hazards)} road users truly stood there, "
+            f"{found.size} detected{late}, {len(hazards) - found.size} missed; "
+            f"{len(false_events)} false events"
+        )
     if json_path is not None:
-        write_text_atomic(json_path, json.dumps(_summary(result), indent=2) + "\n")
+        write_text_atomic(json_path, json.dumps(summary, indent=2) + "\n")
         console.print(f"wrote {json_path}")

@@ -276,3 +276,41 @@ def test_score_bad_input_is_one_line_naming_the_place(tmp_path, which, edit, mes
                "--site", "lx_default")  # fmt: skip
     assert proc.returncode == 1
     assert message in proc.stderr and len(proc.stderr.strip().splitlines()) == 1, proc.stderr
+
+
+def test_score_times_the_stopped_between_the_barriers_event_of_a_stall(tmp_path):
+    """A car stalled on the crossing for 60 s of a 200 s scene (the Python API writes the
+    files as `adaptrack simulate --scene --truth` does): `track` raises the event, and
+    `score --events` finds the true stop from the truth file alone (as the truth in memory
+    does), detected within 1 s, no false event."""
+    from adaptrack.crossing.scene import Stall, scene_spec, simulate_scene
+    from adaptrack.crossing.scene_metrics import HAZARD_COLUMNS, TRUTH_COLUMNS, hazard_stops
+    from adaptrack.crossing.site import load_site
+
+    site = load_site("lx_default")
+    spec = scene_spec(site, duration_s=200.0,
+                      stalls=(Stall(sorted(site.roads)[-1], 60.0, 0.0, 60.0),))  # fmt: skip
+    rec = simulate_scene(site, spec, 1222)
+    rec.detections.to_csv(tmp_path / "det.csv", index=False)
+    rec.truth.table[TRUTH_COLUMNS + HAZARD_COLUMNS].to_csv(tmp_path / "truth.csv", index=False)
+    proc = run("track", str(tmp_path / "det.csv"), "--site", "lx_default", "--out",
+               str(tmp_path / "tracks.csv"))  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    proc = run("score", str(tmp_path / "tracks.csv"), "--truth", str(tmp_path / "truth.csv"),
+               "--site", "lx_default", "--events", str(tmp_path / "tracks.events.csv"),
+               "--json", str(tmp_path / "score.json"))  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    stops = json.loads((tmp_path / "score.json").read_text())["stopped_between_barriers"]
+    assert stops["true_stops"] == len(hazard_stops(rec.truth, site.barrier_m)) >= 1
+    assert stops["detected"] == stops["true_stops"] and stops["false_events"] == 0
+    assert max(stops["delays_s"]) < 1.0
+    assert "truly stood there" in proc.stdout
+
+
+def test_score_events_need_the_truth_s_distance_to_the_crossing(tmp_path):
+    _hand_made_scene(tmp_path)  # its truth has no to_crossing_m
+    (tmp_path / "events.csv").write_text("time_s,event,track_id,east_m,north_m,lead_s\n")
+    proc = run("score", str(tmp_path / "tracks.csv"), "--truth", str(tmp_path / "truth.csv"),
+               "--site", "lx_default", "--events", str(tmp_path / "events.csv"))  # fmt: skip
+    assert proc.returncode == 1
+    assert "missing column(s) ['to_crossing_m']" in proc.stderr, proc.stderr

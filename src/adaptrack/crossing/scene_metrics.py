@@ -24,6 +24,7 @@ from .scene import STEP_S, STOPPED_MPS, SceneTruth
 
 TRUTH_COLUMNS = ["object_id", "vehicle_class", "time_s", "east_m", "north_m", "speed_mps",
                  "in_zone"]  # fmt: skip  # what scoring reads of the truth (`simulate --truth`)
+HAZARD_COLUMNS = ["to_crossing_m"]  # and what the stopped-between-the-barriers events need
 TRACK_COLUMNS = ["track_id", "time_s", "east_m", "north_m", "speed_mps", "east_speed_mps",
                  "north_speed_mps", "from_crossing_m", "status"]  # fmt: skip  # and of tracks
 
@@ -59,7 +60,7 @@ def score_scene(
     sampling unit (its epochs are one track's, correlated) and give the verdict as in
     :mod:`adaptrack.crossing.compliance` (0.7 m, 2 km/h).
     """
-    tab = truth.table if isinstance(truth, SceneTruth) else truth
+    tab = _table_of(truth)
     k_truth = np.rint(tab["time_s"].to_numpy() / STEP_S).astype(np.int64)
     stride = max(1, round(every_s / STEP_S))
     reported = tracks[tracks["status"] != "static"] if len(tracks) else tracks
@@ -149,14 +150,22 @@ def score_scene(
     )
 
 
-def hazard_stops(truth: SceneTruth, barrier_m: float, *, confirm_s: float = 0.5) -> pd.DataFrame:
+def _table_of(truth: SceneTruth | pd.DataFrame) -> pd.DataFrame:
+    """Return the truth's table (a table is its own)."""
+    return truth.table if isinstance(truth, SceneTruth) else truth
+
+
+def hazard_stops(
+    truth: SceneTruth | pd.DataFrame, barrier_m: float, *, confirm_s: float = 0.5
+) -> pd.DataFrame:
     """Road users standing still between the barriers: the true "stopped" hazards.
 
     A user slower than ``STOPPED_MPS`` within ``barrier_m`` of the crossing for at least
-    ``confirm_s`` (its first such standstill). Returns object_id, stop_time_s (the standstill's
-    first epoch), east_m, north_m.
+    ``confirm_s`` (its first such standstill); ``truth`` or its table (with
+    :data:`HAZARD_COLUMNS`). Returns object_id, stop_time_s (the standstill's first epoch),
+    east_m, north_m.
     """
-    tab = truth.table
+    tab = _table_of(truth)
     still = (tab["speed_mps"].to_numpy() < STOPPED_MPS) & (
         np.abs(tab["to_crossing_m"].to_numpy()) <= barrier_m
     )
@@ -180,7 +189,7 @@ def _events_of(events: pd.DataFrame, kind: str) -> tuple[pd.DataFrame, FloatArra
 
 
 def event_outcomes(
-    truth: SceneTruth,
+    truth: SceneTruth | pd.DataFrame,
     events: pd.DataFrame,
     barrier_m: float,
     *,
@@ -240,6 +249,7 @@ def stop_line_outcomes(
 
 
 __all__ = [
+    "HAZARD_COLUMNS",
     "TRACK_COLUMNS",
     "TRUTH_COLUMNS",
     "SceneScore",
