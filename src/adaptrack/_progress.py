@@ -77,8 +77,8 @@ class Bar:
             text += f", {_clock(elapsed)} elapsed"
             if 0 < frac < 1:
                 text += f", ETA {_clock(elapsed * (1 - frac) / frac)}"
-        else:
-            text += f", {_clock(elapsed)} elapsed"
+        else:  # the total not known: the count so far
+            text += f" {self.done:g} done, {_clock(elapsed)} elapsed"
         if self.note:
             text += f": {self.note}"
         print(text, file=sys.stderr, flush=True)

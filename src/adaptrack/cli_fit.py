@@ -10,6 +10,7 @@ from rich.console import Console
 from rich.table import Table
 
 from ._cli_errors import check_outputs, err_console, fail
+from ._progress import progress
 from ._toml import load_toml
 from .analysis.consistency import innovation_consistency
 from .filters.imm import IMMResult
@@ -111,7 +112,8 @@ def fit(
         raise typer.BadParameter(f"--model must be one of {', '.join(MODELS)}")
     log = _read(log_file, measurement)
     try:
-        result = fit_motion(log, model, clock_offset)  # type: ignore[arg-type]
+        with progress(Console(), f"{model.upper()} fit (likelihood evaluations)") as bar:
+            result = fit_motion(log, model, clock_offset, bar.advance)  # type: ignore[arg-type]
     except ValueError as exc:
         fail(str(exc))
     write_text_atomic(out, fit_toml(result, measurement, str(log_file)))

@@ -24,6 +24,21 @@ def test_lines_report_counts_elapsed_and_eta(monkeypatch, capsys):
     ]
 
 
+def test_lines_without_a_total_report_the_count_so_far(monkeypatch, capsys):
+    monkeypatch.setenv("ADAPTRACK_PROGRESS_EVERY_S", "0")
+    clock = iter([0.0, 5.0, 12.0, 15.0])  # start, each change, the closing line
+    monkeypatch.setattr("adaptrack._progress.time.monotonic", lambda: next(clock))
+    console = Console(file=io.StringIO(), force_terminal=False)
+    with progress(console, "CV fit (likelihood evaluations)") as bar:
+        bar.advance()
+        bar.advance()
+    assert capsys.readouterr().err.splitlines() == [
+        f"{LINE_PREFIX}CV fit (likelihood evaluations) 1 done, 5s elapsed",
+        f"{LINE_PREFIX}CV fit (likelihood evaluations) 2 done, 12s elapsed",
+        f"{LINE_PREFIX}CV fit (likelihood evaluations) 2 done, 15s elapsed",
+    ]
+
+
 def test_quick_runs_print_nothing(capsys):
     console = Console(file=io.StringIO(), force_terminal=False)
     with progress(console, "tuning", total=4) as bar:  # default: a line every 10 s at most

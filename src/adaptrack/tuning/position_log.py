@@ -10,6 +10,7 @@ variance per measured component.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
@@ -325,7 +326,10 @@ def _log_likelihood(log: PositionLog | RadarLog, model: str, values: dict[str, f
 
 
 def fit_motion(
-    log: PositionLog | RadarLog, model: Model = "cv", clock_offset: bool = False
+    log: PositionLog | RadarLog,
+    model: Model = "cv",
+    clock_offset: bool = False,
+    on_evaluation: Callable[[], None] | None = None,
 ) -> MotionFit:
     """Fit the motion PSD and the noise variances of ``log`` by maximum likelihood.
 
@@ -336,7 +340,8 @@ def fit_motion(
     fit how late the fixes are stamped against the log's velocity reports (horizontal
     components; epochs with a report), which the log must have. Every model but CV starts
     from the CV fit's values (module constants ``IMM_QUIET``, ``IMM_START_RATE``,
-    ``START_TURN_PSD`` for what CV does not have).
+    ``START_TURN_PSD`` for what CV does not have). ``on_evaluation`` is called after each
+    evaluation of a likelihood (progress).
     """
     clock = None
     if clock_offset:
@@ -360,7 +365,17 @@ def fit_motion(
         initial |= radar_parameters(log)
     else:
         initial |= {"r_horizontal": 1.0} | ({"r_vertical": 1.0} if vertical else {})
-    cv = fit_by_likelihood(lambda values: _log_likelihood(log, "cv", values), initial)
+
+    def loglik_of(kind: str) -> Callable[[dict[str, float]], float]:
+        def loglik(values: dict[str, float]) -> float:
+            value = _log_likelihood(log, kind, values)
+            if on_evaluation is not None:
+                on_evaluation()
+            return value
+
+        return loglik
+
+    cv = fit_by_likelihood(loglik_of("cv"), initial)
     if model == "cv":
         return MotionFit(model, log.n_axes, cv, clock)
     # The others start from the CV fit: far from it (noise variances off by 100x) their
@@ -376,11 +391,7 @@ def fit_motion(
     if model.endswith("ct"):
         initial["q_turn"] = START_TURN_PSD
     initial |= noise
-
-    def loglik(values: dict[str, float]) -> float:
-        return _log_likelihood(log, model, values)
-
-    return MotionFit(model, log.n_axes, fit_by_likelihood(loglik, initial), clock)
+    return MotionFit(model, log.n_axes, fit_by_likelihood(loglik_of(model), initial), clock)
 
 
 IMM_QUIET = 0.1  # an IMM's CV starts at this fraction of the CV fit's PSDs
