@@ -26,13 +26,15 @@ def use_compiled(
     return backend == "numba" or (backend == "auto" and track_steps >= threshold)
 
 
-def kernels_cached(kernel: str = "_radar_kernel.detections_kernel") -> bool:
-    """Whether numba's on-disk cache holds a crossing ``kernel`` (else a first run compiles).
+def kernels_cached(
+    kernel: str = "_radar_kernel.detections_kernel", package: str = "crossing"
+) -> bool:
+    """Whether numba's on-disk cache holds ``kernel`` (else a first run compiles).
 
-    ``kernel`` is ``module.function`` in :mod:`adaptrack.crossing`; its cache index is looked
-    for next to the package (numba's default) and under ``NUMBA_CACHE_DIR``.
+    ``kernel`` is ``module.function`` in the subpackage ``package`` of :mod:`adaptrack`; its
+    cache index is looked for where numba keeps it: under ``NUMBA_CACHE_DIR`` if set, else
+    next to the package.
     """
-    roots = [Path(__file__).parent / "crossing"]
-    if os.environ.get("NUMBA_CACHE_DIR"):
-        roots.append(Path(os.environ["NUMBA_CACHE_DIR"]))
-    return any(next(root.rglob(f"{kernel}-*.nbi"), None) for root in roots)
+    where = os.environ.get("NUMBA_CACHE_DIR")
+    root = Path(where) if where else Path(__file__).parent / package
+    return next(root.rglob(f"{kernel}-*.nbi"), None) is not None

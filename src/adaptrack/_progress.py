@@ -24,7 +24,21 @@ from rich.progress import (
     TimeRemainingColumn,
 )
 
+from ._backend import kernels_cached
+
 LINE_PREFIX = "progress: "
+FIRST_RUN_NOTE = (
+    "note: first run on this machine: numba compiles the kernels now (once; about "
+    "{duration} on 2 cores); later runs reuse them and start in seconds"
+)
+
+
+def announce_compilation(
+    duration: str, kernel: str = "_radar_kernel.detections_kernel", package: str = "crossing"
+) -> None:
+    """Say so on stderr when this run will compile ``kernel`` (not in numba's cache)."""
+    if not kernels_cached(kernel, package):
+        print(FIRST_RUN_NOTE.format(duration=duration), file=sys.stderr, flush=True)
 
 
 def _clock(seconds: float) -> str:

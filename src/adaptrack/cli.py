@@ -18,11 +18,10 @@ from rich.console import Console
 from rich.table import Table
 
 from . import __version__, cli_fit, cli_score
-from ._backend import kernels_cached
 from ._cli_errors import check_outputs as _outputs
 from ._cli_errors import err_console
 from ._cli_errors import fail as _fail
-from ._progress import progress
+from ._progress import announce_compilation, progress
 from .analysis.evaluation import Evaluation, evaluate_scenario
 from .analysis.flights import (
     FlightRow,
@@ -168,7 +167,7 @@ def demo(
     st = _load_site(site)
     criterion = _criterion(criterion)
     keys = _families(families)
-    _announce_compilation(DEMO_COMPILE_TIME)
+    announce_compilation(DEMO_COMPILE_TIME)
     console = Console()
     test_seed = int(np.random.SeedSequence([seed, 13]).generate_state(1)[0])
     n_pairs = len(st.pairs())
@@ -306,20 +305,8 @@ def _mixed_traffic_table(m: MixedTraffic) -> Table:
     return table
 
 
-FIRST_RUN_NOTE = (
-    "note: first run on this machine: numba compiles the kernels now (once; about "
-    "{duration} on 2 cores); later runs reuse them and start in seconds"
-)
-
-
 DEMO_COMPILE_TIME = "3 min"  # measured: a fresh clone's demo (4.8 min) less a cached run (1.7)
 TRACK_COMPILE_TIME = "1.5 min"  # the scene tracker's compiled loop and kernels (93 s, then 0.3 s)
-
-
-def _announce_compilation(duration: str, kernel: str = "_radar_kernel.detections_kernel") -> None:
-    """Say so on stderr when this run will compile the kernels (an empty numba cache)."""
-    if not kernels_cached(kernel):
-        err_console.print(FIRST_RUN_NOTE.format(duration=duration), markup=False, highlight=False)
 
 
 def _load_site(site: str) -> Site:
@@ -513,7 +500,7 @@ def tune(
     st = _load_site(site)
     criterion = _criterion(criterion)
     keys = _families(families)
-    _announce_compilation(DEMO_COMPILE_TIME)
+    announce_compilation(DEMO_COMPILE_TIME)
     console = Console()
     with (
         _pool(workers, scheduler) as pool,
@@ -642,7 +629,7 @@ def _track_scene_file(
         settings = load_scene_config(config) if config is not None else None
     except (ValueError, OSError) as exc:
         _fail(str(exc))
-    _announce_compilation(TRACK_COMPILE_TIME, "_scene_loop.run_scans")
+    announce_compilation(TRACK_COMPILE_TIME, "_scene_loop.run_scans")
     with progress(Console(), "tracking (scans)") as bar:
         try:
             tracks, events_frame, log = track_scene(

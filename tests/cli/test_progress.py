@@ -60,7 +60,7 @@ def test_track_in_a_pipe_shows_progress_lines(cli, tmp_path, monkeypatch):
 
 
 def test_a_first_run_says_that_it_compiles(monkeypatch, capsys, tmp_path):
-    import adaptrack.cli as cli_module
+    import adaptrack._progress as progress_module
     from adaptrack._backend import kernels_cached
 
     assert not kernels_cached("_no_such_module.kernel")
@@ -68,9 +68,13 @@ def test_a_first_run_says_that_it_compiles(monkeypatch, capsys, tmp_path):
     (tmp_path / "x").mkdir()
     (tmp_path / "x" / "_no_such_module.kernel-12.py311.nbi").write_text("")
     assert kernels_cached("_no_such_module.kernel")  # numba's cache folder counts too
-    monkeypatch.setattr(cli_module, "kernels_cached", lambda kernel: False)
-    cli_module._announce_compilation("5 min")
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(empty))  # numba looks only there now
+    assert not kernels_cached("_imm_kernel.imm_kernel", "filters")
+    monkeypatch.setattr(progress_module, "kernels_cached", lambda kernel, package: False)
+    progress_module.announce_compilation("5 min")
     assert "first run on this machine: numba compiles the kernels now" in capsys.readouterr().err
-    monkeypatch.setattr(cli_module, "kernels_cached", lambda kernel: True)
-    cli_module._announce_compilation("5 min")
+    monkeypatch.setattr(progress_module, "kernels_cached", lambda kernel, package: True)
+    progress_module.announce_compilation("5 min")
     assert capsys.readouterr().err == ""
