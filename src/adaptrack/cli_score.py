@@ -68,7 +68,9 @@ def _summary(score: SceneScore) -> dict[str, object]:
         "gospa_mean_m": score.gospa_mean, "gospa_localisation_m2": score.gospa_localisation,
         "gospa_missed_m2": score.gospa_missed, "gospa_false_m2": score.gospa_false,
         "id_switches": score.id_switches, "fragmentations": score.fragmentations,
-        "epochs": score.n_epochs, "classes": classes,
+        "epochs": score.n_epochs, "hours": score.hours, "false_tracks": score.false_tracks,
+        "confirm_delays_s": [float(d) for d in score.confirm_delays_s],
+        "never_confirmed": score.never_confirmed, "classes": classes,
     }  # fmt: skip
 
 
@@ -92,7 +94,9 @@ def score(
     Every half second the road users in the controlled zone are paired with the moving or
     stopped confirmed tracks in the zone by GOSPA's assignment; each class's position and
     speed RMS over its users' epochs (stopped ones included), with 95 % upper bounds and the
-    verdict against 0.7 m and 2 km/h. With ``--events``, each road user that stood still
+    verdict against 0.7 m and 2 km/h. A reported track in the zone never paired is false; a
+    road user's time to confirm runs from its first epoch in the zone to its first paired
+    one. With ``--events``, each road user that stood still
     between the barriers for 0.5 s takes the first "stopped between the barriers" event
     within 5 m of it, from 2 s before its stop to 30 s after (its delay; none: missed); the
     events left over are false.
@@ -121,6 +125,18 @@ def score(
         f"{result.gospa_localisation:.2f} m^2, missed {result.gospa_missed:.2f} m^2, false "
         f"{result.gospa_false:.2f} m^2; identity switches {result.id_switches}, "
         f"fragmentations {result.fragmentations}"
+    )
+    rate = f" ({result.false_tracks / result.hours:.1f} per hour)" if result.hours > 0 else ""
+    delays = result.confirm_delays_s
+    confirm = (
+        f"median {np.median(delays):.2f} s, 90 % {np.quantile(delays, 0.9):.2f} s, max "
+        f"{delays.max():.2f} s over {delays.size} road users"
+        if delays.size
+        else "no road user"
+    )
+    console.print(
+        f"false tracks: {result.false_tracks}{rate}; time to confirm: {confirm}, "
+        f"{result.never_confirmed} never confirmed"
     )
     table = Table(title="accuracy per class through association (95 % upper bounds)")
     for col in ("class", "users", "epochs", "coverage", "position RMS [m]", "speed RMS [km/h]",

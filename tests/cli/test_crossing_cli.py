@@ -256,6 +256,27 @@ def test_score_a_hand_made_scene_with_a_known_answer(tmp_path):
     assert car["class"] == "car" and car["vehicles"] == 1 and car["epochs"] == 3
     assert car["position_rms_m"] == pytest.approx(1.0) and car["coverage"] == pytest.approx(0.5)
     assert "identity switches 0" in proc.stdout
+    assert score["false_tracks"] == 0  # the static track is not reported
+    assert score["confirm_delays_s"] == [0.0] and score["never_confirmed"] == 1
+
+
+def test_false_tracks_and_the_time_to_confirm():
+    """A car in the zone from 0 s, tracked from 1 s; a confirmed track 50 m from it at 1 and
+    1.5 s: one false track, a time to confirm of 1 s."""
+    from adaptrack.crossing.scene_metrics import TRACK_COLUMNS, TRUTH_COLUMNS, score_scene
+
+    times = [0.0, 0.5, 1.0, 1.5]
+    truth = pd.DataFrame([(1, "car", t, 0.0, 10.0 + 10.0 * t, 10.0, True) for t in times],
+                         columns=TRUTH_COLUMNS)  # fmt: skip
+    tracks = pd.DataFrame(
+        [(tid, t, x, 10.0 + 10.0 * t, 10.0, 0.0, 10.0, 20.0, "confirmed")
+         for t in times[2:] for tid, x in ((7, 0.5), (11, 50.0))],
+        columns=TRACK_COLUMNS,
+    )  # fmt: skip
+    score = score_scene(truth, tracks, 200.0)
+    assert score.false_tracks == 1 and score.never_confirmed == 0
+    np.testing.assert_allclose(score.confirm_delays_s, [1.0])
+    assert score.hours == pytest.approx(1.5 / 3600)
 
 
 @pytest.mark.parametrize(

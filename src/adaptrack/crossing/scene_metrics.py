@@ -1,17 +1,20 @@
 """Scoring a scene's tracks against its truth.
 
-GOSPA over time, identities, per-vehicle accuracy through association, hazard-event timing.
+GOSPA over time, identities, per-vehicle accuracy through association, false tracks, time to
+confirm, hazard-event timing.
 
 At every scoring epoch (the traffic steps, every ``every_s``) the road users in the controlled
 zone are compared with the moving or stopped confirmed tracks in the zone (static objects and
 tentative tracks are not reported road users), each track carried from its last scan to the
 epoch at its velocity. GOSPA's optimal assignment (cut-off ``c``) pairs users with tracks; a
 pair's errors count towards the user's class (every epoch in the zone, stopped ones included).
+A reported track in the zone that is never paired is a false track; a user's time to confirm
+runs from its first scoring epoch in the zone to its first paired one.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
@@ -42,6 +45,10 @@ class SceneScore:
     classes: pd.DataFrame  # class, position_rms_m, position_upper_m, speed_rms_kmh, ..., verdict
     gospa_series: pd.DataFrame  # time_s, gospa, n_truth, n_tracks
     n_epochs: int
+    false_tracks: int = 0  # reported tracks in the zone never paired with a road user
+    hours: float = 0.0  # the scoring epochs' span [h]
+    confirm_delays_s: FloatArray = field(default_factory=lambda: np.zeros(0))  # per user
+    never_confirmed: int = 0  # road users in the zone never paired with a track
 
 
 def score_scene(
@@ -73,6 +80,9 @@ def score_scene(
         )
     }
     series, pairs_log, assignments = [], [], []
+    first_in_zone: dict[int, float] = {}  # each user's first scoring epoch in the zone [s]
+    first_paired: dict[int, float] = {}  # ... and its first with a track
+    reported_ids: set[int] = set()
     for k in sorted(truth_by_k):
         tau = k * STEP_S
         g = truth_by_k[k]
@@ -96,6 +106,11 @@ def score_scene(
         ids = g["object_id"].to_numpy()
         tids = est["track_id"].to_numpy() if len(est) else np.zeros(0, int)
         assignments.append({int(ids[i]): int(tids[j_]) for i, j_ in res.pairs})
+        reported_ids.update(int(t) for t in tids)
+        for oid in ids:
+            first_in_zone.setdefault(int(oid), tau)
+        for i, _ in res.pairs:
+            first_paired.setdefault(int(ids[i]), tau)
         for i, j_ in res.pairs:
             pairs_log.append(
                 (
@@ -137,6 +152,8 @@ def score_scene(
             }
         )
     ident = identity_counts(assignments)
+    paired_ids = {t for a in assignments for t in a.values()}
+    delays = np.array([first_paired[o] - first_in_zone[o] for o in first_paired])
     return SceneScore(
         float(s["gospa"].mean()) if len(s) else 0.0,
         float(s["localisation"].mean()) if len(s) else 0.0,
@@ -147,6 +164,10 @@ def score_scene(
         pd.DataFrame(rows),
         s,
         len(s),
+        len(reported_ids - paired_ids),
+        float(s["time_s"].iloc[-1] - s["time_s"].iloc[0]) / 3600.0 if len(s) else 0.0,
+        delays,
+        len(first_in_zone) - len(first_paired),
     )
 
 
