@@ -315,14 +315,11 @@ def _log_likelihood(log: PositionLog | RadarLog, model: str, values: dict[str, f
     steps in NumPy. A fit evaluates it hundreds of times.
     """
     models, sensor, priors = _inputs(log, model, values)
-    if len(models) == 1 and not (
-        isinstance(log, RadarLog) or isinstance(models[0], NonlinearMotionModel)
-    ):  # the linear Kalman filter, compiled already
-        return float(kalman_filter(
-            log.times, log.enu, models[0], list(_AXES[: log.n_axes]), sensor.noise_cov,
-            priors[0], backend="numba",
-        ).info.log_likelihood.sum())  # fmt: skip
-    return float(_imm(log, models, sensor, priors, values).log_likelihood.sum())
+    if len(models) > 1 or isinstance(log, RadarLog) or isinstance(models[0], NonlinearMotionModel):
+        return float(_imm(log, models, sensor, priors, values).log_likelihood.sum())
+    run = _run(log, model, values)  # the linear Kalman filter, compiled already
+    assert isinstance(run, FilterResult)
+    return float(run.info.log_likelihood.sum())
 
 
 def fit_motion(
