@@ -97,15 +97,17 @@ def main() -> None:
             f"seed {seed}: {args.duration / m.tracker_s:.0f}x real time, GOSPA "
             f"{m.gospa_mean:.2f} (parts: localisation {m.gospa_localisation:.2f}, "
             f"missed {m.gospa_missed:.2f}, false {m.gospa_false:.2f}), id switches "
-            f"{m.id_switches}, hazard delays {delays} s, false events "
-            f"{len(m.false_stop_times_s)}; stop-line runners {len(m.stop_line_runs)}, event "
+            f"{m.id_switches}, false tracks {m.false_tracks}, hazard delays {delays} s, false "
+            f"events {len(m.false_stop_times_s)}; stop-line runners {len(m.stop_line_runs)}, event "
             f"leads {leads} s (NaN: missed), false 'will not stop' events "
             f"{len(m.false_line_times_s)}"
         )
         print(pd.DataFrame(m.classes).round(2).to_string(index=False))
     print(
         f"mean GOSPA over the seeds: {np.mean([m.gospa_mean for m in studies]):.3f} m, id "
-        f"switches {sum(m.id_switches for m in studies)}; per class over every epoch:"
+        f"switches {sum(m.id_switches for m in studies)}, false tracks "
+        f"{sum(m.false_tracks for m in studies) / hours:.1f} per hour; per class over every "
+        "epoch:"
     )
     print(pooled_classes(studies).round(3).to_string())
     print(f"false 'stopped between the barriers' events: {n_false} in {hours:.2f} h")

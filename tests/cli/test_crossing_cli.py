@@ -262,7 +262,8 @@ def test_score_a_hand_made_scene_with_a_known_answer(tmp_path):
 
 def test_false_tracks_and_the_time_to_confirm():
     """A car in the zone from 0 s, tracked from 1 s; a confirmed track 50 m from it at 1 and
-    1.5 s: one false track, a time to confirm of 1 s."""
+    1.5 s: one false track, a time to confirm of 1 s. A tentative track (a new one on an
+    established body) is not a reported road user."""
     from adaptrack.crossing.scene_metrics import TRACK_COLUMNS, TRUTH_COLUMNS, score_scene
 
     times = [0.0, 0.5, 1.0, 1.5]
@@ -275,6 +276,9 @@ def test_false_tracks_and_the_time_to_confirm():
     )  # fmt: skip
     score = score_scene(truth, tracks, 200.0)
     assert score.false_tracks == 1 and score.never_confirmed == 0
+    tentative = tracks.assign(track_id=13, east_m=-50.0, status="tentative")
+    both = score_scene(truth, pd.concat([tracks, tentative]), 200.0)
+    assert both.false_tracks == 1 and both.gospa_false == score.gospa_false
     np.testing.assert_allclose(score.confirm_delays_s, [1.0])
     assert score.hours == pytest.approx(1.5 / 3600)
 

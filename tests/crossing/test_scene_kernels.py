@@ -9,6 +9,7 @@ from adaptrack.crossing._scene_kernels import (
     BODY_HALF_SPREADS,
     VISIBLE_SAMPLES,
     _visible_part,
+    confirmed_rows,
     merged_rows,
     mode_changes,
     nearer_occluders,
@@ -262,6 +263,42 @@ def test_the_younger_of_two_tracks_on_one_body_is_dropped_unless_it_is_the_confi
     assert drop(np.array([False, False, True, True])) == [True, True, False, False]
     x[1, 1] = 12.0  # a different speed: another road user alongside
     assert drop(np.array([True, True, True, True])) == [False, False, True, False]
+
+
+def test_a_new_track_on_an_established_body_is_reported_tentative_until_it_has_moved():
+    """A truck's track (moved, spread 3 m: its body reaches 6 m either side) and, confirmed
+    since, a track on its far end 5.5 m behind (not moved yet: a body reflection or a ghost
+    that ``merged_rows`` drops once it has moved): tentative. The same track beside the truck
+    (1.5 m across, beyond ``merge_lateral_m`` 1.2), off its body (13 m behind), on another
+    corridor, or once it has moved, is a road user. A stopped body counts as established, an
+    unconfirmed one does not; a stopped track is reported as stopped or static."""
+    codes = np.array([10, 11, 12, 13, 14])  # confirmed, coasting, stopped, static, tentative
+    x = np.zeros((3, 4))
+    x[:, 0] = [50.0, 44.5, 200.0]
+    x[:, 1] = [12.0, 12.4, 12.0]
+    spread = np.array([3.0, 1.5, 1.0])
+    t = np.full(3, 10.0)
+    seen = t.copy()
+
+    def status(confirmed=(True, True, True), moved=(True, False, True), stopped=(False,) * 3,
+               corridor=(0, 0, 0), across=0.3, behind=5.5):  # fmt: skip
+        x[1, 3], x[1, 0] = across, 50.0 - behind
+        rows, st = confirmed_rows(
+            np.array(confirmed), t, seen, np.array(stopped), np.array(moved), x, spread,
+            np.array(corridor), 1.2, 0.2, codes,
+        )  # fmt: skip
+        return dict(zip(rows.tolist(), st.tolist(), strict=True))
+
+    assert status() == {0: 10, 1: 14, 2: 10}
+    assert status(across=1.5)[1] == 10
+    assert status(behind=13.0)[1] == 10
+    assert status(corridor=(0, 1, 0))[1] == 10
+    assert status(moved=(True, True, True))[1] == 10
+    assert status(moved=(False, False, True), stopped=(True, False, False)) == {
+        0: 13, 1: 14, 2: 10,
+    }  # fmt: skip  # on a static object (clutter): tentative too
+    assert status(confirmed=(False, True, True)) == {1: 10, 2: 10}
+    assert status(stopped=(False, True, False))[1] == 13
 
 
 def test_a_road_user_followed_for_long_is_not_merged_into_one_beside_it():

@@ -239,11 +239,19 @@ def detections_in_view(z, radar, fields):  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True)
-def confirmed_rows(confirmed, time_s, last_hit_s, stopped, moved, coasting_s, codes):  # type: ignore[no-untyped-def]
+def confirmed_rows(  # type: ignore[no-untyped-def]
+    confirmed, time_s, last_hit_s, stopped, moved, x, spread, corridor, lateral_m, coasting_s,
+    codes,
+):  # fmt: skip
     """Rows of the confirmed tracks and their status codes.
 
     ``codes``: the codes of confirmed, coasting (no detection for more than ``coasting_s``
-    [s]), stopped, and static (stopped, never moved).
+    [s]), stopped, static (stopped, never moved) and tentative. A confirmed track that has not
+    moved yet and lies on the body of an established track (one that has moved or stopped) of
+    its corridor (within ``lateral_m`` across, ``BODY_HALF_SPREADS`` spreads either side
+    along) is reported tentative: most such tracks are a body's far reflections or a ghost,
+    which :func:`merged_rows` drops once they have moved; one that outlives that test is
+    another road user.
     """
     rows = np.flatnonzero(confirmed)
     status = np.empty(rows.size, np.int64)
@@ -251,8 +259,18 @@ def confirmed_rows(confirmed, time_s, last_hit_s, stopped, moved, coasting_s, co
         i = rows[k]
         if stopped[i]:
             status[k] = codes[2] if moved[i] else codes[3]
-        else:
-            status[k] = codes[1] if time_s[i] - last_hit_s[i] > coasting_s else codes[0]
+            continue
+        status[k] = codes[1] if time_s[i] - last_hit_s[i] > coasting_s else codes[0]
+        if moved[i]:
+            continue
+        for j in rows:
+            if (
+                j != i and (moved[j] or stopped[j]) and corridor[j] == corridor[i]
+                and abs(x[i, 3] - x[j, 3]) < lateral_m
+                and abs(x[i, 0] - x[j, 0]) < BODY_HALF_SPREADS * (spread[i] + spread[j])
+            ):  # fmt: skip
+                status[k] = codes[4]
+                break
     return rows, status
 
 

@@ -126,7 +126,7 @@ class Settings(NamedTuple):
     merge_settled_s: float
     merge_settled_lateral_m: float
     coasting_s: float
-    status_codes: np.ndarray  # confirmed, coasting, stopped, static
+    status_codes: np.ndarray  # confirmed, coasting, stopped, static, tentative
 
 
 class SiteTables(NamedTuple):
@@ -436,8 +436,9 @@ def write_rows(t, n, time_s, s, site, rows_out, n_out):  # type: ignore[no-untyp
     """Append the confirmed tracks at ``time_s``; return the buffer (grown if full), count."""
     v = _live(t, n)
     rows, status = confirmed_rows(
-        v.confirmed, v.time_s, v.last_hit_s, v.stopped, v.moved, s.coasting_s, s.status_codes
-    )
+        v.confirmed, v.time_s, v.last_hit_s, v.stopped, v.moved, v.x, v.spread, v.corridor,
+        s.merge_lateral_m, s.coasting_s, s.status_codes,
+    )  # fmt: skip
     m = rows.size
     if n_out + m > rows_out.track_id.shape[0]:
         size = 2 * (n_out + m) + 1024

@@ -28,7 +28,7 @@ from .compliance import CONFIDENCE, POSITION_LIMIT_M, SPEED_LIMIT_KMH
 from .object_list import object_list_ids
 from .radar_sim import radial_geometry
 from .scene import Stall, scene_spec, simulate_scene
-from .scene_metrics import event_outcomes, score_scene, stop_line_outcomes
+from .scene_metrics import UNREPORTED, event_outcomes, score_scene, stop_line_outcomes
 from .scene_tracker import SceneTrackerConfig, track_scene
 from .site import Site
 
@@ -54,6 +54,7 @@ class MixedTraffic:
     gospa_false: float
     id_switches: int
     fragmentations: int
+    false_tracks: int  # reported tracks in the zone never paired with a road user
     confidence: float
     classes: list[dict[str, Any]]  # per class: RMS, upper bounds, verdict, coverage, ...
     gospa_series: dict[str, list[float]]  # time_s, gospa, localisation, missed, false
@@ -157,7 +158,7 @@ def mixed_traffic_study(
     hazards, false_stops = event_outcomes(rec.truth, events, site.barrier_m)
     runs, false_line = stop_line_outcomes(rec.truth, events)
     series = score.gospa_series
-    moving = tracks[tracks["status"] != "static"]
+    moving = tracks[~tracks["status"].isin(UNREPORTED)]
     static = tracks[tracks["status"] == "static"].drop_duplicates("track_id", keep="last")
     return MixedTraffic(
         seed,
@@ -173,6 +174,7 @@ def mixed_traffic_study(
         score.gospa_false,
         score.id_switches,
         score.fragmentations,
+        score.false_tracks,
         confidence,
         score.classes.to_dict("records"),
         {
@@ -346,7 +348,8 @@ def mixed_traffic_html(
         f"{STALL_S:g} s. The scene tracker took {m.tracker_s:.1f} s "
         f"({m.duration_s / m.tracker_s:.0f} times faster than real time). Mean GOSPA "
         f"{m.gospa_mean:.2f} m, {m.id_switches} identity switches, {m.fragmentations} "
-        "fragmentations.</p>",
+        f"fragmentations, {m.false_tracks} false tracks (reported in the zone, never paired "
+        f"with a road user; {m.false_tracks / (m.duration_s / 3600.0):.0f} per hour).</p>",
         "<figure id='mixed-map'>" + _map_figure(m, roads, radars, zone_m) + "</figure>",
         "<figure id='mixed-gospa'>" + _gospa_figure(m) + "</figure>",
         f"<h3>Hazard events</h3><p id='mixed-events'>{hazard_text}</p>",

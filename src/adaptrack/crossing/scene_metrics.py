@@ -28,6 +28,7 @@ from .scene import STEP_S, STOPPED_MPS, SceneTruth
 TRUTH_COLUMNS = ["object_id", "vehicle_class", "time_s", "east_m", "north_m", "speed_mps",
                  "in_zone"]  # fmt: skip  # what scoring reads of the truth (`simulate --truth`)
 HAZARD_COLUMNS = ["to_crossing_m"]  # and what the stopped-between-the-barriers events need
+UNREPORTED = ("static", "tentative")  # track statuses that are not road users
 TRACK_COLUMNS = ["track_id", "time_s", "east_m", "north_m", "speed_mps", "east_speed_mps",
                  "north_speed_mps", "from_crossing_m", "status"]  # fmt: skip  # and of tracks
 
@@ -70,7 +71,7 @@ def score_scene(
     tab = _table_of(truth)
     k_truth = np.rint(tab["time_s"].to_numpy() / STEP_S).astype(np.int64)
     stride = max(1, round(every_s / STEP_S))
-    reported = tracks[tracks["status"] != "static"] if len(tracks) else tracks
+    reported = tracks[~tracks["status"].isin(UNREPORTED)] if len(tracks) else tracks
     scan_t = np.unique(reported["time_s"].to_numpy()) if len(reported) else np.zeros(0)
     by_time = {t: g for t, g in reported.groupby("time_s")} if len(reported) else {}
     truth_by_k = {

@@ -107,7 +107,14 @@ STATIC = len(TrackStatus)  # status code of a stopped object that never moved
 STATUS_NAMES = (*(s.name.lower() for s in TrackStatus), "static")  # by status code
 COASTING_S = 0.2  # a confirmed track without a detection for longer is coasting [s]
 _STATUS_CODES = np.array(
-    [TrackStatus.CONFIRMED, TrackStatus.COASTING, TrackStatus.STOPPED, STATIC], np.int64
+    [
+        TrackStatus.CONFIRMED,
+        TrackStatus.COASTING,
+        TrackStatus.STOPPED,
+        STATIC,
+        TrackStatus.TENTATIVE,
+    ],
+    np.int64,
 )  # confirmed_rows' codes
 ROW_COLUMNS = RowBuffer._fields  # the columns of a track table
 EVENT_COLUMNS = ["time_s", "event", "track_id", "east_m", "north_m", "lead_s"]
