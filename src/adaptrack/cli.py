@@ -556,8 +556,9 @@ def track(
 
     The many-object scene tracker (its settings from the ``[scene_tracker]`` table of
     ``--config``, if any) takes raw detections, and an object list's ``object_id`` column as
-    association hints, not truth (``--ids hint``): tracks go to ``--out`` (status tentative
-    tracks excluded) and hazard events to ``--events`` (with ``--warnings``, also the
+    association hints, not truth (``--ids hint``): the confirmed tracks go to ``--out`` (status
+    tentative: one that has not moved yet on another track's body, a likely duplicate) and
+    hazard events to ``--events`` (with ``--warnings``, also the
     predicted "will not stop before the stop line"). With ``--ids truth`` every object id is
     one track of the site's road estimator, the deployed one of ``--config`` (the road EKF with
     constant acceleration without it); the reflection-point scatter follows the
