@@ -33,6 +33,7 @@ from ._radar_kernel import curve_at, in_view, wrapped
 
 N_STATE = 4
 BIAS_MIN_SPEED_MPS = 6.0  # azimuth alignment on vehicles, not on cyclists at the lane's edge
+GHOST_SPEED_MPS = 2.0  # a multipath ghost moves with the body that makes it (within this)
 BODY_HALF_SPREADS = 2.0  # a body reaches this many spreads either side of its centre
 DETECTION_D_RATE = 0.2  # moving-average rate of a track's detections' offset across
 VISIBLE_SAMPLES = 17  # points over a body tested against a field of view
@@ -518,6 +519,7 @@ def apply_scan(  # type: ignore[no-untyped-def]
     bounds, radar, noise_tab, noise_cnt, fields, pd_tab, pd_cnt, across_std, moving_radial,
     start_speed_var, learning_rate, shape_rate, spread_lo, spread_hi, align, lane_half_width,
     bias, bias_stats, bias_forget, bias_gate, confirm_speed_var, window_mask, confirm_hits,
+    shadow_spread,
 ):  # fmt: skip
     """Update the tracks with a gated scan (:func:`associate_scan`, its ``sight``) in place.
 
@@ -528,7 +530,12 @@ def apply_scan(  # type: ignore[no-untyped-def]
     miss tells nothing), else takes what the miss tells (:func:`miss_updates`, moving ones).
     Tracks in view and not hidden record the hit or miss in the track book's arrays
     (:func:`adaptrack.tracking.lifecycle.record_hits`; confirmed once their speed variance is
-    below ``confirm_speed_var``), and one confirmed now anchors where it is. Returns which
+    below ``confirm_speed_var``), and one confirmed now anchors where it is. A moving body
+    whose spread is below ``shadow_spread`` [m] (a car: the radar on its pole sees over it)
+    casts no radar shadow over a tentative track behind it on its corridor that moves with
+    it (within ``GHOST_SPEED_MPS``): that track's miss counts against its confirmation,
+    though not towards its deletion (a multipath ghost lies behind the body that made it,
+    moves with it, and is seen rarely). Returns which
     detections were used (D,).
     """
     n_t, n_d = d2.shape
@@ -568,6 +575,12 @@ def apply_scan(  # type: ignore[no-untyped-def]
     for k in range(missed.size):
         i = missed[k]
         occluded[i] = nearer[k] >= 0
+        o = nearer[k]
+        if (
+            o >= 0 and not confirmed[i] and not stopped[o] and spread[o] < shadow_spread
+            and corridor[o] == corridor[i] and abs(x[i, 1] - x[o, 1]) < GHOST_SPEED_MPS
+        ):  # fmt: skip
+            history[i] = (history[i] << 1) & window_mask  # no shadow: the miss counts
         if not occluded[i] and not stopped[i]:
             moving_missed[m] = i
             m += 1

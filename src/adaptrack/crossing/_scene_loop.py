@@ -82,6 +82,7 @@ class Settings(NamedTuple):
     occlusion_gate: bool
     passing_gate: bool
     beside_m: float
+    shadow_spread_m: float
     gate: float
     clutter_gate: float
     sensor_id_bonus: float
@@ -540,7 +541,7 @@ def run_scans(  # type: ignore[no-untyped-def]
                 s.start_speed_max_mps**2, s.spread_learning_rate, s.shape_learning_rate,
                 s.spread_lo_m, s.spread_hi_m, s.estimate_azimuth_bias, site.half_lane_m, bias,
                 stats, s.bias_forget, s.bias_gate_m, s.confirm_speed_var, s.window_mask,
-                s.confirm_hits,
+                s.confirm_hits, s.shadow_spread_m,
             )  # fmt: skip
             if stats[2] >= s.bias_min_samples:
                 radars.azimuth_bias_rad[r] = stats[1] / stats[0]

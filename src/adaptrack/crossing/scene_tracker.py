@@ -23,7 +23,10 @@ give every further gated detection to the track most likely to have made it (the
 other reflections; least ``d2 + ln det S``); update (a body reaching out of the radar's field
 of view is measured at the centre of its part in view); apply what a miss tells (the Doppler
 gate hides slow vehicles; a miss behind a nearer track tells nothing,
-unless it lies within that track's own body: a duplicate); record hits and misses
+unless it lies within that track's own body: a duplicate; a tentative track's miss behind a
+moving body shorter than ``shadow_spread_m`` that it moves with counts against its
+confirmation: the radar sees over a car, and what is seen rarely there, moving with the car,
+is its multipath ghost); record hits and misses
 (M-of-N confirmation once the speed sigma is below ``confirm_speed_std_mps``, deletion by
 coasting time or, for a stopped track, by misses in a row: :mod:`adaptrack.tracking.lifecycle`);
 open tentative tracks from the detections left over, clustered within ``cluster_radius_m``;
@@ -136,6 +139,8 @@ class SceneTrackerConfig:
     body_across_std_m: float = 0.5
     body_extent_gate: bool = True  # a detection beyond the body's end along the lane costs more
     occlusion_gate: bool = True  # a track hidden in a queue takes none of its occluder's
+    shadow_spread_m: float = 1.4  # a moving body this long (spread) hides a new track behind it
+    # (a shorter one, a car, does not: the radar on its pole sees over it; 0: every body hides)
     absorb_young_static: bool = True  # a new static object on a stopped body is its reflection
     gate_probability: float = 0.999
     clutter_gate_probability: float = 0.99  # a static object's own detections (reserved) ...
@@ -207,7 +212,7 @@ _POSITIVE = (
 )  # fmt: skip
 _NO_LIMIT = (  # inf: no limit
     "merge_parts_speed_mps", "merge_settled_s", "clutter_age_s", "stop_seen_s",
-    "bias_min_samples", "stop_confirm_s", "moved_distance_m",
+    "bias_min_samples", "stop_confirm_s", "moved_distance_m", "shadow_spread_m",
 )  # fmt: skip
 
 
