@@ -239,6 +239,12 @@ def detections_in_view(z, radar, fields):  # type: ignore[no-untyped-def]
     return seen
 
 
+@numba.njit(cache=True, inline="always")
+def bodies_overlap(x, spread, a, b):  # type: ignore[no-untyped-def]
+    """Whether the bodies of tracks ``a`` and ``b`` (``BODY_HALF_SPREADS`` spreads) overlap."""
+    return abs(x[a, 0] - x[b, 0]) < BODY_HALF_SPREADS * (spread[a] + spread[b])
+
+
 @numba.njit(cache=True)
 def confirmed_rows(  # type: ignore[no-untyped-def]
     confirmed, time_s, last_hit_s, stopped, moved, x, spread, corridor, lateral_m, coasting_s,
@@ -268,7 +274,7 @@ def confirmed_rows(  # type: ignore[no-untyped-def]
             if (
                 j != i and (moved[j] or stopped[j]) and corridor[j] == corridor[i]
                 and abs(x[i, 3] - x[j, 3]) < lateral_m
-                and abs(x[i, 0] - x[j, 0]) < BODY_HALF_SPREADS * (spread[i] + spread[j])
+                and bodies_overlap(x, spread, i, j)
             ):  # fmt: skip
                 status[k] = codes[4]
                 break
@@ -1013,7 +1019,7 @@ def merged_rows(  # type: ignore[no-untyped-def]
                 s, r = (a, b) if static[a] else (b, a)  # the static one, the road user
                 if (
                     young[s] and born[s] > born[r] and stopped[r] and moved[r] and not drop[r]
-                    and abs(x[s, 0] - x[r, 0]) < BODY_HALF_SPREADS * (spread[r] + spread[s])
+                    and bodies_overlap(x, spread, s, r)
                     and abs(x[s, 3] - x[r, 3]) < lateral_m
                 ):  # fmt: skip
                     drop[s] = True
@@ -1023,7 +1029,7 @@ def merged_rows(  # type: ignore[no-untyped-def]
             parts = (
                 moved[a] and moved[b] and not (stopped[a] or stopped[b])
                 and min(abs(x[a, 1]), abs(x[b, 1])) > parts_speed
-                and du < BODY_HALF_SPREADS * (spread[a] + spread[b])
+                and bodies_overlap(x, spread, a, b)
             )  # fmt: skip
             if not (
                 (du < spread[a] + spread[b] + 0.5 or parts)
