@@ -850,3 +850,13 @@ def test_a_ghost_behind_a_car_is_not_confirmed_but_a_car_in_a_trucks_shadow_is(s
     assert ghost[0.0] < 8.0
     car = _confirmed_behind(SceneTrackerConfig(), 12.0, 3.0, 3, "car", 0.15, seed)
     assert car < 4.0
+
+
+@pytest.mark.parametrize("value", [np.nan, -0.5])
+def test_a_bad_shadow_spread_is_named(value):
+    """``shadow_spread_m`` must be >= 0 (inf: no body hides a new track; 0: every body does)."""
+    from adaptrack.crossing.scene_tracker import SceneTrackerConfig
+
+    with pytest.raises(ValueError, match=r"SceneTrackerConfig.shadow_spread_m must be >= 0"):
+        SceneTrackerConfig(shadow_spread_m=value)
+    assert SceneTrackerConfig(shadow_spread_m=np.inf).shadow_spread_m == np.inf
