@@ -117,15 +117,14 @@ def test_a_track_inside_a_nearer_body_is_its_duplicate_not_hidden_by_it():
 
 def test_a_body_reaching_past_the_radars_range_is_seen_over_its_near_part():
     roads = _road()
-    bounds = np.array([[0, roads.shape[1]]])
     radar = np.array([0.0, 0.0, 6.0, 0.0, 1.0, 0.1])  # at the road's start, looking north
     fields = np.array([[40.0, math.pi / 2]])  # 40 m slant range
     x = np.zeros((3, 4))
     x[:, 0] = [40.0, 20.0, 60.0]  # a 16 m body centred at 40 m ground range, at 20 m, at 60 m
     spread = np.array([4.0, 4.0, 4.0]) / BODY_HALF_SPREADS
-    corridor = np.zeros(3, np.int64)
+    end = roads.shape[1]
     offset, part_spread, slope, out = _visible_part(
-        0, x, spread, corridor, roads, bounds, radar, fields
+        x[0, 0], x[0, 3], spread[0], 0, end, roads, radar, fields
     )
     # independently: in view up to the ground range sqrt(40^2 - 6^2) = 39.55 m
     far = math.sqrt(40.0**2 - 6.0**2)
@@ -135,9 +134,9 @@ def test_a_body_reaching_past_the_radars_range_is_seen_over_its_near_part():
     assert slope == -0.5  # the far end of what is seen stays at the range limit
     assert not out
     whole = (0.0, 2.0, 0.0, False)  # in view from 12 to 28 m
-    assert _visible_part(1, x, spread, corridor, roads, bounds, radar, fields) == whole
+    assert _visible_part(x[1, 0], x[1, 3], spread[1], 0, end, roads, radar, fields) == whole
     gone = (0.0, 2.0, 0.0, True)  # from 52 to 68 m: known out of view (its detection too)
-    assert _visible_part(2, x, spread, corridor, roads, bounds, radar, fields) == gone
+    assert _visible_part(x[2, 0], x[2, 3], spread[2], 0, end, roads, radar, fields) == gone
 
 
 @pytest.mark.parametrize("site_name", ["lx_curve_near", "lx_three_arm"])
@@ -171,8 +170,9 @@ def test_the_visible_part_of_a_body_equals_a_sampled_field_of_view_test(site_nam
                 offset = float((BODY_HALF_SPREADS * spread[i] * a[0])[seen].mean())
                 want = (offset, spread[i] * k / VISIBLE_SAMPLES, slope)
                 checked += 1
+            lo, hi = bounds[corridor[i]]
             got = _visible_part(
-                i, x, spread, corridor, roads, bounds, radar.kernel_row(), radar.field_table()
+                x[i, 0], x[i, 3], spread[i], lo, hi, roads, radar.kernel_row(), radar.field_table()
             )
             assert got[:3] == pytest.approx(want, abs=1e-9), (radar.name, i)
             assert k == 0 or not got[3], (radar.name, i)

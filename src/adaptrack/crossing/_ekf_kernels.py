@@ -136,23 +136,35 @@ def folded_log_likelihood_gap(rm, radar):  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True, inline="always")
-def _centreline(road, s):  # type: ignore[no-untyped-def]
-    """Centreline x, y, heading and curvature at ``s`` (clipped to the road), as np.interp."""
-    last = road.shape[1] - 1
-    q = min(max(s, 0.0), road[0, last])
+def centreline_span(roads, lo, hi, s):  # type: ignore[no-untyped-def]
+    """Centreline x, y, heading and curvature at ``s`` of the road in columns ``lo:hi``.
+
+    ``roads`` (5, S): sampled ``s``, x, y, heading and curvature rows of one or more roads
+    side by side; ``s`` is clipped to the road, as np.interp. Indexes in place: a view of
+    the road's columns per call would cost its reference counting in the scan loop.
+    """
+    last = hi - lo - 1
+    q = min(max(s, 0.0), roads[0, lo + last])
     # last j with s_j <= q (as np.interp); the samples are nearly uniform: guess, then walk
-    j = min(int(q * (last / road[0, last])), last - 1)
-    while j < last - 1 and road[0, j + 1] <= q:
+    j = min(int(q * (last / roads[0, lo + last])), last - 1)
+    while j < last - 1 and roads[0, lo + j + 1] <= q:
         j += 1
-    while j > 0 and road[0, j] > q:
+    while j > 0 and roads[0, lo + j] > q:
         j -= 1
-    u = q - road[0, j]
-    ds = road[0, j + 1] - road[0, j]
-    cx = (road[1, j + 1] - road[1, j]) / ds * u + road[1, j]
-    cy = (road[2, j + 1] - road[2, j]) / ds * u + road[2, j]
-    th = (road[3, j + 1] - road[3, j]) / ds * u + road[3, j]
-    kappa = (road[4, j + 1] - road[4, j]) / ds * u + road[4, j]
+    a, b = lo + j, lo + j + 1
+    u = q - roads[0, a]
+    ds = roads[0, b] - roads[0, a]
+    cx = (roads[1, b] - roads[1, a]) / ds * u + roads[1, a]
+    cy = (roads[2, b] - roads[2, a]) / ds * u + roads[2, a]
+    th = (roads[3, b] - roads[3, a]) / ds * u + roads[3, a]
+    kappa = (roads[4, b] - roads[4, a]) / ds * u + roads[4, a]
     return cx, cy, th, kappa
+
+
+@numba.njit(cache=True, inline="always")
+def _centreline(road, s):  # type: ignore[no-untyped-def]
+    """Centreline x, y, heading and curvature at ``s`` of ``road`` (5, S) (clipped to it)."""
+    return centreline_span(road, 0, road.shape[1], s)
 
 
 @numba.njit(cache=True)
@@ -164,6 +176,18 @@ def measure(  # type: ignore[no-untyped-def]
     ``radar``: x, y, height, boresight; ``noise_tab``/``noise_cnt`` its sigma curves;
     ``road`` (5, S): sampled centreline ``s``, ``x``, ``y``, heading and curvature rows.
     """
+    measure_span(
+        kind, x, k, radar, noise_tab, noise_cnt, road, 0, road.shape[1], half_width,
+        scatter_std, zp, h, rm, jp, jv,
+    )  # fmt: skip
+
+
+@numba.njit(cache=True)
+def measure_span(  # type: ignore[no-untyped-def]
+    kind, x, k, radar, noise_tab, noise_cnt, roads, lo, hi, half_width, scatter_std, zp, h, rm,
+    jp, jv,
+):  # fmt: skip
+    """:func:`measure` of the road in columns ``lo:hi`` of ``roads`` (:func:`centreline_span`)."""
     h[:, :] = 0.0
     if kind == FREE:
         vx, vy = x[2], x[3]
@@ -180,7 +204,7 @@ def measure(  # type: ignore[no-untyped-def]
         _noise_into(radar, noise_tab, noise_cnt, zp, jp, ux, uy, scatter_std, rm)
         return
     s, vs, d = x[0], x[1], x[k]
-    cx, cy, th, kappa = _centreline(road, s)
+    cx, cy, th, kappa = centreline_span(roads, lo, hi, s)
     tx, ty = math.sin(th), math.cos(th)
     rx, ry = -ty, tx
     off = half_width + d

@@ -22,11 +22,11 @@ from ..tracking.lifecycle import expired_rows, record_hits
 from ._ekf_kernels import (
     GATE_MIN_COS,
     ROAD,
-    _centreline,
+    centreline_span,
     doppler_usable,
     gate_update_into,
     innovation_into,
-    measure,
+    measure_span,
     off_boresight,
 )
 from ._radar_kernel import curve_at, in_view, wrapped
@@ -117,8 +117,7 @@ def _lane_frame(roads, bounds, c, u, d):  # type: ignore[no-untyped-def]
 
     Returns ``(cx, cy, tx, ty, kappa, px, py)``; ``(-ty, tx)`` is the offsets' direction.
     """
-    road = roads[:, bounds[c, 0] : bounds[c, 1]]
-    cx, cy, th, kappa = _centreline(road, u)
+    cx, cy, th, kappa = centreline_span(roads, bounds[c, 0], bounds[c, 1], u)
     tx, ty = math.sin(th), math.cos(th)
     return cx, cy, tx, ty, kappa, cx - d * ty, cy + d * tx
 
@@ -131,7 +130,7 @@ def _ground_point(z_row, radar):  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True, inline="always")
-def _view_uniform(road, u, d, half, radar, fields):  # type: ignore[no-untyped-def]
+def _view_uniform(roads, lo, hi, u, d, half, radar, fields):  # type: ignore[no-untyped-def]
     """Whether the lane points within ``half`` [m] of ``(u, d)`` are all in view (1), all out (-1).
 
     0 when it cannot tell. A sufficient test from the centre point alone: the points lie
@@ -139,7 +138,7 @@ def _view_uniform(road, u, d, half, radar, fields):  # type: ignore[no-untyped-d
     differ from its by at most ``half`` and their bearings by at most
     ``asin(half / ground range)``.
     """
-    cx, cy, th, _ = _centreline(road, u)
+    cx, cy, th, _ = centreline_span(roads, lo, hi, u)
     ex = cx - d * math.cos(th) - radar[0]
     ey = cy + d * math.sin(th) - radar[1]
     ground = math.sqrt(ex * ex + ey * ey)
@@ -160,31 +159,31 @@ def _view_uniform(road, u, d, half, radar, fields):  # type: ignore[no-untyped-d
 
 
 @numba.njit(cache=True, inline="always")
-def _visible_part(i, x, spread, corridor, roads, bounds, radar, fields):  # type: ignore[no-untyped-def]
-    """Locate the part of track ``i``'s body inside the radar's field of view.
+def _visible_part(u, d, spread, lo, hi, roads, radar, fields):  # type: ignore[no-untyped-def]
+    """Locate the part of a body inside the radar's field of view.
 
-    The body spans ``BODY_HALF_SPREADS`` spreads either side of its centre along the lane;
-    ``VISIBLE_SAMPLES`` points over it are tested against the field of view (``fields``, the
-    radar's minimum range ``radar[4]``). Returns ``(offset, spread, slope, out)``: the
-    visible part's centre along the lane from the body's centre [m], its spread [m] (the
-    body's, in proportion to the part's length), ``d offset / d u`` (-1/2 when one end is
-    cut: the cut stays put while the body moves; -1 when both are), and whether the body is
-    known to lie wholly out of view (then its centre, the point its detection is predicted
-    at, is out of view too). A body wholly in view, or wholly out of it, gives
-    ``(0, spread, 0, out)``.
+    The body's centre lies ``u`` [m] along the road in columns ``lo:hi`` of ``roads`` and
+    ``d`` [m] across; it spans ``BODY_HALF_SPREADS`` times ``spread`` [m] either side of its
+    centre along the lane. ``VISIBLE_SAMPLES`` points over it are tested against the field of
+    view (``fields``, the radar's minimum range ``radar[4]``). Returns ``(offset, spread,
+    slope, out)``: the visible part's centre along the lane from the body's centre [m], its
+    spread [m] (the body's, in proportion to the part's length), ``d offset / d u`` (-1/2
+    when one end is cut: the cut stays put while the body moves; -1 when both are), and
+    whether the body is known to lie wholly out of view (then its centre, the point its
+    detection is predicted at, is out of view too). A body wholly in view, or wholly out of
+    it, gives ``(0, spread, 0, out)``.
     """
-    half = BODY_HALF_SPREADS * spread[i]
-    road = roads[:, bounds[corridor[i], 0] : bounds[corridor[i], 1]]
-    uniform = _view_uniform(road, x[i, 0], x[i, 3], half, radar, fields)
+    half = BODY_HALF_SPREADS * spread
+    uniform = _view_uniform(roads, lo, hi, u, d, half, radar, fields)
     if uniform != 0:
-        return 0.0, spread[i], 0.0, uniform < 0
+        return 0.0, spread, 0.0, uniform < 0
     n_in, total = 0, 0.0
     first_in = last_in = False
     for k in range(VISIBLE_SAMPLES):
         a = half * (2.0 * k / (VISIBLE_SAMPLES - 1) - 1.0)
-        cx, cy, th, _ = _centreline(road, x[i, 0] + a)
-        ex = cx - x[i, 3] * math.cos(th) - radar[0]
-        ey = cy + x[i, 3] * math.sin(th) - radar[1]
+        cx, cy, th, _ = centreline_span(roads, lo, hi, u + a)
+        ex = cx - d * math.cos(th) - radar[0]
+        ey = cy + d * math.sin(th) - radar[1]
         rng = math.sqrt(ex * ex + ey * ey + radar[2] * radar[2])
         if in_view(rng, off_boresight(math.atan2(ex, ey), radar), fields, radar[4]):
             n_in += 1
@@ -192,9 +191,9 @@ def _visible_part(i, x, spread, corridor, roads, bounds, radar, fields):  # type
             first_in |= k == 0
             last_in |= k == VISIBLE_SAMPLES - 1
     if n_in == 0 or n_in == VISIBLE_SAMPLES:
-        return 0.0, spread[i], 0.0, False
+        return 0.0, spread, 0.0, False
     slope = -0.5 if first_in != last_in else (-1.0 if not first_in else 0.0)
-    return total / n_in, spread[i] * n_in / VISIBLE_SAMPLES, slope, False
+    return total / n_in, spread * n_in / VISIBLE_SAMPLES, slope, False
 
 
 @numba.njit(cache=True, inline="always")
@@ -210,14 +209,18 @@ def _model(  # type: ignore[no-untyped-def]
     part's centre after the call. Returns the visible part's spread [m] and the corridor's
     centreline point and heading there (``cx, cy, th``).
     """
-    road = roads[:, bounds[corridor[i], 0] : bounds[corridor[i], 1]]
+    lo, hi = bounds[corridor[i], 0], bounds[corridor[i], 1]
     offset, part_spread, slope, _ = visible
-    xv[:] = x[i]
+    for a in range(N_STATE):
+        xv[a] = x[i, a]
     xv[0] += offset
-    measure(ROAD, xv, 3, radar, noise_tab, noise_cnt, road, 0.0, part_spread, zp, h, rm, jp, jv)
+    measure_span(
+        ROAD, xv, 3, radar, noise_tab, noise_cnt, roads, lo, hi, 0.0, part_spread, zp, h, rm,
+        jp, jv,
+    )  # fmt: skip
     for a in range(3):
         h[a, 0] *= 1.0 + slope
-    cx, cy, th, _ = _centreline(road, xv[0])
+    cx, cy, th, _ = centreline_span(roads, lo, hi, xv[0])
     rx, ry = -math.cos(th), math.sin(th)
     b0 = jp[0, 0] * rx + jp[0, 1] * ry
     b1 = jp[1, 0] * rx + jp[1, 1] * ry
@@ -351,7 +354,8 @@ def gate_scan(  # type: ignore[no-untyped-def]
     held = np.full((n_t, n_d), np.inf)  # a starting row's d2 at its held zero speed
     for i in range(n_t):
         logdet[i] = np.inf
-        visible = _visible_part(i, x, spread, corridor, roads, bounds, radar, fields)
+        lo_i, hi_i = bounds[corridor[i], 0], bounds[corridor[i], 1]
+        visible = _visible_part(x[i, 0], x[i, 3], spread[i], lo_i, hi_i, roads, radar, fields)
         if visible[3]:  # wholly out of view, its predicted detection too (seen stays False)
             d2[i, :] = np.inf
             continue
@@ -739,7 +743,8 @@ def update_tracks(  # type: ignore[no-untyped-def]
                 bias_stats[2] = bias_forget * bias_stats[2] + 1.0
         sr = curve_at(noise_tab, noise_cnt, 0, z[j, 0])
         sa = curve_at(noise_tab, noise_cnt, 1, off_boresight(z[j, 1], radar))
-        whole = _visible_part(i, x, spread, corridor, roads, bounds, radar, fields)[0] == 0.0
+        lo_i, hi_i = bounds[corridor[i], 0], bounds[corridor[i], 1]
+        whole = _visible_part(x[i, 0], x[i, 3], spread[i], lo_i, hi_i, roads, radar, fields)[0] == 0
         if whole:
             if not (stopped[i] and moved[i]):
                 sample = max(along * along - sr * sr - (rho * sa) ** 2 - p[i, 0, 0], 0.0)
@@ -750,7 +755,7 @@ def update_tracks(  # type: ignore[no-untyped-def]
         _model(  # over the part in view of its body as learnt now
             i, x, spread, corridor, roads, bounds, radar, noise_tab, noise_cnt, fields,
             across_std, xv, zp, h, rm, jp, jv,
-            _visible_part(i, x, spread, corridor, roads, bounds, radar, fields),
+            _visible_part(x[i, 0], x[i, 3], spread[i], lo_i, hi_i, roads, radar, fields),
         )  # fmt: skip
         doppler = doppler_usable(h, p[i], rm, radar)
         innovation_into(z[j], zp, radar, doppler, nu)

@@ -18,6 +18,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
+from .._borrowed import borrowed
 from ..tracking import assignment_by_components, gnn_assign
 from ._scene_kernels import (
     _lane_frame,
@@ -207,14 +208,30 @@ def _assign(d2, gate):  # type: ignore[no-untyped-def]
 
 @numba.njit(cache=True)
 def _live(t, n):  # type: ignore[no-untyped-def]
-    """Return the first ``n`` rows of every column (views)."""
+    """Return the first ``n`` rows of every column (borrowed views: while ``t`` is not grown)."""
     return TrackRows(
-        t.ids[:n], t.history[:n], t.confirmed[:n], t.misses[:n], t.last_hit_s[:n],
-        t.born_s[:n], t.corridor[:n], t.x[:n], t.p[:n], t.time_s[:n], t.stopped[:n],
-        t.slow_since[:n], t.moved[:n], t.event_raised[:n], t.line_event_raised[:n],
-        t.anchor_u[:n], t.spread[:n], t.along_m2[:n], t.along_m4[:n], t.direction[:n],
-        t.miss_run[:n], t.occluded[:n], t.doppler_seen_s[:n], t.detection_d[:n],
-        t.sensor_id[:n],
+        borrowed(t.ids[:n]), borrowed(t.history[:n]), borrowed(t.confirmed[:n]),
+        borrowed(t.misses[:n]), borrowed(t.last_hit_s[:n]), borrowed(t.born_s[:n]),
+        borrowed(t.corridor[:n]), borrowed(t.x[:n]), borrowed(t.p[:n]),
+        borrowed(t.time_s[:n]), borrowed(t.stopped[:n]), borrowed(t.slow_since[:n]),
+        borrowed(t.moved[:n]), borrowed(t.event_raised[:n]),
+        borrowed(t.line_event_raised[:n]), borrowed(t.anchor_u[:n]), borrowed(t.spread[:n]),
+        borrowed(t.along_m2[:n]), borrowed(t.along_m4[:n]), borrowed(t.direction[:n]),
+        borrowed(t.miss_run[:n]), borrowed(t.occluded[:n]), borrowed(t.doppler_seen_s[:n]),
+        borrowed(t.detection_d[:n]), borrowed(t.sensor_id[:n]),
+    )  # fmt: skip
+
+
+@numba.njit(cache=True)
+def _borrowed_site(site):  # type: ignore[no-untyped-def]
+    """Return ``site`` with borrowed views of its tables (while ``site`` is alive)."""
+    return SiteTables(
+        borrowed(site.roads), borrowed(site.bounds), borrowed(site.crossing_u),
+        borrowed(site.length_m), borrowed(site.half_lane_m), site.barrier_m, site.stop_line_m,
+        borrowed(site.warning_starts), borrowed(site.warning_ends), borrowed(site.radar),
+        borrowed(site.noise_tab), borrowed(site.noise_cnt), borrowed(site.fields),
+        borrowed(site.field_count), borrowed(site.pd_tab), borrowed(site.pd_cnt),
+        borrowed(site.latency_s),
     )  # fmt: skip
 
 
@@ -489,6 +506,7 @@ def run_scans(  # type: ignore[no-untyped-def]
     :data:`EVENT_FIELDS`); with ``record``, each scan's confirmed tracks to ``rows_out``.
     Each scan is the steps of :meth:`adaptrack.crossing.scene_tracker.SceneTracker.step`.
     """
+    site = _borrowed_site(site)  # the caller's site outlives the call
     for k in range(scan_radar.size):
         r = scan_radar[k]
         radars.last_stamp_s[r] = scan_stamp[k]
@@ -613,7 +631,7 @@ def run_scans(  # type: ignore[no-untyped-def]
             s.merge_settled_s, s.merge_settled_lateral_m,
         )  # fmt: skip
         if dead.any():
-            n = _compacted(t, n, dead)
+            n = _compacted(v, n, dead)  # rows move within the live ones
         if record:
             rows_out, n_out = write_rows(t, n, time_s, s, site, rows_out, n_out)
     return t, n, next_id, events, n_events, rows_out, n_out
