@@ -6,7 +6,7 @@ import numba
 import numpy as np
 import pytest
 
-from adaptrack._borrowed import borrowed
+from adaptrack._borrowed import borrowed, keep_alive
 
 
 @numba.njit(cache=True)
@@ -33,3 +33,21 @@ def test_a_borrowed_view_writes_through_and_keeps_shape_and_strides(columns) -> 
     untouched = np.ones(6, bool)
     untouched[columns] = False  # the columns between a slice's are left as they were
     np.testing.assert_array_equal(base[:, untouched], np.arange(30.0).reshape(5, 6)[:, untouched])
+
+
+@numba.njit(cache=True)
+def _write_after_allocating(n):  # type: ignore[no-untyped-def]
+    """Borrow a local array, allocate another, write through the view; return both sums."""
+    own = np.zeros(n)
+    view = borrowed(own)
+    other = np.zeros(n)  # would take the memory of ``own`` if ``own`` were freed by now
+    view[:] = 1.0
+    total = other.sum()
+    keep_alive(own)
+    return total, view.sum()
+
+
+def test_keep_alive_keeps_a_borrowed_local_array_until_its_call() -> None:
+    """Without it numba frees ``own`` after its last use, and the writes would land elsewhere."""
+    for n in (8, 1000, 100_000):
+        assert _write_after_allocating(n) == (0.0, float(n))

@@ -4,7 +4,8 @@ numba counts references on every array view it makes or passes (an atomic increm
 decrement through a call each time); in the scene tracker's scan loop that was about half the
 time. :func:`borrowed` returns a view of an array that owns no reference: its slices and the
 views made of it in called kernels count nothing. The caller keeps the array itself alive while
-the view is in use, and never returns or stores the view.
+the view is in use (an argument of the caller, or a local used again after the views with
+:func:`keep_alive`), and never returns or stores the view.
 """
 
 from __future__ import annotations
@@ -32,3 +33,17 @@ def borrowed(typingctx: Any, arr: Any) -> Any:
         return view._getvalue()
 
     return arr(arr), codegen
+
+
+@intrinsic
+def keep_alive(typingctx: Any, obj: Any) -> Any:
+    """Use ``obj`` here and do nothing (compiled code only).
+
+    numba frees a local array right after its last use; a function that borrows views of its
+    own arrays calls this with them after its last use of the views.
+    """
+
+    def codegen(context: Any, builder: Any, sig: Any, args: Any) -> Any:
+        return context.get_dummy_value()
+
+    return types.none(obj), codegen

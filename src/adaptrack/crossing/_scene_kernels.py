@@ -16,6 +16,7 @@ import math
 import numba
 import numpy as np
 
+from .._borrowed import borrowed, keep_alive
 from ..filters._kernels import cholesky_into, predict_into, update_into
 from ..tracking.assignment import cluster_labels
 from ..tracking.lifecycle import expired_rows, record_hits
@@ -56,6 +57,21 @@ def _update_scratch(m):  # type: ignore[no-untyped-def]
         np.zeros((m, N_STATE)), np.zeros((m, m)), np.zeros((m, m)), np.zeros((m, N_STATE)),
         np.zeros(m), np.zeros((N_STATE, N_STATE)), np.zeros((N_STATE, N_STATE)),
         np.zeros(N_STATE), np.zeros((N_STATE, N_STATE)),
+    )  # fmt: skip
+
+
+@numba.njit(cache=True, inline="always")
+def _borrowed_model(own):  # type: ignore[no-untyped-def]
+    """Borrowed views of the model buffers ``own`` (:func:`_model_scratch`)."""
+    return borrowed(own[0]), borrowed(own[1]), borrowed(own[2]), borrowed(own[3]), borrowed(own[4])
+
+
+@numba.njit(cache=True, inline="always")
+def _borrowed_update(own):  # type: ignore[no-untyped-def]
+    """Borrowed views of the update buffers ``own`` (:func:`_update_scratch`)."""
+    return (
+        borrowed(own[0]), borrowed(own[1]), borrowed(own[2]), borrowed(own[3]), borrowed(own[4]),
+        borrowed(own[5]), borrowed(own[6]), borrowed(own[7]), borrowed(own[8]),
     )  # fmt: skip
 
 
@@ -336,12 +352,12 @@ def gate_scan(  # type: ignore[no-untyped-def]
     """
     n_t, n_d = x.shape[0], z.shape[0]
     seen = np.zeros(n_t, dtype=np.bool_)
-    zp, h, rm, jp, jv = _model_scratch()
-    xv = np.zeros(N_STATE)
-    s = np.zeros((3, 3))
-    lo = np.zeros((3, 3))
-    w = np.zeros(3)
-    w0 = np.zeros(3)
+    # buffers passed per track: borrowed (their owners kept to the end)
+    model = _model_scratch()
+    own = (np.zeros(N_STATE), np.zeros((3, 3)), np.zeros((3, 3)), np.zeros(3), np.zeros(3))
+    zp, h, rm, jp, jv = _borrowed_model(model)
+    xv, s, lo = borrowed(own[0]), borrowed(own[1]), borrowed(own[2])
+    w, w0 = borrowed(own[3]), borrowed(own[4])
     ground = np.zeros((n_d, 6))  # ground point, sight line, range and cross variances
     for j in range(n_d):
         gx, gy, rho = _ground_point(z[j], radar)
@@ -432,6 +448,7 @@ def gate_scan(  # type: ignore[no-untyped-def]
             for i in range(n_t):
                 if on_a_body or starting[i]:
                     d2[i, j] += penalty[i, j]
+    keep_alive((model, own))
     return seen
 
 
@@ -715,10 +732,11 @@ def update_tracks(  # type: ignore[no-untyped-def]
     ``DETECTION_D_RATE``; NaN before the first): where its reflections lie, not where the
     track's state says.
     """
-    zp, h, rm, jp, jv = _model_scratch()
-    xv = np.zeros(N_STATE)
-    nu = np.zeros(3)
-    hp, s, lo, kt, w, ikh, tmp, xn, pn = _update_scratch(3)
+    # buffers passed per detection: borrowed (their owners kept to the end)
+    model, update, own = _model_scratch(), _update_scratch(3), (np.zeros(N_STATE), np.zeros(3))
+    zp, h, rm, jp, jv = _borrowed_model(model)
+    hp, s, lo, kt, w, ikh, tmp, xn, pn = _borrowed_update(update)
+    xv, nu = borrowed(own[0]), borrowed(own[1])
     for j in order:
         i = owner[j]
         # body spread: along-track residual of the detection's ground point
@@ -778,6 +796,7 @@ def update_tracks(  # type: ignore[no-untyped-def]
             p[i] = pn
             if stopped[i]:
                 x[i, 1] = x[i, 2] = 0.0
+    keep_alive((model, update, own))
 
 
 @numba.njit(cache=True)
@@ -866,10 +885,11 @@ def miss_updates(  # type: ignore[no-untyped-def]
     0 within the gate; ``miss_run`` (T,) is each track's probability of its current run of
     misses for a moving target.
     """
-    zp, h, rm, jp, jv = _model_scratch()
-    hp, s, lo, kt, w, ikh, tmp, xn, pn = _update_scratch(1)
-    nu1 = np.zeros(1)
-    r1 = np.zeros((1, 1))
+    # buffers passed per track: borrowed (their owners kept to the end)
+    model, update, own = _model_scratch(), _update_scratch(1), (np.zeros(1), np.zeros((1, 1)))
+    zp, h, rm, jp, jv = _borrowed_model(model)
+    hp, s, lo, kt, w, ikh, tmp, xn, pn = _borrowed_update(update)
+    nu1, r1 = borrowed(own[0]), borrowed(own[1])
     for i in rows:
         road = roads[:, bounds[corridor[i], 0] : bounds[corridor[i], 1]]
         _, miss_run[i] = gate_update_into(
@@ -879,6 +899,7 @@ def miss_updates(  # type: ignore[no-untyped-def]
         )  # fmt: skip
         x[i] = xn
         p[i] = pn
+    keep_alive((model, update, own))
 
 
 @numba.njit(cache=True)
