@@ -12,6 +12,11 @@ one of numba's, with the source stamp widened to the module's file and every mod
 package it imports, directly or through others (``from .x import y``, ``from ..x import y``,
 ``import pkg.x``; a name that is a submodule counts as imported). A kernel's cache is then
 reused only while none of those sources changed.
+
+A kernel's index names the types of its signatures; after a type is renamed or removed
+(a ``NamedTuple`` a kernel takes) numba cannot unpickle the index and fails. In the
+package's cache directories such an index is a miss: the kernel compiles again and the
+index is rewritten.
 """
 
 from __future__ import annotations
@@ -19,6 +24,7 @@ from __future__ import annotations
 import ast
 import hashlib
 import os
+import pickle
 from pathlib import Path
 from typing import Any
 
@@ -26,6 +32,8 @@ from numba.core import caching
 
 _CACHE_IMPL: Any = getattr(caching, "CacheImpl", None) or getattr(caching, "_CacheImpl")  # noqa: B009
 _FILE_BACKED = caching._SourceFileBackedLocatorMixin
+_OUR_CACHE_PATHS: set[str] = set()  # the cache directories of registered packages' kernels
+_UNREADABLE = (AttributeError, ImportError, EOFError, pickle.UnpicklingError)
 
 
 class _Package:
@@ -133,6 +141,11 @@ def register(root: Path, name: str) -> None:
         def get_source_stamp(self: Any) -> Any:
             return base.get_source_stamp(self), package.digest(Path(self._py_file).resolve())
 
+        def get_cache_path(self: Any) -> Any:
+            path = base.get_cache_path(self)
+            _OUR_CACHE_PATHS.add(os.path.abspath(path))
+            return path
+
         def from_function(cls: type, py_func: Any, py_file: str) -> Any:
             if not package.holds(Path(py_file).resolve()):
                 return None
@@ -142,11 +155,29 @@ def register(root: Path, name: str) -> None:
             f"{name}{base.__name__.lstrip('_')}",
             (base,),
             {"package": (package.root, name), "get_source_stamp": get_source_stamp,
-             "from_function": classmethod(from_function)},
+             "get_cache_path": get_cache_path, "from_function": classmethod(from_function)},
         )  # fmt: skip
 
     ours = [wrap(c) for c in classes if issubclass(c, _FILE_BACKED) and "Zip" not in c.__name__]
     classes[:0] = ours
+    index_file = caching.IndexDataCacheFile
+    if not getattr(index_file._load_index, "reads_stale_types", False):
+        index_file._load_index = _tolerant(index_file._load_index)  # type: ignore[method-assign]
+
+
+def _tolerant(load_index: Any) -> Any:
+    """Return numba's index loader with an unreadable index of a registered package a miss."""
+
+    def _load_index(self: Any) -> Any:
+        try:
+            return load_index(self)
+        except _UNREADABLE:
+            if os.path.dirname(os.path.abspath(self._index_path)) not in _OUR_CACHE_PATHS:
+                raise
+            return {}
+
+    _load_index.reads_stale_types = True  # type: ignore[attr-defined]
+    return _load_index
 
 
 register(Path(__file__).parent, __name__.partition(".")[0])
