@@ -16,6 +16,7 @@ from adaptrack.crossing._scene_kernels import (
     nearest_sample,
     open_tracks,
     owners,
+    predict_tracks,
     sight_lines,
     split_rows,
     unambiguous_assignment,
@@ -23,9 +24,60 @@ from adaptrack.crossing._scene_kernels import (
 from adaptrack.crossing.corridor import nearest_corridor
 from adaptrack.crossing.scene_tracker import SceneTracker
 from adaptrack.crossing.site import load_site
+from adaptrack.filters._kernels import predict_into
 from adaptrack.tracking import cluster_labels, cluster_points, gnn_assign
 
 GATE = 16.27
+
+
+def _white_jerk_q(dt, psd, lateral_psd):
+    """Process noise of CA driven by white jerk (PSD ``psd``) and a lateral random walk."""
+    q = np.zeros((4, 4))
+    q[:3, :3] = psd * np.array(
+        [[dt**5 / 20, dt**4 / 8, dt**3 / 6], [dt**4 / 8, dt**3 / 3, dt**2 / 2],
+         [dt**3 / 6, dt**2 / 2, dt]]
+    )  # fmt: skip
+    q[3, 3] = lateral_psd * dt
+    return q
+
+
+def test_predicted_tracks_equal_the_generic_kalman_prediction_to_the_last_bit():
+    """The specialised prediction leaves out the zero terms of Phi; the sums it keeps are in
+    the generic kernel's order, so every value is identical (and near numpy's matrices)."""
+    rng = np.random.default_rng(5)
+    n = 40
+    x = rng.normal(0.0, 10.0, (n, 4))
+    a = rng.normal(0.0, 1.0, (n, 4, 4))
+    p = a @ a.transpose(0, 2, 1) + 0.1 * np.eye(4)
+    stopped = rng.random(n) < 0.4
+    t = np.where(rng.random(n) < 0.3, 9.95, 9.9)  # two step lengths, mixed with stopped rows
+    t[3] = 10.0  # already at the scan time: left alone
+    direction = np.zeros(n)
+    direction[5], x[5, 1], x[5, 2] = 1.0, 0.1, -5.0  # brakes through zero: held at a standstill
+    psd, lateral, stopped_psd = 3.0, 0.2, 1e-4
+    xp, pp, tp = x.copy(), p.copy(), t.copy()
+    predict_tracks(xp, pp, tp, stopped, direction, 10.0, psd, lateral, stopped_psd)
+    assert np.all(tp == 10.0)
+    for i in range(n):
+        dt = 10.0 - t[i]
+        phi, q = np.eye(4), np.zeros((4, 4))
+        if dt == 0.0:
+            assert np.array_equal(xp[i], x[i]) and np.array_equal(pp[i], p[i])
+            continue
+        if stopped[i]:
+            q[0, 0] = q[3, 3] = stopped_psd * dt
+        else:
+            phi[0, 1] = phi[1, 2] = dt
+            phi[0, 2] = 0.5 * dt * dt
+            q = _white_jerk_q(dt, psd, lateral)
+        x_ref, p_ref = np.zeros(4), np.zeros((4, 4))
+        predict_into(x[i], p[i], phi, q, np.zeros(4), x_ref, p_ref, np.zeros((4, 4)))
+        if i == 5:
+            assert x_ref[1] < 0.0
+            x_ref[1] = x_ref[2] = 0.0
+        assert np.array_equal(xp[i], x_ref)
+        assert np.array_equal(pp[i], p_ref)
+        assert np.allclose(pp[i], phi @ p[i] @ phi.T + q, rtol=1e-13, atol=1e-13)
 
 
 def test_unambiguous_assignment_is_the_gnn_optimum_when_no_detection_is_shared():

@@ -187,7 +187,11 @@ def measure_span(  # type: ignore[no-untyped-def]
     kind, x, k, radar, noise_tab, noise_cnt, roads, lo, hi, half_width, scatter_std, zp, h, rm,
     jp, jv,
 ):  # fmt: skip
-    """:func:`measure` of the road in columns ``lo:hi`` of ``roads`` (:func:`centreline_span`)."""
+    """:func:`measure` of the road in columns ``lo:hi`` of ``roads`` (:func:`centreline_span`).
+
+    Returns the centreline point and unit tangent ``(cx, cy, tx, ty)`` at the state's ``u``
+    (ROAD; zeros for FREE), for a caller that needs the lane frame there too.
+    """
     h[:, :] = 0.0
     if kind == FREE:
         vx, vy = x[2], x[3]
@@ -202,7 +206,7 @@ def measure_span(  # type: ignore[no-untyped-def]
             dist = math.sqrt(ex * ex + ey * ey)
             ux, uy = -ex / dist, -ey / dist
         _noise_into(radar, noise_tab, noise_cnt, zp, jp, ux, uy, scatter_std, rm)
-        return
+        return 0.0, 0.0, 0.0, 0.0
     s, vs, d = x[0], x[1], x[k]
     cx, cy, th, kappa = centreline_span(roads, lo, hi, s)
     tx, ty = math.sin(th), math.cos(th)
@@ -218,6 +222,7 @@ def measure_span(  # type: ignore[no-untyped-def]
         h[a, 1] = jv[a, 0] * dpx + jv[a, 1] * dpy
         h[a, k] = jp[a, 0] * rx + jp[a, 1] * ry + jv[a, 0] * ex + jv[a, 1] * ey
     _noise_into(radar, noise_tab, noise_cnt, zp, jp, -tx, -ty, scatter_std, rm)
+    return cx, cy, tx, ty
 
 
 @numba.njit(cache=True)

@@ -17,7 +17,7 @@ import numba
 import numpy as np
 
 from .._borrowed import borrowed, keep_alive
-from ..filters._kernels import cholesky_into, predict_into, update_into
+from ..filters._kernels import cholesky_into, update_into
 from ..tracking.assignment import cluster_labels
 from ..tracking.lifecycle import expired_rows, record_hits
 from ._ekf_kernels import (
@@ -84,40 +84,37 @@ def predict_tracks(  # type: ignore[no-untyped-def]
     A track with a known ``direction`` (+1 / -1 along ``u``) does not reverse: a predicted
     speed against it becomes a standstill (speed and acceleration 0), as a braking vehicle.
     """
-    phi = np.zeros((N_STATE, N_STATE))
-    q = np.zeros((N_STATE, N_STATE))
-    tmp = np.zeros((N_STATE, N_STATE))
-    no_input = np.zeros(N_STATE)
-    x0 = np.zeros(N_STATE)
-    p0 = np.zeros((N_STATE, N_STATE))
-    made_dt, made_stopped = -1.0, False  # the step phi and q were made for (tracks share it)
+    own = np.zeros((3, N_STATE, N_STATE))  # kept to the end
+    noise = borrowed(own)
+    q_moving, q_stopped, tmp = noise[0], noise[1], noise[2]
+    moving_dt, stopped_dt = -1.0, -1.0  # the steps q_moving, q_stopped were made for
     for i in range(x.shape[0]):
         dt = max(time_s - t[i], 0.0)
         t[i] = max(t[i], time_s)
         if dt == 0.0:
             continue
-        if dt != made_dt or stopped[i] != made_stopped:
-            made_dt, made_stopped = dt, stopped[i]
-            _transition_into(dt, stopped[i], accel_psd, lateral_psd, stopped_psd, phi, q)
-        x0[:] = x[i]
-        p0[:, :] = p[i]
-        predict_into(x0, p0, phi, q, no_input, x[i], p[i], tmp)
+        if stopped[i]:
+            if dt != stopped_dt:  # tracks mostly share the step
+                stopped_dt = dt
+                _process_noise_into(dt, True, accel_psd, lateral_psd, stopped_psd, q_stopped)
+            _predict_row(x, p, i, dt, True, q_stopped, tmp)
+        else:
+            if dt != moving_dt:
+                moving_dt = dt
+                _process_noise_into(dt, False, accel_psd, lateral_psd, stopped_psd, q_moving)
+            _predict_row(x, p, i, dt, False, q_moving, tmp)
         if direction[i] != 0 and x[i, 1] * direction[i] < 0.0:
             x[i, 1] = x[i, 2] = 0.0
+    keep_alive(own)
 
 
 @numba.njit(cache=True, inline="always")
-def _transition_into(dt, stopped, accel_psd, lateral_psd, stopped_psd, phi, q):  # type: ignore[no-untyped-def]
-    """Fill the transition ``phi`` and process noise ``q`` of a step ``dt`` [s]."""
-    phi[:, :] = 0.0
+def _process_noise_into(dt, stopped, accel_psd, lateral_psd, stopped_psd, q):  # type: ignore[no-untyped-def]
+    """Fill the process noise ``q`` (4, 4) of a step ``dt`` [s]: white jerk along, walk across."""
     q[:, :] = 0.0
-    for a in range(N_STATE):
-        phi[a, a] = 1.0
     if stopped:
         q[0, 0] = q[3, 3] = stopped_psd * dt
     else:
-        phi[0, 1] = phi[1, 2] = dt
-        phi[0, 2] = 0.5 * dt * dt
         q[0, 0] = accel_psd * dt**5 / 20.0
         q[0, 1] = q[1, 0] = accel_psd * dt**4 / 8.0
         q[0, 2] = q[2, 0] = accel_psd * dt**3 / 6.0
@@ -125,6 +122,47 @@ def _transition_into(dt, stopped, accel_psd, lateral_psd, stopped_psd, phi, q): 
         q[1, 2] = q[2, 1] = accel_psd * dt**2 / 2.0
         q[2, 2] = accel_psd * dt
         q[3, 3] = lateral_psd * dt
+
+
+@numba.njit(cache=True, inline="always")
+def _predict_row(x, p, i, dt, stopped, q, tmp):  # type: ignore[no-untyped-def]
+    """Predict row ``i`` over ``dt`` [s] in place: ``x = Phi x``, ``P = Phi P Phi^T + q``.
+
+    ``Phi`` is CA along (``[[1, dt, dt^2/2], [0, 1, dt], [0, 0, 1]]``) and 1 across, or the
+    identity when ``stopped``. The sums of :func:`adaptrack.filters._kernels.predict_into`,
+    in its order, with the terms of zero ``Phi`` entries left out: the same values to the last
+    bit for finite states (a test compares the two). ``tmp`` (4, 4) scratch.
+    """
+    if stopped:
+        for a in range(N_STATE):
+            x[i, a] = (0.0 + x[i, a]) + 0.0
+            for b in range(N_STATE):
+                tmp[a, b] = 0.0 + p[i, a, b]
+        for a in range(N_STATE):
+            for b in range(N_STATE):
+                p[i, a, b] = (0.0 + tmp[a, b]) + q[a, b]
+    else:
+        h = 0.5 * dt * dt
+        x0, x1, x2, x3 = x[i, 0], x[i, 1], x[i, 2], x[i, 3]
+        x[i, 0] = (((0.0 + x0) + dt * x1) + h * x2) + 0.0
+        x[i, 1] = ((0.0 + x1) + dt * x2) + 0.0
+        x[i, 2] = (0.0 + x2) + 0.0
+        x[i, 3] = (0.0 + x3) + 0.0
+        for b in range(N_STATE):
+            tmp[0, b] = ((0.0 + p[i, 0, b]) + dt * p[i, 1, b]) + h * p[i, 2, b]
+            tmp[1, b] = (0.0 + p[i, 1, b]) + dt * p[i, 2, b]
+            tmp[2, b] = 0.0 + p[i, 2, b]
+            tmp[3, b] = 0.0 + p[i, 3, b]
+        for a in range(N_STATE):
+            p[i, a, 0] = (((0.0 + tmp[a, 0]) + tmp[a, 1] * dt) + tmp[a, 2] * h) + q[a, 0]
+            p[i, a, 1] = ((0.0 + tmp[a, 1]) + tmp[a, 2] * dt) + q[a, 1]
+            p[i, a, 2] = (0.0 + tmp[a, 2]) + q[a, 2]
+            p[i, a, 3] = (0.0 + tmp[a, 3]) + q[a, 3]
+    for a in range(N_STATE):
+        for b in range(a + 1, N_STATE):
+            v = 0.5 * (p[i, a, b] + p[i, b, a])
+            p[i, a, b] = v
+            p[i, b, a] = v
 
 
 @numba.njit(cache=True, inline="always")
@@ -223,21 +261,20 @@ def _model(  # type: ignore[no-untyped-def]
     (``visible``: :func:`_visible_part` of the track): the detection is predicted at that
     part's centre, with its spread. ``xv`` (4,): scratch; it holds the state at the visible
     part's centre after the call. Returns the visible part's spread [m] and the corridor's
-    centreline point and heading there (``cx, cy, th``).
+    centreline point and unit tangent there (``cx, cy, tx, ty``).
     """
     lo, hi = bounds[corridor[i], 0], bounds[corridor[i], 1]
     offset, part_spread, slope, _ = visible
     for a in range(N_STATE):
         xv[a] = x[i, a]
     xv[0] += offset
-    measure_span(
+    cx, cy, tx, ty = measure_span(
         ROAD, xv, 3, radar, noise_tab, noise_cnt, roads, lo, hi, 0.0, part_spread, zp, h, rm,
         jp, jv,
     )  # fmt: skip
     for a in range(3):
         h[a, 0] *= 1.0 + slope
-    cx, cy, th, _ = centreline_span(roads, lo, hi, xv[0])
-    rx, ry = -math.cos(th), math.sin(th)
+    rx, ry = -ty, tx
     b0 = jp[0, 0] * rx + jp[0, 1] * ry
     b1 = jp[1, 0] * rx + jp[1, 1] * ry
     b2 = jp[2, 0] * rx + jp[2, 1] * ry
@@ -246,7 +283,7 @@ def _model(  # type: ignore[no-untyped-def]
     for a in range(3):
         for c in range(3):
             rm[a, c] += s2 * bb[a] * bb[c]
-    return part_spread, cx, cy, th
+    return part_spread, cx, cy, tx, ty
 
 
 @numba.njit(cache=True)
@@ -317,12 +354,13 @@ def _whitened_square(lo, w):  # type: ignore[no-untyped-def]
 def gate_scan(  # type: ignore[no-untyped-def]
     x, p, spread, starting, road_user, moving, occluder, direction, corridor, roads, bounds,
     radar, noise_tab, noise_cnt, fields, across_std, start_speed_max, extent_gate,
-    passing_gate, beside_m, gate, z, d2, logdet,
+    passing_gate, beside_m, gate, z, d2, logdet, visible,
 ):  # fmt: skip
     """Fill ``d2`` (T, D) with each detection's squared Mahalanobis distance to each track.
 
     ``logdet`` (T,) receives the log-determinant of each track's innovation covariance
-    (``inf`` where ``d2`` is).
+    (``inf`` where ``d2`` is), ``visible`` (T, 4) each track's :func:`_visible_part` (its
+    flag as 0 / 1).
     A body's reflections lie on it: with ``extent_gate``, a detection that lies on a road
     user's body (a ``road_user`` track: confirmed, it has moved; within ``BODY_HALF_SPREADS``
     of its spreads along the lane from its centre, and within ``gate``) costs a track whose
@@ -371,13 +409,14 @@ def gate_scan(  # type: ignore[no-untyped-def]
     for i in range(n_t):
         logdet[i] = np.inf
         lo_i, hi_i = bounds[corridor[i], 0], bounds[corridor[i], 1]
-        visible = _visible_part(x[i, 0], x[i, 3], spread[i], lo_i, hi_i, roads, radar, fields)
-        if visible[3]:  # wholly out of view, its predicted detection too (seen stays False)
+        part = _visible_part(x[i, 0], x[i, 3], spread[i], lo_i, hi_i, roads, radar, fields)
+        visible[i, 0], visible[i, 1], visible[i, 2], visible[i, 3] = part
+        if part[3]:  # wholly out of view, its predicted detection too (seen stays False)
             d2[i, :] = np.inf
             continue
-        part_spread, cx, cy, th = _model(
+        part_spread, cx, cy, tx, ty = _model(
             i, x, spread, corridor, roads, bounds, radar, noise_tab, noise_cnt, fields,
-            across_std, xv, zp, h, rm, jp, jv, visible,
+            across_std, xv, zp, h, rm, jp, jv, part,
         )  # fmt: skip
         seen[i] = in_view(zp[0], off_boresight(zp[1], radar), fields, radar[4])
         if not seen[i] or n_d == 0:
@@ -395,7 +434,6 @@ def gate_scan(  # type: ignore[no-untyped-def]
             d2[i, :] = np.inf
             continue
         logdet[i] = 2.0 * (math.log(lo[0, 0]) + math.log(lo[1, 1]) + math.log(lo[2, 2]))
-        tx, ty = math.sin(th), math.cos(th)  # the lane frame at the visible part's centre
         px, py = cx - xv[3] * ty, cy + xv[3] * tx
         half = BODY_HALF_SPREADS * part_spread
         for j in range(n_d):
@@ -505,14 +543,16 @@ def associate_scan(  # type: ignore[no-untyped-def]
     :func:`reserve_clutter`). With ``id_bonus`` > 0, a gated detection whose sensor id
     (``ids`` (D,), -1 none) is the one this radar last gave a track (``sensor_id`` (T,))
     costs that much less (:func:`favour_sensor_ids`).
-    Returns ``(seen, d2, logdet, simple, tracks, detections, sight)``: each track in view,
-    distances (T, D), log-determinants (T,) (:func:`gate_scan`), if ``simple`` the
+    Returns ``(seen, d2, logdet, visible, simple, tracks, detections, sight)``: each track in
+    view, distances (T, D), log-determinants (T,), visible parts (T, 4) (:func:`gate_scan`),
+    if ``simple`` the
     one-to-one assignment (:func:`unambiguous_assignment`), and the tracks' lines of sight
     if the occlusion gate computed them (:func:`sight_lines`; else no rows).
     """
     n_t, n_d = x.shape[0], z.shape[0]
     d2 = np.empty((n_t, n_d))
     logdet = np.empty(n_t)
+    visible = np.empty((n_t, 4))
     road_user = moved & confirmed
     behind = np.full(n_t, -1, dtype=np.int64)  # the stopped road user hiding a queued track
     sight = np.zeros((0, 3))  # the tracks' lines of sight, if needed (:func:`sight_lines`)
@@ -527,20 +567,22 @@ def associate_scan(  # type: ignore[no-untyped-def]
     seen = gate_scan(
         x, p, spread, stopped & moved, road_user, road_user & ~stopped, behind, direction,
         corridor, roads, bounds, radar, noise_tab, noise_cnt, fields, across_std,
-        start_speed_max, extent_gate, passing_gate, beside_m, gate, z, d2, logdet,
+        start_speed_max, extent_gate, passing_gate, beside_m, gate, z, d2, logdet, visible,
     )  # fmt: skip
     if n_d == 0:
-        return seen, d2, logdet, True, np.zeros(0, np.int64), np.zeros(0, np.int64), sight
+        none = np.zeros(0, np.int64)
+        return seen, d2, logdet, visible, True, none, none, sight
     reserve_clutter(d2, clutter, clutter_gate)
     if id_bonus != 0.0:
         favour_sensor_ids(d2, sensor_id, ids, id_bonus, gate)
     simple, tracks, dets = unambiguous_assignment(d2, gate)
-    return seen, d2, logdet, simple, tracks, dets, sight
+    return seen, d2, logdet, visible, simple, tracks, dets, sight
 
 
 @numba.njit(cache=True)
 def apply_scan(  # type: ignore[no-untyped-def]
-    time_s, seen, d2, logdet, sight, gate, tracks, dets, z, ids, radar_col, x, p, spread, along_m2,
+    time_s, seen, d2, logdet, visible, sight, gate, tracks, dets, z, ids, radar_col, x, p, spread,
+    along_m2,
     along_m4, stopped, moved, direction, slow_since, corridor, miss_run, occluded, anchor_u,
     doppler_seen_s, detection_d, sensor_id, history, misses, last_hit_s, confirmed, roads,
     bounds, radar, noise_tab, noise_cnt, fields, pd_tab, pd_cnt, across_std, moving_radial,
@@ -548,7 +590,7 @@ def apply_scan(  # type: ignore[no-untyped-def]
     bias, bias_stats, bias_forget, bias_gate, confirm_speed_var, window_mask, confirm_hits,
     shadow_spread,
 ):  # fmt: skip
-    """Update the tracks with a gated scan (:func:`associate_scan`, its ``sight``) in place.
+    """Update the tracks with a gated scan (:func:`associate_scan`, its ``visible``, ``sight``).
 
     Every gated detection goes to its owner (:func:`owners`: the assignment's, then the likeliest
     track) and updates it (:func:`update_tracks`, which sets ``doppler_seen_s``); the assigned
@@ -571,7 +613,7 @@ def apply_scan(  # type: ignore[no-untyped-def]
     if n_d:
         owner, order = owners(d2, logdet, gate, tracks, dets)
         update_tracks(
-            time_s, order, owner, z, x, p, spread, along_m2, along_m4, stopped, moved,
+            time_s, order, owner, visible, z, x, p, spread, along_m2, along_m4, stopped, moved,
             direction, slow_since, doppler_seen_s, detection_d, corridor, roads, bounds, radar,
             noise_tab, noise_cnt, fields, across_std, moving_radial, start_speed_var,
             learning_rate, shape_rate, spread_lo, spread_hi, align, lane_half_width, bias,
@@ -696,12 +738,15 @@ def unambiguous_assignment(d2, gate):  # type: ignore[no-untyped-def]
 
 @numba.njit(cache=True)
 def update_tracks(  # type: ignore[no-untyped-def]
-    time_s, order, owner, z, x, p, spread, along_m2, along_m4, stopped, moved, direction,
+    time_s, order, owner, visible, z, x, p, spread, along_m2, along_m4, stopped, moved, direction,
     slow_since, doppler_seen_s, detection_d, corridor, roads, bounds, radar, noise_tab,
     noise_cnt, fields, across_std, moving_radial, start_speed_var, learning_rate, shape_rate,
     spread_lo, spread_hi, align, lane_half_width, bias, bias_stats, bias_forget, bias_gate,
 ):  # fmt: skip
     """Update each owning track with its detections in ``order`` (sequential EKF updates).
+
+    ``visible`` (T, 4): the tracks' visible parts as gated (:func:`gate_scan`), the part of a
+    track not updated since.
 
     Azimuth alignment (if ``align``): before its update, a detection of a moving track
     (``moved``, not stopped, ``direction`` known, faster than ``BIAS_MIN_SPEED_MPS``) is
@@ -737,6 +782,7 @@ def update_tracks(  # type: ignore[no-untyped-def]
     zp, h, rm, jp, jv = _borrowed_model(model)
     hp, s, lo, kt, w, ikh, tmp, xn, pn = _borrowed_update(update)
     xv, nu = borrowed(own[0]), borrowed(own[1])
+    gated = np.ones(visible.shape[0], np.bool_)  # the state the gate saw (visible holds)
     for j in order:
         i = owner[j]
         # body spread: along-track residual of the detection's ground point
@@ -762,18 +808,23 @@ def update_tracks(  # type: ignore[no-untyped-def]
         sr = curve_at(noise_tab, noise_cnt, 0, z[j, 0])
         sa = curve_at(noise_tab, noise_cnt, 1, off_boresight(z[j, 1], radar))
         lo_i, hi_i = bounds[corridor[i], 0], bounds[corridor[i], 1]
-        whole = _visible_part(x[i, 0], x[i, 3], spread[i], lo_i, hi_i, roads, radar, fields)[0] == 0
-        if whole:
+        if gated[i]:
+            part = visible[i, 0], visible[i, 1], visible[i, 2], visible[i, 3] != 0.0
+        else:
+            part = _visible_part(x[i, 0], x[i, 3], spread[i], lo_i, hi_i, roads, radar, fields)
+        was_spread = spread[i]
+        if part[0] == 0:  # the whole body in view
             if not (stopped[i] and moved[i]):
                 sample = max(along * along - sr * sr - (rho * sa) ** 2 - p[i, 0, 0], 0.0)
                 var = (1.0 - learning_rate) * spread[i] ** 2 + learning_rate * sample
                 spread[i] = math.sqrt(min(max(var, spread_lo**2), spread_hi**2))
             along_m2[i] += shape_rate * (along * along - along_m2[i])
             along_m4[i] += shape_rate * (along**4 - along_m4[i])
+        if spread[i] != was_spread:
+            part = _visible_part(x[i, 0], x[i, 3], spread[i], lo_i, hi_i, roads, radar, fields)
         _model(  # over the part in view of its body as learnt now
             i, x, spread, corridor, roads, bounds, radar, noise_tab, noise_cnt, fields,
-            across_std, xv, zp, h, rm, jp, jv,
-            _visible_part(x[i, 0], x[i, 3], spread[i], lo_i, hi_i, roads, radar, fields),
+            across_std, xv, zp, h, rm, jp, jv, part,
         )  # fmt: skip
         doppler = doppler_usable(h, p[i], rm, radar)
         innovation_into(z[j], zp, radar, doppler, nu)
@@ -791,6 +842,7 @@ def update_tracks(  # type: ignore[no-untyped-def]
             p[i, 1, 1] += start_speed_var
             p[i, 2, 2] += start_speed_var
         ok, _, _ = update_into(x[i], p[i], nu, h, rm, True, xn, pn, hp, s, lo, kt, w, ikh, tmp)
+        gated[i] = False
         if ok:
             x[i] = xn
             p[i] = pn
@@ -885,6 +937,8 @@ def miss_updates(  # type: ignore[no-untyped-def]
     0 within the gate; ``miss_run`` (T,) is each track's probability of its current run of
     misses for a moving target.
     """
+    if rows.size == 0:
+        return
     # buffers passed per track: borrowed (their owners kept to the end)
     model, update, own = _model_scratch(), _update_scratch(1), (np.zeros(1), np.zeros((1, 1)))
     zp, h, rm, jp, jv = _borrowed_model(model)

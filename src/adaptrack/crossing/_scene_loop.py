@@ -20,6 +20,7 @@ import numpy as np
 
 from .._borrowed import borrowed
 from ..tracking import assignment_by_components, gnn_assign
+from ._radar_kernel import wrapped
 from ._scene_kernels import (
     _lane_frame,
     apply_scan,
@@ -517,7 +518,7 @@ def run_scans(  # type: ignore[no-untyped-def]
         bias = radars.azimuth_bias_rad[r]
         if bias:
             for j in range(z.shape[0]):
-                z[j, 1] = (z[j, 1] - bias + np.pi) % (2 * np.pi) - np.pi
+                z[j, 1] = wrapped(z[j, 1] - bias, np.pi)
         radar = site.radar[r]
         noise_tab, noise_cnt = site.noise_tab[r], site.noise_cnt[r]
         fields = site.fields[r, : site.field_count[r]]
@@ -537,7 +538,7 @@ def run_scans(  # type: ignore[no-untyped-def]
         used = np.zeros(z.shape[0], np.bool_)
         if n:
             clutter = learnt_clutter(v.stopped, v.moved, v.time_s, v.born_s, s.clutter_age_s)
-            seen, d2, logdet, simple, ti, di, sight = associate_scan(
+            seen, d2, logdet, visible, simple, ti, di, sight = associate_scan(
                 v.x, v.p, v.spread, v.stopped, v.moved, v.confirmed, clutter, v.direction,
                 v.corridor, v.sensor_id[:, r], site.roads, site.bounds, radar, noise_tab,
                 noise_cnt, fields, s.body_across_std_m, s.start_speed_max_mps,
@@ -550,8 +551,8 @@ def run_scans(  # type: ignore[no-untyped-def]
                     ti, di = _assign(d2, s.gate)
             stats = radars.bias_stats[r]
             used = apply_scan(
-                time_s, seen, d2, logdet, sight, s.gate, ti, di, z, ids, r, v.x, v.p, v.spread,
-                v.along_m2, v.along_m4, v.stopped, v.moved, v.direction, v.slow_since,
+                time_s, seen, d2, logdet, visible, sight, s.gate, ti, di, z, ids, r, v.x, v.p,
+                v.spread, v.along_m2, v.along_m4, v.stopped, v.moved, v.direction, v.slow_since,
                 v.corridor, v.miss_run, v.occluded, v.anchor_u, v.doppler_seen_s,
                 v.detection_d, v.sensor_id, v.history, v.misses, v.last_hit_s, v.confirmed,
                 site.roads, site.bounds, radar, noise_tab, noise_cnt, fields, site.pd_tab[r],
