@@ -1,10 +1,12 @@
 """Radar simulation, trackers and the compliance Monte Carlo."""
 
 import dataclasses
+import math
 
 import numpy as np
 import pytest
 
+from adaptrack.crossing._radar_kernel import wrapped
 from adaptrack.crossing.compliance import ComplianceResult, evaluate_site
 from adaptrack.crossing.radar_sim import simulate_case
 from adaptrack.crossing.sensor import Curve
@@ -384,3 +386,20 @@ def test_detection_probability_follows_class_and_range():
         # binomial: > 3,000 draws per bin, sd < 0.01; 5 sd
         assert runs.detected[sel].mean() == pytest.approx(expected, abs=0.05)
     assert radar.detection_curve("car")(100.0) == 0.95
+
+
+def test_wrapped_angles_equal_pythons_floored_remainder_to_the_last_bit():
+    """The compiled wrap avoids the remainder call within a turn either side: every value,
+    the turn's edges included, equals Python's ``(a + h) % (2 h) - h`` exactly."""
+    rng = np.random.default_rng(3)
+    two_pi = 2.0 * math.pi
+    edges = [k * math.pi + e for k in range(-5, 6) for e in (0.0, 1e-15, -1e-15, 5e-324, -5e-324)]
+    values = [*edges, *rng.uniform(-8 * math.pi, 8 * math.pi, 20000), 0.0, -0.0, 1e6, -1e6]
+    for half in (math.pi, 0.5 * math.pi, 17.0):
+        for a in values:
+            expected = (a + half) % (2.0 * half) - half
+            got = wrapped(a, half)
+            same_sign = math.copysign(1.0, got) == math.copysign(1.0, expected)
+            assert got == expected and same_sign, (a, half, got, expected)
+    assert wrapped(-3.0 * math.pi / 2, math.pi) == math.pi / 2
+    assert abs(wrapped(two_pi + 0.25, math.pi) - 0.25) < 1e-15

@@ -20,12 +20,19 @@ from numba import prange
 def wrapped(a, half):  # type: ignore[no-untyped-def]
     """Return ``(a + half) % (2 half) - half`` (floored remainder, as Python and NumPy).
 
-    Within one turn the remainder is its argument, exactly: it is taken only beyond.
+    Within one turn either side the remainder is a subtraction or an addition, as Python's
+    (``fmod`` returns its argument, or its difference from the modulus exactly, there): the
+    same value to the last bit without the library call. Further out it is taken.
     """
     r = a + half
-    if 0.0 <= r < 2.0 * half:
+    m = 2.0 * half
+    if 0.0 <= r < m:
         return r - half
-    return r % (2.0 * half) - half
+    if m <= r < 2.0 * m:
+        return (r - m) - half
+    if -m <= r < 0.0:
+        return (r + m) - half
+    return r % m - half
 
 
 @numba.njit(cache=True, inline="always")

@@ -39,6 +39,7 @@ BODY_HALF_SPREADS = 2.0  # a body reaches this many spreads either side of its c
 DETECTION_D_RATE = 0.2  # moving-average rate of a track's detections' offset across
 VISIBLE_SAMPLES = 17  # points over a body tested against a field of view
 NEAREST_BLOCK = 32  # centreline samples searched as a block once it may hold the nearest
+NEAREST_GROUP = 32  # blocks tested as a group first
 
 
 @numba.njit(cache=True, inline="always")
@@ -354,13 +355,15 @@ def _whitened_square(lo, w):  # type: ignore[no-untyped-def]
 def gate_scan(  # type: ignore[no-untyped-def]
     x, p, spread, starting, road_user, moving, occluder, direction, corridor, roads, bounds,
     radar, noise_tab, noise_cnt, fields, across_std, start_speed_max, extent_gate,
-    passing_gate, beside_m, gate, z, d2, logdet, visible,
+    passing_gate, beside_m, gate, z, d2, logdet, gated,
 ):  # fmt: skip
     """Fill ``d2`` (T, D) with each detection's squared Mahalanobis distance to each track.
 
     ``logdet`` (T,) receives the log-determinant of each track's innovation covariance
-    (``inf`` where ``d2`` is), ``visible`` (T, 4) each track's :func:`_visible_part` (its
-    flag as 0 / 1).
+    (``inf`` where ``d2`` is), ``gated`` (T, 8) what the gate computed of each track for its
+    update (:func:`update_tracks`): its :func:`_visible_part` (the flag as 0 / 1), and the
+    lane frame ``cx, cy, tx, ty`` at its ``u`` (:func:`_lane_frame`; NaN when not computed,
+    or computed elsewhere: at the centre of a part of the body).
     A body's reflections lie on it: with ``extent_gate``, a detection that lies on a road
     user's body (a ``road_user`` track: confirmed, it has moved; within ``BODY_HALF_SPREADS``
     of its spreads along the lane from its centre, and within ``gate``) costs a track whose
@@ -410,7 +413,8 @@ def gate_scan(  # type: ignore[no-untyped-def]
         logdet[i] = np.inf
         lo_i, hi_i = bounds[corridor[i], 0], bounds[corridor[i], 1]
         part = _visible_part(x[i, 0], x[i, 3], spread[i], lo_i, hi_i, roads, radar, fields)
-        visible[i, 0], visible[i, 1], visible[i, 2], visible[i, 3] = part
+        gated[i, 0], gated[i, 1], gated[i, 2], gated[i, 3] = part
+        gated[i, 4:] = np.nan
         if part[3]:  # wholly out of view, its predicted detection too (seen stays False)
             d2[i, :] = np.inf
             continue
@@ -418,6 +422,8 @@ def gate_scan(  # type: ignore[no-untyped-def]
             i, x, spread, corridor, roads, bounds, radar, noise_tab, noise_cnt, fields,
             across_std, xv, zp, h, rm, jp, jv, part,
         )  # fmt: skip
+        if part[0] == 0.0:  # the model's frame is the track's
+            gated[i, 4], gated[i, 5], gated[i, 6], gated[i, 7] = cx, cy, tx, ty
         seen[i] = in_view(zp[0], off_boresight(zp[1], radar), fields, radar[4])
         if not seen[i] or n_d == 0:
             d2[i, :] = np.inf
@@ -543,23 +549,27 @@ def associate_scan(  # type: ignore[no-untyped-def]
     :func:`reserve_clutter`). With ``id_bonus`` > 0, a gated detection whose sensor id
     (``ids`` (D,), -1 none) is the one this radar last gave a track (``sensor_id`` (T,))
     costs that much less (:func:`favour_sensor_ids`).
-    Returns ``(seen, d2, logdet, visible, simple, tracks, detections, sight)``: each track in
-    view, distances (T, D), log-determinants (T,), visible parts (T, 4) (:func:`gate_scan`),
+    Returns ``(seen, d2, logdet, gated, simple, tracks, detections, sight)``: each track in
+    view, distances (T, D), log-determinants (T,), visible parts and lane frames (T, 8)
+    (:func:`gate_scan`),
     if ``simple`` the
     one-to-one assignment (:func:`unambiguous_assignment`), and the tracks' lines of sight
-    if the occlusion gate computed them (:func:`sight_lines`; else no rows).
+    if the occlusion gate computed them (:func:`sight_lines`: when a road user stands, of the
+    queued tracks and the road users, NaN rows for the rest; else no rows).
     """
     n_t, n_d = x.shape[0], z.shape[0]
     d2 = np.empty((n_t, n_d))
     logdet = np.empty(n_t)
-    visible = np.empty((n_t, 4))
+    gated = np.empty((n_t, 8))
     road_user = moved & confirmed
     behind = np.full(n_t, -1, dtype=np.int64)  # the stopped road user hiding a queued track
     sight = np.zeros((0, 3))  # the tracks' lines of sight, if needed (:func:`sight_lines`)
     queued = np.flatnonzero(stopped)
-    if occlusion_gate and queued.size:
-        sight = np.zeros((n_t, 3))
-        sight_lines(np.arange(n_t), x, spread, corridor, roads, bounds, radar, sight)
+    if occlusion_gate and queued.size and (stopped & road_user).any():
+        # of the queued tracks and the road users (the rest NaN: not needed here)
+        sight = np.full((n_t, 3), np.nan)
+        sight_lines(np.flatnonzero(stopped | road_user), x, spread, corridor, roads, bounds,
+                    radar, sight)  # fmt: skip
         nearest = nearer_occluders(queued, x, spread, corridor, sight, road_user)
         for k in range(queued.size):
             if nearest[k] >= 0 and stopped[nearest[k]]:  # else the nearest is moving
@@ -567,21 +577,21 @@ def associate_scan(  # type: ignore[no-untyped-def]
     seen = gate_scan(
         x, p, spread, stopped & moved, road_user, road_user & ~stopped, behind, direction,
         corridor, roads, bounds, radar, noise_tab, noise_cnt, fields, across_std,
-        start_speed_max, extent_gate, passing_gate, beside_m, gate, z, d2, logdet, visible,
+        start_speed_max, extent_gate, passing_gate, beside_m, gate, z, d2, logdet, gated,
     )  # fmt: skip
     if n_d == 0:
         none = np.zeros(0, np.int64)
-        return seen, d2, logdet, visible, True, none, none, sight
+        return seen, d2, logdet, gated, True, none, none, sight
     reserve_clutter(d2, clutter, clutter_gate)
     if id_bonus != 0.0:
         favour_sensor_ids(d2, sensor_id, ids, id_bonus, gate)
     simple, tracks, dets = unambiguous_assignment(d2, gate)
-    return seen, d2, logdet, visible, simple, tracks, dets, sight
+    return seen, d2, logdet, gated, simple, tracks, dets, sight
 
 
 @numba.njit(cache=True)
 def apply_scan(  # type: ignore[no-untyped-def]
-    time_s, seen, d2, logdet, visible, sight, gate, tracks, dets, z, ids, radar_col, x, p, spread,
+    time_s, seen, d2, logdet, gated, sight, gate, tracks, dets, z, ids, radar_col, x, p, spread,
     along_m2,
     along_m4, stopped, moved, direction, slow_since, corridor, miss_run, occluded, anchor_u,
     doppler_seen_s, detection_d, sensor_id, history, misses, last_hit_s, confirmed, roads,
@@ -590,7 +600,7 @@ def apply_scan(  # type: ignore[no-untyped-def]
     bias, bias_stats, bias_forget, bias_gate, confirm_speed_var, window_mask, confirm_hits,
     shadow_spread,
 ):  # fmt: skip
-    """Update the tracks with a gated scan (:func:`associate_scan`, its ``visible``, ``sight``).
+    """Update the tracks with a gated scan (:func:`associate_scan`, its ``gated``, ``sight``).
 
     Every gated detection goes to its owner (:func:`owners`: the assignment's, then the likeliest
     track) and updates it (:func:`update_tracks`, which sets ``doppler_seen_s``); the assigned
@@ -613,7 +623,7 @@ def apply_scan(  # type: ignore[no-untyped-def]
     if n_d:
         owner, order = owners(d2, logdet, gate, tracks, dets)
         update_tracks(
-            time_s, order, owner, visible, z, x, p, spread, along_m2, along_m4, stopped, moved,
+            time_s, order, owner, gated, z, x, p, spread, along_m2, along_m4, stopped, moved,
             direction, slow_since, doppler_seen_s, detection_d, corridor, roads, bounds, radar,
             noise_tab, noise_cnt, fields, across_std, moving_radial, start_speed_var,
             learning_rate, shape_rate, spread_lo, spread_hi, align, lane_half_width, bias,
@@ -631,7 +641,8 @@ def apply_scan(  # type: ignore[no-untyped-def]
     nearer = np.full(missed.size, -1, np.int64)
     if missed.size:  # lines of sight after the updates: those of the updated tracks anew
         if sight.shape[0] == n_t:
-            sight_lines(np.flatnonzero(hit), x, spread, corridor, roads, bounds, radar, sight)
+            stale = hit | np.isnan(sight[:, 0])
+            sight_lines(np.flatnonzero(stale), x, spread, corridor, roads, bounds, radar, sight)
         else:
             sight = np.zeros((n_t, 3))
             sight_lines(np.arange(n_t), x, spread, corridor, roads, bounds, radar, sight)
@@ -738,15 +749,15 @@ def unambiguous_assignment(d2, gate):  # type: ignore[no-untyped-def]
 
 @numba.njit(cache=True)
 def update_tracks(  # type: ignore[no-untyped-def]
-    time_s, order, owner, visible, z, x, p, spread, along_m2, along_m4, stopped, moved, direction,
+    time_s, order, owner, gated, z, x, p, spread, along_m2, along_m4, stopped, moved, direction,
     slow_since, doppler_seen_s, detection_d, corridor, roads, bounds, radar, noise_tab,
     noise_cnt, fields, across_std, moving_radial, start_speed_var, learning_rate, shape_rate,
     spread_lo, spread_hi, align, lane_half_width, bias, bias_stats, bias_forget, bias_gate,
 ):  # fmt: skip
     """Update each owning track with its detections in ``order`` (sequential EKF updates).
 
-    ``visible`` (T, 4): the tracks' visible parts as gated (:func:`gate_scan`), the part of a
-    track not updated since.
+    ``gated`` (T, 8): the tracks' visible parts and lane frames as gated (:func:`gate_scan`),
+    those of a track not updated since.
 
     Azimuth alignment (if ``align``): before its update, a detection of a moving track
     (``moved``, not stopped, ``direction`` known, faster than ``BIAS_MIN_SPEED_MPS``) is
@@ -782,11 +793,15 @@ def update_tracks(  # type: ignore[no-untyped-def]
     zp, h, rm, jp, jv = _borrowed_model(model)
     hp, s, lo, kt, w, ikh, tmp, xn, pn = _borrowed_update(update)
     xv, nu = borrowed(own[0]), borrowed(own[1])
-    gated = np.ones(visible.shape[0], np.bool_)  # the state the gate saw (visible holds)
+    as_gated = np.ones(gated.shape[0], np.bool_)  # the state the gate saw (gated holds)
     for j in order:
         i = owner[j]
         # body spread: along-track residual of the detection's ground point
-        cx, cy, tx, ty, _, px, py = _lane_frame(roads, bounds, corridor[i], x[i, 0], x[i, 3])
+        if as_gated[i] and not math.isnan(gated[i, 4]):
+            cx, cy, tx, ty = gated[i, 4], gated[i, 5], gated[i, 6], gated[i, 7]
+            px, py = cx - x[i, 3] * ty, cy + x[i, 3] * tx
+        else:
+            cx, cy, tx, ty, _, px, py = _lane_frame(roads, bounds, corridor[i], x[i, 0], x[i, 3])
         gx, gy, rho = _ground_point(z[j], radar)
         along = (gx - px) * tx + (gy - py) * ty
         across = (gx - cx) * -ty + (gy - cy) * tx  # the detection's offset (as x[i, 3])
@@ -808,8 +823,8 @@ def update_tracks(  # type: ignore[no-untyped-def]
         sr = curve_at(noise_tab, noise_cnt, 0, z[j, 0])
         sa = curve_at(noise_tab, noise_cnt, 1, off_boresight(z[j, 1], radar))
         lo_i, hi_i = bounds[corridor[i], 0], bounds[corridor[i], 1]
-        if gated[i]:
-            part = visible[i, 0], visible[i, 1], visible[i, 2], visible[i, 3] != 0.0
+        if as_gated[i]:
+            part = gated[i, 0], gated[i, 1], gated[i, 2], gated[i, 3] != 0.0
         else:
             part = _visible_part(x[i, 0], x[i, 3], spread[i], lo_i, hi_i, roads, radar, fields)
         was_spread = spread[i]
@@ -842,7 +857,7 @@ def update_tracks(  # type: ignore[no-untyped-def]
             p[i, 1, 1] += start_speed_var
             p[i, 2, 2] += start_speed_var
         ok, _, _ = update_into(x[i], p[i], nu, h, rm, True, xn, pn, hp, s, lo, kt, w, ikh, tmp)
-        gated[i] = False
+        as_gated[i] = False
         if ok:
             x[i] = xn
             p[i] = pn
@@ -980,35 +995,57 @@ def planar_rows(  # type: ignore[no-untyped-def]
         to_cross[k] = abs(crossing_u[corridor[i]] - x[i, 0])
 
 
+@numba.njit(cache=True, inline="always")
+def _beyond(roads, start, stop, px, py, r2):  # type: ignore[no-untyped-def]
+    """Whether no centreline sample of columns ``start:stop`` lies nearer than ``sqrt(r2)``.
+
+    None lies nearer than the middle one less the arc to the block's ends (an arc is no
+    shorter than its chord); a small margin keeps the test on the safe side of rounding.
+    """
+    mid = (start + stop - 1) // 2
+    reach = max(roads[0, mid] - roads[0, start], roads[0, stop - 1] - roads[0, mid])
+    lower = math.sqrt((px - roads[1, mid]) ** 2 + (py - roads[2, mid]) ** 2) - reach
+    return lower > 0.0 and lower * lower > r2 * (1.0 + 1e-9) + 1e-12
+
+
 @numba.njit(cache=True)
 def nearest_sample(roads, bounds, px, py):  # type: ignore[no-untyped-def]
     """Corridor whose centreline passes nearest to a point, ``u`` and signed offset ``d``.
 
     ``u`` is the nearest centreline sample's (the first on a tie); ``d`` is to the right of
-    increasing ``u``; the corridor is the one of least ``|d|`` (the first on a tie). Blocks of
-    samples that cannot hold a nearer one than the nearest of their middles, or than found
-    so far, are skipped.
+    increasing ``u``; the corridor is the one of least ``|d|`` (the first on a tie). Samples
+    are searched in blocks of ``NEAREST_BLOCK``, blocks in groups of ``NEAREST_GROUP``: a
+    first candidate is the nearest middle of a group, then of that group's blocks; groups and
+    blocks that cannot hold a nearer sample than found so far are skipped (:func:`_beyond`).
     """
     best_c, best_u, best_d = 0, 0.0, np.inf
+    group = NEAREST_BLOCK * NEAREST_GROUP
     for c in range(bounds.shape[0]):
-        k_best, r_best = bounds[c, 0], np.inf
-        for start in range(bounds[c, 0], bounds[c, 1], NEAREST_BLOCK):  # the nearest middle
-            mid = (start + min(start + NEAREST_BLOCK, bounds[c, 1]) - 1) // 2
+        lo, hi = bounds[c, 0], bounds[c, 1]
+        k_best, r_best = lo, np.inf
+        for start in range(lo, hi, group):  # the nearest middle of a group
+            mid = (start + min(start + group, hi) - 1) // 2
             r = (px - roads[1, mid]) ** 2 + (py - roads[2, mid]) ** 2
             if r < r_best:
                 k_best, r_best = mid, r
-        for start in range(bounds[c, 0], bounds[c, 1], NEAREST_BLOCK):
-            stop = min(start + NEAREST_BLOCK, bounds[c, 1])
-            # no sample of the block lies nearer than its middle one less the arc to its ends
-            mid = (start + stop - 1) // 2
-            reach = max(roads[0, mid] - roads[0, start], roads[0, stop - 1] - roads[0, mid])
-            lower = math.sqrt((px - roads[1, mid]) ** 2 + (py - roads[2, mid]) ** 2) - reach
-            if lower > 0.0 and lower * lower > r_best * (1.0 + 1e-9) + 1e-12:
+        first = lo + (k_best - lo) // group * group
+        for start in range(first, min(first + group, hi), NEAREST_BLOCK):  # then of its blocks
+            mid = (start + min(start + NEAREST_BLOCK, hi) - 1) // 2
+            r = (px - roads[1, mid]) ** 2 + (py - roads[2, mid]) ** 2
+            if r < r_best:
+                k_best, r_best = mid, r
+        for group_start in range(lo, hi, group):
+            group_stop = min(group_start + group, hi)
+            if _beyond(roads, group_start, group_stop, px, py, r_best):
                 continue
-            for k in range(start, stop):
-                r = (px - roads[1, k]) ** 2 + (py - roads[2, k]) ** 2
-                if r < r_best or (r == r_best and k < k_best):  # the first on a tie
-                    k_best, r_best = k, r
+            for start in range(group_start, group_stop, NEAREST_BLOCK):
+                stop = min(start + NEAREST_BLOCK, group_stop)
+                if _beyond(roads, start, stop, px, py, r_best):
+                    continue
+                for k in range(start, stop):
+                    r = (px - roads[1, k]) ** 2 + (py - roads[2, k]) ** 2
+                    if r < r_best or (r == r_best and k < k_best):  # the first on a tie
+                        k_best, r_best = k, r
         th = roads[3, k_best]
         d = (px - roads[1, k_best]) * -math.cos(th) + (py - roads[2, k_best]) * math.sin(th)
         if abs(d) < abs(best_d):

@@ -237,6 +237,40 @@ def _borrowed_site(site):  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True)
+def _borrowed_tracks(t):  # type: ignore[no-untyped-def]
+    """Return ``t`` (:class:`TrackRows`) as borrowed views (while its arrays are alive)."""
+    return TrackRows(
+        borrowed(t.ids), borrowed(t.history), borrowed(t.confirmed), borrowed(t.misses),
+        borrowed(t.last_hit_s), borrowed(t.born_s), borrowed(t.corridor), borrowed(t.x),
+        borrowed(t.p), borrowed(t.time_s), borrowed(t.stopped), borrowed(t.slow_since),
+        borrowed(t.moved), borrowed(t.event_raised), borrowed(t.line_event_raised),
+        borrowed(t.anchor_u), borrowed(t.spread), borrowed(t.along_m2), borrowed(t.along_m4),
+        borrowed(t.direction), borrowed(t.miss_run), borrowed(t.occluded),
+        borrowed(t.doppler_seen_s), borrowed(t.detection_d), borrowed(t.sensor_id),
+    )  # fmt: skip
+
+
+@numba.njit(cache=True)
+def _borrowed_out(o):  # type: ignore[no-untyped-def]
+    """Return ``o`` (:class:`RowBuffer`) as borrowed views (while its arrays are alive)."""
+    return RowBuffer(
+        borrowed(o.track_id), borrowed(o.time_s), borrowed(o.east_m), borrowed(o.north_m),
+        borrowed(o.speed_mps), borrowed(o.east_speed_mps), borrowed(o.north_speed_mps),
+        borrowed(o.from_crossing_m), borrowed(o.status), borrowed(o.moved),
+        borrowed(o.position_std_m), borrowed(o.speed_std_mps),
+    )  # fmt: skip
+
+
+@numba.njit(cache=True, inline="always")
+def _room(rows, t, n, need):  # type: ignore[no-untyped-def]
+    """``rows`` (owned) with room for ``need`` rows and ``t``, its borrowed views (renewed)."""
+    if need <= rows.ids.shape[0]:
+        return rows, t
+    rows = with_room(rows, n, need)
+    return rows, _borrowed_tracks(rows)
+
+
+@numba.njit(cache=True)
 def _grown(a, n, size):  # type: ignore[no-untyped-def]
     """Return ``a`` with ``size`` rows along its first axis, its first ``n`` kept."""
     out = np.empty((size,) + a.shape[1:], a.dtype)
@@ -451,25 +485,37 @@ def learnt_clutter(stopped, moved, time_s, born_s, clutter_age_s):  # type: igno
 
 
 @numba.njit(cache=True)
+def _out_room(o, n_out, more):  # type: ignore[no-untyped-def]
+    """Return the row buffer ``o`` (``n_out`` rows used) with room for ``more`` rows."""
+    if n_out + more <= o.track_id.shape[0]:
+        return o
+    size = 2 * (n_out + more) + 1024
+    return RowBuffer(
+        _grown(o.track_id, n_out, size), _grown(o.time_s, n_out, size),
+        _grown(o.east_m, n_out, size), _grown(o.north_m, n_out, size),
+        _grown(o.speed_mps, n_out, size), _grown(o.east_speed_mps, n_out, size),
+        _grown(o.north_speed_mps, n_out, size), _grown(o.from_crossing_m, n_out, size),
+        _grown(o.status, n_out, size), _grown(o.moved, n_out, size),
+        _grown(o.position_std_m, n_out, size), _grown(o.speed_std_mps, n_out, size),
+    )  # fmt: skip
+
+
+@numba.njit(cache=True)
 def write_rows(t, n, time_s, s, site, rows_out, n_out):  # type: ignore[no-untyped-def]
     """Append the confirmed tracks at ``time_s``; return the buffer (grown if full), count."""
+    rows_out = _out_room(rows_out, n_out, n)
+    return rows_out, _write_rows_into(t, n, time_s, s, site, _borrowed_out(rows_out), n_out)
+
+
+@numba.njit(cache=True)
+def _write_rows_into(t, n, time_s, s, site, rows_out, n_out):  # type: ignore[no-untyped-def]
+    """:func:`write_rows` into a buffer with room for ``n`` more rows; return its count."""
     v = _live(t, n)
     rows, status = confirmed_rows(
         v.confirmed, v.time_s, v.last_hit_s, v.stopped, v.moved, v.x, v.spread, v.corridor,
         s.merge_lateral_m, s.coasting_s, s.status_codes,
     )  # fmt: skip
     m = rows.size
-    if n_out + m > rows_out.track_id.shape[0]:
-        size = 2 * (n_out + m) + 1024
-        o = rows_out
-        rows_out = RowBuffer(
-            _grown(o.track_id, n_out, size), _grown(o.time_s, n_out, size),
-            _grown(o.east_m, n_out, size), _grown(o.north_m, n_out, size),
-            _grown(o.speed_mps, n_out, size), _grown(o.east_speed_mps, n_out, size),
-            _grown(o.north_speed_mps, n_out, size), _grown(o.from_crossing_m, n_out, size),
-            _grown(o.status, n_out, size), _grown(o.moved, n_out, size),
-            _grown(o.position_std_m, n_out, size), _grown(o.speed_std_mps, n_out, size),
-        )  # fmt: skip
     pos, vel, pos_std, to_cross = np.zeros((m, 2)), np.zeros((m, 2)), np.zeros(m), np.zeros(m)
     planar_rows(
         rows, v.x, v.p, v.corridor, site.roads, site.bounds, site.crossing_u, pos, vel, pos_std,
@@ -488,7 +534,7 @@ def write_rows(t, n, time_s, s, site, rows_out, n_out):  # type: ignore[no-untyp
         east_speed[r], north_speed[r] = vel[k, 0], vel[k, 1]
         from_crossing[r], position_std[r] = to_cross[k], pos_std[k]
         speed_std[r] = math.sqrt(p[i, 1, 1])
-    return rows_out, n_out + m
+    return n_out + m
 
 
 @numba.njit(cache=True)
@@ -508,6 +554,10 @@ def run_scans(  # type: ignore[no-untyped-def]
     Each scan is the steps of :meth:`adaptrack.crossing.scene_tracker.SceneTracker.step`.
     """
     site = _borrowed_site(site)  # the caller's site outlives the call
+    # the track rows and the output buffer are grown here as needed: the owners (returned),
+    # and views without reference counting for the scans
+    rows_own, t = t, _borrowed_tracks(t)
+    out_own, out = rows_out, _borrowed_out(rows_out)
     for k in range(scan_radar.size):
         r = scan_radar[k]
         radars.last_stamp_s[r] = scan_stamp[k]
@@ -538,7 +588,7 @@ def run_scans(  # type: ignore[no-untyped-def]
         used = np.zeros(z.shape[0], np.bool_)
         if n:
             clutter = learnt_clutter(v.stopped, v.moved, v.time_s, v.born_s, s.clutter_age_s)
-            seen, d2, logdet, visible, simple, ti, di, sight = associate_scan(
+            seen, d2, logdet, gated, simple, ti, di, sight = associate_scan(
                 v.x, v.p, v.spread, v.stopped, v.moved, v.confirmed, clutter, v.direction,
                 v.corridor, v.sensor_id[:, r], site.roads, site.bounds, radar, noise_tab,
                 noise_cnt, fields, s.body_across_std_m, s.start_speed_max_mps,
@@ -551,7 +601,7 @@ def run_scans(  # type: ignore[no-untyped-def]
                     ti, di = _assign(d2, s.gate)
             stats = radars.bias_stats[r]
             used = apply_scan(
-                time_s, seen, d2, logdet, visible, sight, s.gate, ti, di, z, ids, r, v.x, v.p,
+                time_s, seen, d2, logdet, gated, sight, s.gate, ti, di, z, ids, r, v.x, v.p,
                 v.spread, v.along_m2, v.along_m4, v.stopped, v.moved, v.direction, v.slow_since,
                 v.corridor, v.miss_run, v.occluded, v.anchor_u, v.doppler_seen_s,
                 v.detection_d, v.sensor_id, v.history, v.misses, v.last_hit_s, v.confirmed,
@@ -575,7 +625,7 @@ def run_scans(  # type: ignore[no-untyped-def]
                 s.cluster_radius_m, s.initial_speed_var, s.body_along_std_m**2,
             )  # fmt: skip
             m = corridor.size
-            t = with_room(t, n, n + m)
+            rows_own, t = _room(rows_own, t, n, n + m)
             left_ids = ids[left]
             for g in range(m):
                 new_row(
@@ -608,7 +658,7 @@ def run_scans(  # type: ignore[no-untyped-def]
             v.stopped, v.moved, v.along_m2, v.along_m4, s.split_kurtosis, s.split_min_half_gap_m
         )
         if rows.size:
-            t = with_room(t, n, n + rows.size)
+            rows_own, t = _room(rows_own, t, n, n + rows.size)
             for g in range(rows.size):
                 i, j = rows[g], n + g
                 towards = 1.0 if site.crossing_u[t.corridor[i]] >= t.x[i, 0] else -1.0
@@ -634,5 +684,8 @@ def run_scans(  # type: ignore[no-untyped-def]
         if dead.any():
             n = _compacted(v, n, dead)  # rows move within the live ones
         if record:
-            rows_out, n_out = write_rows(t, n, time_s, s, site, rows_out, n_out)
-    return t, n, next_id, events, n_events, rows_out, n_out
+            if n_out + n > out_own.track_id.shape[0]:
+                out_own = _out_room(out_own, n_out, n)
+                out = _borrowed_out(out_own)
+            n_out = _write_rows_into(t, n, time_s, s, site, out, n_out)
+    return rows_own, n, next_id, events, n_events, out_own, n_out
