@@ -16,7 +16,7 @@ import math
 import numba
 import numpy as np
 
-from .._borrowed import borrowed, keep_alive
+from .._borrowed import on_stack
 from ..filters._kernels import cholesky_into, update_into
 from ..tracking.assignment import cluster_labels
 from ..tracking.lifecycle import expired_rows, record_hits
@@ -44,35 +44,19 @@ NEAREST_GROUP = 32  # blocks tested as a group first
 
 @numba.njit(cache=True, inline="always")
 def _model_scratch():  # type: ignore[no-untyped-def]
-    """Buffers of the measurement model: detection, Jacobian, noise, polar Jacobians."""
+    """Buffers of the measurement model (stack): detection, Jacobian, noise, polar Jacobians."""
     return (
-        np.zeros(3), np.zeros((3, N_STATE)), np.zeros((3, 3)), np.zeros((3, 2)),
-        np.zeros((3, 2)),
+        on_stack(3), on_stack((3, N_STATE)), on_stack((3, 3)), on_stack((3, 2)), on_stack((3, 2))
     )  # fmt: skip
 
 
 @numba.njit(cache=True, inline="always")
 def _update_scratch(m):  # type: ignore[no-untyped-def]
-    """Buffers of an ``m``-dimensional EKF update (``update_into``) and its posterior."""
+    """Buffers of an ``m``-dimensional EKF update (``update_into``) and its posterior (stack)."""
     return (
-        np.zeros((m, N_STATE)), np.zeros((m, m)), np.zeros((m, m)), np.zeros((m, N_STATE)),
-        np.zeros(m), np.zeros((N_STATE, N_STATE)), np.zeros((N_STATE, N_STATE)),
-        np.zeros(N_STATE), np.zeros((N_STATE, N_STATE)),
-    )  # fmt: skip
-
-
-@numba.njit(cache=True, inline="always")
-def _borrowed_model(own):  # type: ignore[no-untyped-def]
-    """Borrowed views of the model buffers ``own`` (:func:`_model_scratch`)."""
-    return borrowed(own[0]), borrowed(own[1]), borrowed(own[2]), borrowed(own[3]), borrowed(own[4])
-
-
-@numba.njit(cache=True, inline="always")
-def _borrowed_update(own):  # type: ignore[no-untyped-def]
-    """Borrowed views of the update buffers ``own`` (:func:`_update_scratch`)."""
-    return (
-        borrowed(own[0]), borrowed(own[1]), borrowed(own[2]), borrowed(own[3]), borrowed(own[4]),
-        borrowed(own[5]), borrowed(own[6]), borrowed(own[7]), borrowed(own[8]),
+        on_stack((m, N_STATE)), on_stack((m, m)), on_stack((m, m)), on_stack((m, N_STATE)),
+        on_stack(m), on_stack((N_STATE, N_STATE)), on_stack((N_STATE, N_STATE)),
+        on_stack(N_STATE), on_stack((N_STATE, N_STATE)),
     )  # fmt: skip
 
 
@@ -85,9 +69,8 @@ def predict_tracks(  # type: ignore[no-untyped-def]
     A track with a known ``direction`` (+1 / -1 along ``u``) does not reverse: a predicted
     speed against it becomes a standstill (speed and acceleration 0), as a braking vehicle.
     """
-    own = np.zeros((3, N_STATE, N_STATE))  # kept to the end
-    noise = borrowed(own)
-    q_moving, q_stopped, tmp = noise[0], noise[1], noise[2]
+    q_moving, q_stopped = on_stack((N_STATE, N_STATE)), on_stack((N_STATE, N_STATE))
+    tmp = on_stack((N_STATE, N_STATE))
     moving_dt, stopped_dt = -1.0, -1.0  # the steps q_moving, q_stopped were made for
     for i in range(x.shape[0]):
         dt = max(time_s - t[i], 0.0)
@@ -106,7 +89,6 @@ def predict_tracks(  # type: ignore[no-untyped-def]
             _predict_row(x, p, i, dt, False, q_moving, tmp)
         if direction[i] != 0 and x[i, 1] * direction[i] < 0.0:
             x[i, 1] = x[i, 2] = 0.0
-    keep_alive(own)
 
 
 @numba.njit(cache=True, inline="always")
@@ -393,12 +375,10 @@ def gate_scan(  # type: ignore[no-untyped-def]
     """
     n_t, n_d = x.shape[0], z.shape[0]
     seen = np.zeros(n_t, dtype=np.bool_)
-    # buffers passed per track: borrowed (their owners kept to the end)
-    model = _model_scratch()
-    own = (np.zeros(N_STATE), np.zeros((3, 3)), np.zeros((3, 3)), np.zeros(3), np.zeros(3))
-    zp, h, rm, jp, jv = _borrowed_model(model)
-    xv, s, lo = borrowed(own[0]), borrowed(own[1]), borrowed(own[2])
-    w, w0 = borrowed(own[3]), borrowed(own[4])
+    # buffers passed per track: on the stack
+    zp, h, rm, jp, jv = _model_scratch()
+    xv, s, lo = on_stack(N_STATE), on_stack((3, 3)), on_stack((3, 3))
+    w, w0 = on_stack(3), on_stack(3)
     ground = np.zeros((n_d, 6))  # ground point, sight line, range and cross variances
     for j in range(n_d):
         gx, gy, rho = _ground_point(z[j], radar)
@@ -492,7 +472,6 @@ def gate_scan(  # type: ignore[no-untyped-def]
             for i in range(n_t):
                 if on_a_body or starting[i]:
                     d2[i, j] += penalty[i, j]
-    keep_alive((model, own))
     return seen
 
 
@@ -788,11 +767,10 @@ def update_tracks(  # type: ignore[no-untyped-def]
     ``DETECTION_D_RATE``; NaN before the first): where its reflections lie, not where the
     track's state says.
     """
-    # buffers passed per detection: borrowed (their owners kept to the end)
-    model, update, own = _model_scratch(), _update_scratch(3), (np.zeros(N_STATE), np.zeros(3))
-    zp, h, rm, jp, jv = _borrowed_model(model)
-    hp, s, lo, kt, w, ikh, tmp, xn, pn = _borrowed_update(update)
-    xv, nu = borrowed(own[0]), borrowed(own[1])
+    # buffers passed per detection: on the stack
+    zp, h, rm, jp, jv = _model_scratch()
+    hp, s, lo, kt, w, ikh, tmp, xn, pn = _update_scratch(3)
+    xv, nu = on_stack(N_STATE), on_stack(3)
     as_gated = np.ones(gated.shape[0], np.bool_)  # the state the gate saw (gated holds)
     for j in order:
         i = owner[j]
@@ -863,7 +841,6 @@ def update_tracks(  # type: ignore[no-untyped-def]
             p[i] = pn
             if stopped[i]:
                 x[i, 1] = x[i, 2] = 0.0
-    keep_alive((model, update, own))
 
 
 @numba.njit(cache=True)
@@ -954,11 +931,10 @@ def miss_updates(  # type: ignore[no-untyped-def]
     """
     if rows.size == 0:
         return
-    # buffers passed per track: borrowed (their owners kept to the end)
-    model, update, own = _model_scratch(), _update_scratch(1), (np.zeros(1), np.zeros((1, 1)))
-    zp, h, rm, jp, jv = _borrowed_model(model)
-    hp, s, lo, kt, w, ikh, tmp, xn, pn = _borrowed_update(update)
-    nu1, r1 = borrowed(own[0]), borrowed(own[1])
+    # buffers passed per track: on the stack
+    zp, h, rm, jp, jv = _model_scratch()
+    hp, s, lo, kt, w, ikh, tmp, xn, pn = _update_scratch(1)
+    nu1, r1 = on_stack(1), on_stack((1, 1))
     for i in rows:
         road = roads[:, bounds[corridor[i], 0] : bounds[corridor[i], 1]]
         _, miss_run[i] = gate_update_into(
@@ -968,7 +944,6 @@ def miss_updates(  # type: ignore[no-untyped-def]
         )  # fmt: skip
         x[i] = xn
         p[i] = pn
-    keep_alive((model, update, own))
 
 
 @numba.njit(cache=True)
