@@ -5,6 +5,7 @@ import math
 import numpy as np
 import pytest
 
+from adaptrack.crossing._ekf_kernels import lane_at
 from adaptrack.crossing._scene_kernels import (
     BODY_HALF_SPREADS,
     VISIBLE_SAMPLES,
@@ -175,9 +176,12 @@ def test_a_body_reaching_past_the_radars_range_is_seen_over_its_near_part():
     x[:, 0] = [40.0, 20.0, 60.0]  # a 16 m body centred at 40 m ground range, at 20 m, at 60 m
     spread = np.array([4.0, 4.0, 4.0]) / BODY_HALF_SPREADS
     end = roads.shape[1]
-    offset, part_spread, slope, out = _visible_part(
-        x[0, 0], x[0, 3], spread[0], 0, end, roads, radar, fields
-    )
+
+    def visible(i):
+        lane = lane_at(roads, 0, end, x[i, 0])
+        return _visible_part(x[i, 0], x[i, 3], spread[i], 0, end, roads, radar, fields, lane)
+
+    offset, part_spread, slope, out = visible(0)
     # independently: in view up to the ground range sqrt(40^2 - 6^2) = 39.55 m
     far = math.sqrt(40.0**2 - 6.0**2)
     step = 8.0 / (VISIBLE_SAMPLES - 1)
@@ -186,9 +190,9 @@ def test_a_body_reaching_past_the_radars_range_is_seen_over_its_near_part():
     assert slope == -0.5  # the far end of what is seen stays at the range limit
     assert not out
     whole = (0.0, 2.0, 0.0, False)  # in view from 12 to 28 m
-    assert _visible_part(x[1, 0], x[1, 3], spread[1], 0, end, roads, radar, fields) == whole
+    assert visible(1) == whole
     gone = (0.0, 2.0, 0.0, True)  # from 52 to 68 m: known out of view (its detection too)
-    assert _visible_part(x[2, 0], x[2, 3], spread[2], 0, end, roads, radar, fields) == gone
+    assert visible(2) == gone
 
 
 @pytest.mark.parametrize("site_name", ["lx_curve_near", "lx_three_arm"])
@@ -224,8 +228,9 @@ def test_the_visible_part_of_a_body_equals_a_sampled_field_of_view_test(site_nam
                 checked += 1
             lo, hi = bounds[corridor[i]]
             got = _visible_part(
-                x[i, 0], x[i, 3], spread[i], lo, hi, roads, radar.kernel_row(), radar.field_table()
-            )
+                x[i, 0], x[i, 3], spread[i], lo, hi, roads, radar.kernel_row(),
+                radar.field_table(), lane_at(roads, lo, hi, x[i, 0]),
+            )  # fmt: skip
             assert got[:3] == pytest.approx(want, abs=1e-9), (radar.name, i)
             assert k == 0 or not got[3], (radar.name, i)
             known_out += got[3]

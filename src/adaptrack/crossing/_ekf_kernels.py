@@ -192,6 +192,11 @@ def measure_span(  # type: ignore[no-untyped-def]
     Returns the centreline point and unit tangent ``(cx, cy, tx, ty)`` at the state's ``u``
     (ROAD; zeros for FREE), for a caller that needs the lane frame there too.
     """
+    if kind == ROAD:
+        lane = lane_at(roads, lo, hi, x[0])
+        return road_measure(
+            x, k, radar, noise_tab, noise_cnt, lane, half_width, scatter_std, zp, h, rm, jp, jv
+        )
     h[:, :] = 0.0
     if kind == FREE:
         vx, vy = x[2], x[3]
@@ -206,10 +211,28 @@ def measure_span(  # type: ignore[no-untyped-def]
             dist = math.sqrt(ex * ex + ey * ey)
             ux, uy = -ex / dist, -ey / dist
         _noise_into(radar, noise_tab, noise_cnt, zp, jp, ux, uy, scatter_std, rm)
-        return 0.0, 0.0, 0.0, 0.0
-    s, vs, d = x[0], x[1], x[k]
+    return 0.0, 0.0, 0.0, 0.0
+
+
+@numba.njit(cache=True, inline="always")
+def lane_at(roads, lo, hi, s):  # type: ignore[no-untyped-def]
+    """Return the lane frame at ``s`` of the road in columns ``lo:hi`` of ``roads``.
+
+    ``(cx, cy, kappa, tx, ty)``: centreline point, curvature and unit tangent (the sine and
+    cosine of the heading) of :func:`centreline_span`.
+    """
     cx, cy, th, kappa = centreline_span(roads, lo, hi, s)
-    tx, ty = math.sin(th), math.cos(th)
+    return cx, cy, kappa, math.sin(th), math.cos(th)
+
+
+@numba.njit(cache=True)
+def road_measure(  # type: ignore[no-untyped-def]
+    x, k, radar, noise_tab, noise_cnt, lane, half_width, scatter_std, zp, h, rm, jp, jv
+):
+    """:func:`measure_span` of a ROAD state ``x`` given its lane frame (:func:`lane_at`)."""
+    h[:, :] = 0.0
+    vs, d = x[1], x[k]
+    cx, cy, kappa, tx, ty = lane
     rx, ry = -ty, tx
     off = half_width + d
     lever = 1.0 + kappa * off  # the lane point moves at lever * ds/dt

@@ -27,8 +27,10 @@ from ._ekf_kernels import (
     doppler_usable,
     gate_update_into,
     innovation_into,
+    lane_at,
     measure_span,
     off_boresight,
+    road_measure,
 )
 from ._radar_kernel import curve_at, in_view, wrapped
 
@@ -154,8 +156,7 @@ def _lane_frame(roads, bounds, c, u, d):  # type: ignore[no-untyped-def]
 
     Returns ``(cx, cy, tx, ty, kappa, px, py)``; ``(-ty, tx)`` is the offsets' direction.
     """
-    cx, cy, th, kappa = centreline_span(roads, bounds[c, 0], bounds[c, 1], u)
-    tx, ty = math.sin(th), math.cos(th)
+    cx, cy, kappa, tx, ty = lane_at(roads, bounds[c, 0], bounds[c, 1], u)
     return cx, cy, tx, ty, kappa, cx - d * ty, cy + d * tx
 
 
@@ -167,17 +168,17 @@ def _ground_point(z_row, radar):  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True, inline="always")
-def _view_uniform(roads, lo, hi, u, d, half, radar, fields):  # type: ignore[no-untyped-def]
+def _view_uniform(lane, d, half, radar, fields):  # type: ignore[no-untyped-def]
     """Whether the lane points within ``half`` [m] of ``(u, d)`` are all in view (1), all out (-1).
 
-    0 when it cannot tell. A sufficient test from the centre point alone: the points lie
-    within ``half`` of it (the arc is no shorter than its chord), so their slant ranges
-    differ from its by at most ``half`` and their bearings by at most
-    ``asin(half / ground range)``.
+    ``lane``: the lane frame at ``u`` (:func:`._ekf_kernels.lane_at`). 0 when it cannot
+    tell. A sufficient test from the centre point alone: the points lie within ``half`` of it
+    (the arc is no shorter than its chord), so their slant ranges differ from its by at most
+    ``half`` and their bearings by at most ``asin(half / ground range)``.
     """
-    cx, cy, th, _ = centreline_span(roads, lo, hi, u)
-    ex = cx - d * math.cos(th) - radar[0]
-    ey = cy + d * math.sin(th) - radar[1]
+    cx, cy, _, tx, ty = lane
+    ex = cx - d * ty - radar[0]
+    ey = cy + d * tx - radar[1]
     ground = math.sqrt(ex * ex + ey * ey)
     if ground <= half:
         return 0
@@ -196,22 +197,23 @@ def _view_uniform(roads, lo, hi, u, d, half, radar, fields):  # type: ignore[no-
 
 
 @numba.njit(cache=True, inline="always")
-def _visible_part(u, d, spread, lo, hi, roads, radar, fields):  # type: ignore[no-untyped-def]
+def _visible_part(u, d, spread, lo, hi, roads, radar, fields, lane):  # type: ignore[no-untyped-def]
     """Locate the part of a body inside the radar's field of view.
 
-    The body's centre lies ``u`` [m] along the road in columns ``lo:hi`` of ``roads`` and
-    ``d`` [m] across; it spans ``BODY_HALF_SPREADS`` times ``spread`` [m] either side of its
-    centre along the lane. ``VISIBLE_SAMPLES`` points over it are tested against the field of
-    view (``fields``, the radar's minimum range ``radar[4]``). Returns ``(offset, spread,
-    slope, out)``: the visible part's centre along the lane from the body's centre [m], its
-    spread [m] (the body's, in proportion to the part's length), ``d offset / d u`` (-1/2
-    when one end is cut: the cut stays put while the body moves; -1 when both are), and
-    whether the body is known to lie wholly out of view (then its centre, the point its
-    detection is predicted at, is out of view too). A body wholly in view, or wholly out of
-    it, gives ``(0, spread, 0, out)``.
+    The body's centre lies ``u`` [m] along the road in columns ``lo:hi`` of ``roads`` (its
+    lane frame there ``lane``: :func:`._ekf_kernels.lane_at`) and ``d`` [m] across; it spans
+    ``BODY_HALF_SPREADS`` times ``spread`` [m] either side of its centre along the lane.
+    ``VISIBLE_SAMPLES`` points over it are tested against the field of view (``fields``, the
+    radar's minimum range ``radar[4]``). Returns ``(offset, spread, slope, out)``: the
+    visible part's centre along the lane from the body's centre [m], its spread [m] (the
+    body's, in proportion to the part's length), ``d offset / d u`` (-1/2 when one end is cut:
+    the cut stays put while the body moves; -1 when both are), and whether the body is known
+    to lie wholly out of view (then its centre, the point its detection is predicted at, is
+    out of view too). A body wholly in view, or wholly out of it, gives
+    ``(0, spread, 0, out)``.
     """
     half = BODY_HALF_SPREADS * spread
-    uniform = _view_uniform(roads, lo, hi, u, d, half, radar, fields)
+    uniform = _view_uniform(lane, d, half, radar, fields)
     if uniform != 0:
         return 0.0, spread, 0.0, uniform < 0
     n_in, total = 0, 0.0
@@ -236,25 +238,31 @@ def _visible_part(u, d, spread, lo, hi, roads, radar, fields):  # type: ignore[n
 @numba.njit(cache=True, inline="always")
 def _model(  # type: ignore[no-untyped-def]
     i, x, spread, corridor, roads, bounds, radar, noise_tab, noise_cnt, fields, across_std,
-    xv, zp, h, rm, jp, jv, visible,
+    xv, zp, h, rm, jp, jv, visible, lane,
 ):  # fmt: skip
     """Predicted detection, Jacobian and noise of track ``i`` (body spread along and across).
 
     A body partly outside the field of view is detected over its visible part only
     (``visible``: :func:`_visible_part` of the track): the detection is predicted at that
-    part's centre, with its spread. ``xv`` (4,): scratch; it holds the state at the visible
-    part's centre after the call. Returns the visible part's spread [m] and the corridor's
-    centreline point and unit tangent there (``cx, cy, tx, ty``).
+    part's centre, with its spread. ``lane``: the lane frame at the track's ``u``. ``xv``
+    (4,): scratch; it holds the state at the visible part's centre after the call. Returns the
+    visible part's spread [m] and the corridor's centreline point and unit tangent there
+    (``cx, cy, tx, ty``).
     """
     lo, hi = bounds[corridor[i], 0], bounds[corridor[i], 1]
     offset, part_spread, slope, _ = visible
     for a in range(N_STATE):
         xv[a] = x[i, a]
     xv[0] += offset
-    cx, cy, tx, ty = measure_span(
-        ROAD, xv, 3, radar, noise_tab, noise_cnt, roads, lo, hi, 0.0, part_spread, zp, h, rm,
-        jp, jv,
-    )  # fmt: skip
+    if offset == 0.0:  # at the track's u
+        cx, cy, tx, ty = road_measure(
+            xv, 3, radar, noise_tab, noise_cnt, lane, 0.0, part_spread, zp, h, rm, jp, jv
+        )
+    else:
+        cx, cy, tx, ty = measure_span(
+            ROAD, xv, 3, radar, noise_tab, noise_cnt, roads, lo, hi, 0.0, part_spread, zp, h,
+            rm, jp, jv,
+        )  # fmt: skip
     for a in range(3):
         h[a, 0] *= 1.0 + slope
     rx, ry = -ty, tx
@@ -342,10 +350,9 @@ def gate_scan(  # type: ignore[no-untyped-def]
     """Fill ``d2`` (T, D) with each detection's squared Mahalanobis distance to each track.
 
     ``logdet`` (T,) receives the log-determinant of each track's innovation covariance
-    (``inf`` where ``d2`` is), ``gated`` (T, 8) what the gate computed of each track for its
+    (``inf`` where ``d2`` is), ``gated`` (T, 9) what the gate computed of each track for its
     update (:func:`update_tracks`): its :func:`_visible_part` (the flag as 0 / 1), and the
-    lane frame ``cx, cy, tx, ty`` at its ``u`` (:func:`_lane_frame`; NaN when not computed,
-    or computed elsewhere: at the centre of a part of the body).
+    lane frame at its ``u`` (:func:`._ekf_kernels.lane_at`).
     A body's reflections lie on it: with ``extent_gate``, a detection that lies on a road
     user's body (a ``road_user`` track: confirmed, it has moved; within ``BODY_HALF_SPREADS``
     of its spreads along the lane from its centre, and within ``gate``) costs a track whose
@@ -392,18 +399,17 @@ def gate_scan(  # type: ignore[no-untyped-def]
     for i in range(n_t):
         logdet[i] = np.inf
         lo_i, hi_i = bounds[corridor[i], 0], bounds[corridor[i], 1]
-        part = _visible_part(x[i, 0], x[i, 3], spread[i], lo_i, hi_i, roads, radar, fields)
+        lane = lane_at(roads, lo_i, hi_i, x[i, 0])
+        part = _visible_part(x[i, 0], x[i, 3], spread[i], lo_i, hi_i, roads, radar, fields, lane)
         gated[i, 0], gated[i, 1], gated[i, 2], gated[i, 3] = part
-        gated[i, 4:] = np.nan
+        gated[i, 4], gated[i, 5], gated[i, 6], gated[i, 7], gated[i, 8] = lane
         if part[3]:  # wholly out of view, its predicted detection too (seen stays False)
             d2[i, :] = np.inf
             continue
         part_spread, cx, cy, tx, ty = _model(
             i, x, spread, corridor, roads, bounds, radar, noise_tab, noise_cnt, fields,
-            across_std, xv, zp, h, rm, jp, jv, part,
+            across_std, xv, zp, h, rm, jp, jv, part, lane,
         )  # fmt: skip
-        if part[0] == 0.0:  # the model's frame is the track's
-            gated[i, 4], gated[i, 5], gated[i, 6], gated[i, 7] = cx, cy, tx, ty
         seen[i] = in_view(zp[0], off_boresight(zp[1], radar), fields, radar[4])
         if not seen[i] or n_d == 0:
             d2[i, :] = np.inf
@@ -529,7 +535,7 @@ def associate_scan(  # type: ignore[no-untyped-def]
     (``ids`` (D,), -1 none) is the one this radar last gave a track (``sensor_id`` (T,))
     costs that much less (:func:`favour_sensor_ids`).
     Returns ``(seen, d2, logdet, gated, simple, tracks, detections, sight)``: each track in
-    view, distances (T, D), log-determinants (T,), visible parts and lane frames (T, 8)
+    view, distances (T, D), log-determinants (T,), visible parts and lane frames (T, 9)
     (:func:`gate_scan`),
     if ``simple`` the
     one-to-one assignment (:func:`unambiguous_assignment`), and the tracks' lines of sight
@@ -539,7 +545,7 @@ def associate_scan(  # type: ignore[no-untyped-def]
     n_t, n_d = x.shape[0], z.shape[0]
     d2 = np.empty((n_t, n_d))
     logdet = np.empty(n_t)
-    gated = np.empty((n_t, 8))
+    gated = np.empty((n_t, 9))
     road_user = moved & confirmed
     behind = np.full(n_t, -1, dtype=np.int64)  # the stopped road user hiding a queued track
     sight = np.zeros((0, 3))  # the tracks' lines of sight, if needed (:func:`sight_lines`)
@@ -735,7 +741,7 @@ def update_tracks(  # type: ignore[no-untyped-def]
 ):  # fmt: skip
     """Update each owning track with its detections in ``order`` (sequential EKF updates).
 
-    ``gated`` (T, 8): the tracks' visible parts and lane frames as gated (:func:`gate_scan`),
+    ``gated`` (T, 9): the tracks' visible parts and lane frames as gated (:func:`gate_scan`),
     those of a track not updated since.
 
     Azimuth alignment (if ``align``): before its update, a detection of a moving track
@@ -775,11 +781,13 @@ def update_tracks(  # type: ignore[no-untyped-def]
     for j in order:
         i = owner[j]
         # body spread: along-track residual of the detection's ground point
-        if as_gated[i] and not math.isnan(gated[i, 4]):
-            cx, cy, tx, ty = gated[i, 4], gated[i, 5], gated[i, 6], gated[i, 7]
-            px, py = cx - x[i, 3] * ty, cy + x[i, 3] * tx
+        lo_i, hi_i = bounds[corridor[i], 0], bounds[corridor[i], 1]
+        if as_gated[i]:
+            lane = gated[i, 4], gated[i, 5], gated[i, 6], gated[i, 7], gated[i, 8]
         else:
-            cx, cy, tx, ty, _, px, py = _lane_frame(roads, bounds, corridor[i], x[i, 0], x[i, 3])
+            lane = lane_at(roads, lo_i, hi_i, x[i, 0])
+        cx, cy, _, tx, ty = lane
+        px, py = cx - x[i, 3] * ty, cy + x[i, 3] * tx
         gx, gy, rho = _ground_point(z[j], radar)
         along = (gx - px) * tx + (gy - py) * ty
         across = (gx - cx) * -ty + (gy - cy) * tx  # the detection's offset (as x[i, 3])
@@ -790,9 +798,9 @@ def update_tracks(  # type: ignore[no-untyped-def]
         fast = abs(x[i, 1]) >= BIAS_MIN_SPEED_MPS
         if align and moved[i] and not stopped[i] and direction[i] != 0.0 and fast:
             # across the lane only (the body's extent along it says nothing on the bias)
-            lane = -direction[i] * lane_half_width[corridor[i]]
+            centre = -direction[i] * lane_half_width[corridor[i]]
             nx, ny = -ty, tx
-            lat = (gx - (cx + lane * nx)) * nx + (gy - (cy + lane * ny)) * ny
+            lat = (gx - (cx + centre * nx)) * nx + (gy - (cy + centre * ny)) * ny
             g = rho * (math.cos(z[j, 1]) * nx - math.sin(z[j, 1]) * ny)  # d lat / d azimuth
             if abs(lat) <= bias_gate:
                 bias_stats[0] = bias_forget * bias_stats[0] + g * g
@@ -800,11 +808,12 @@ def update_tracks(  # type: ignore[no-untyped-def]
                 bias_stats[2] = bias_forget * bias_stats[2] + 1.0
         sr = curve_at(noise_tab, noise_cnt, 0, z[j, 0])
         sa = curve_at(noise_tab, noise_cnt, 1, off_boresight(z[j, 1], radar))
-        lo_i, hi_i = bounds[corridor[i], 0], bounds[corridor[i], 1]
         if as_gated[i]:
             part = gated[i, 0], gated[i, 1], gated[i, 2], gated[i, 3] != 0.0
         else:
-            part = _visible_part(x[i, 0], x[i, 3], spread[i], lo_i, hi_i, roads, radar, fields)
+            part = _visible_part(
+                x[i, 0], x[i, 3], spread[i], lo_i, hi_i, roads, radar, fields, lane
+            )
         was_spread = spread[i]
         if part[0] == 0:  # the whole body in view
             if not (stopped[i] and moved[i]):
@@ -814,10 +823,12 @@ def update_tracks(  # type: ignore[no-untyped-def]
             along_m2[i] += shape_rate * (along * along - along_m2[i])
             along_m4[i] += shape_rate * (along**4 - along_m4[i])
         if spread[i] != was_spread:
-            part = _visible_part(x[i, 0], x[i, 3], spread[i], lo_i, hi_i, roads, radar, fields)
+            part = _visible_part(
+                x[i, 0], x[i, 3], spread[i], lo_i, hi_i, roads, radar, fields, lane
+            )
         _model(  # over the part in view of its body as learnt now
             i, x, spread, corridor, roads, bounds, radar, noise_tab, noise_cnt, fields,
-            across_std, xv, zp, h, rm, jp, jv, part,
+            across_std, xv, zp, h, rm, jp, jv, part, lane,
         )  # fmt: skip
         doppler = doppler_usable(h, p[i], rm, radar)
         innovation_into(z[j], zp, radar, doppler, nu)
