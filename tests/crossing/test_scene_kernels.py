@@ -120,7 +120,10 @@ def test_owners_give_an_extra_detection_to_the_likeliest_track_not_the_nearest_i
 def occluders(rows, x, spread, corridor, roads, bounds, radar, can_hide):
     """The nearer track hiding each of ``rows`` (-1: none), from every track's line of sight."""
     sight = np.zeros((x.shape[0], 3))
-    sight_lines(np.arange(x.shape[0]), x, spread, corridor, roads, bounds, radar, sight)
+    lanes = np.array(
+        [lane_at(roads, *bounds[corridor[i]], x[i, 0]) for i in range(x.shape[0])]
+    ).reshape(-1, 5)
+    sight_lines(np.arange(x.shape[0]), x, spread, lanes, radar, sight)
     return nearer_occluders(rows, x, spread, corridor, sight, can_hide)
 
 

@@ -350,9 +350,9 @@ def gate_scan(  # type: ignore[no-untyped-def]
     """Fill ``d2`` (T, D) with each detection's squared Mahalanobis distance to each track.
 
     ``logdet`` (T,) receives the log-determinant of each track's innovation covariance
-    (``inf`` where ``d2`` is), ``gated`` (T, 9) what the gate computed of each track for its
-    update (:func:`update_tracks`): its :func:`_visible_part` (the flag as 0 / 1), and the
-    lane frame at its ``u`` (:func:`._ekf_kernels.lane_at`).
+    (``inf`` where ``d2`` is). ``gated`` (T, 9) holds each track's lane frame at its ``u`` in
+    columns 4:9 (:func:`._ekf_kernels.lane_at`) and receives its :func:`_visible_part` in
+    columns 0:4 (the flag as 0 / 1), for its update (:func:`update_tracks`).
     A body's reflections lie on it: with ``extent_gate``, a detection that lies on a road
     user's body (a ``road_user`` track: confirmed, it has moved; within ``BODY_HALF_SPREADS``
     of its spreads along the lane from its centre, and within ``gate``) costs a track whose
@@ -399,10 +399,9 @@ def gate_scan(  # type: ignore[no-untyped-def]
     for i in range(n_t):
         logdet[i] = np.inf
         lo_i, hi_i = bounds[corridor[i], 0], bounds[corridor[i], 1]
-        lane = lane_at(roads, lo_i, hi_i, x[i, 0])
+        lane = gated[i, 4], gated[i, 5], gated[i, 6], gated[i, 7], gated[i, 8]
         part = _visible_part(x[i, 0], x[i, 3], spread[i], lo_i, hi_i, roads, radar, fields, lane)
         gated[i, 0], gated[i, 1], gated[i, 2], gated[i, 3] = part
-        gated[i, 4], gated[i, 5], gated[i, 6], gated[i, 7], gated[i, 8] = lane
         if part[3]:  # wholly out of view, its predicted detection too (seen stays False)
             d2[i, :] = np.inf
             continue
@@ -545,7 +544,12 @@ def associate_scan(  # type: ignore[no-untyped-def]
     n_t, n_d = x.shape[0], z.shape[0]
     d2 = np.empty((n_t, n_d))
     logdet = np.empty(n_t)
-    gated = np.empty((n_t, 9))
+    gated = np.empty((n_t, 9))  # visible parts (gate_scan) and lane frames of the tracks
+    for i in range(n_t):
+        gated[i, 4], gated[i, 5], gated[i, 6], gated[i, 7], gated[i, 8] = lane_at(
+            roads, bounds[corridor[i], 0], bounds[corridor[i], 1], x[i, 0]
+        )
+    lanes = gated[:, 4:]
     road_user = moved & confirmed
     behind = np.full(n_t, -1, dtype=np.int64)  # the stopped road user hiding a queued track
     sight = np.zeros((0, 3))  # the tracks' lines of sight, if needed (:func:`sight_lines`)
@@ -553,8 +557,7 @@ def associate_scan(  # type: ignore[no-untyped-def]
     if occlusion_gate and queued.size and (stopped & road_user).any():
         # of the queued tracks and the road users (the rest NaN: not needed here)
         sight = np.full((n_t, 3), np.nan)
-        sight_lines(np.flatnonzero(stopped | road_user), x, spread, corridor, roads, bounds,
-                    radar, sight)  # fmt: skip
+        sight_lines(np.flatnonzero(stopped | road_user), x, spread, lanes, radar, sight)
         nearest = nearer_occluders(queued, x, spread, corridor, sight, road_user)
         for k in range(queued.size):
             if nearest[k] >= 0 and stopped[nearest[k]]:  # else the nearest is moving
@@ -625,12 +628,17 @@ def apply_scan(  # type: ignore[no-untyped-def]
     missed = np.flatnonzero(seen & ~hit)
     nearer = np.full(missed.size, -1, np.int64)
     if missed.size:  # lines of sight after the updates: those of the updated tracks anew
+        lanes = gated[:, 4:]
+        for i in np.flatnonzero(hit):
+            lanes[i, 0], lanes[i, 1], lanes[i, 2], lanes[i, 3], lanes[i, 4] = lane_at(
+                roads, bounds[corridor[i], 0], bounds[corridor[i], 1], x[i, 0]
+            )
         if sight.shape[0] == n_t:
             stale = hit | np.isnan(sight[:, 0])
-            sight_lines(np.flatnonzero(stale), x, spread, corridor, roads, bounds, radar, sight)
+            sight_lines(np.flatnonzero(stale), x, spread, lanes, radar, sight)
         else:
             sight = np.zeros((n_t, 3))
-            sight_lines(np.arange(n_t), x, spread, corridor, roads, bounds, radar, sight)
+            sight_lines(np.arange(n_t), x, spread, lanes, radar, sight)
         nearer = nearer_occluders(missed, x, spread, corridor, sight, np.ones(n_t, np.bool_))
     for i in range(n_t):
         if hit[i]:
@@ -881,14 +889,16 @@ def split_rows(stopped, moved, along_m2, along_m4, kurtosis_max, min_half_gap): 
 
 
 @numba.njit(cache=True)
-def sight_lines(rows, x, spread, corridor, roads, bounds, radar, sight):  # type: ignore[no-untyped-def]
+def sight_lines(rows, x, spread, lanes, radar, sight):  # type: ignore[no-untyped-def]
     """Fill ``sight`` (T, 3) rows ``rows``: range, azimuth and apparent half width [m, rad].
 
+    ``lanes`` (T, 5): the tracks' lane frames at their ``u`` (:func:`._ekf_kernels.lane_at`).
     The half width is twice the body spread along the lane's heading and 1 m across, seen
     from the radar (:func:`nearer_occluders`).
     """
     for i in rows:
-        _, _, tx, ty, _, px, py = _lane_frame(roads, bounds, corridor[i], x[i, 0], x[i, 3])
+        cx, cy, tx, ty = lanes[i, 0], lanes[i, 1], lanes[i, 3], lanes[i, 4]
+        px, py = cx - x[i, 3] * ty, cy + x[i, 3] * tx
         ex, ey = px - radar[0], py - radar[1]
         rng = math.sqrt(ex * ex + ey * ey)
         ux, uy = ex / max(rng, 1e-9), ey / max(rng, 1e-9)
