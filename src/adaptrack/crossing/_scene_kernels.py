@@ -62,6 +62,30 @@ def _update_scratch(m):  # type: ignore[no-untyped-def]
     )  # fmt: skip
 
 
+@numba.njit(cache=True, inline="always")
+def rows_where(mask, value):  # type: ignore[no-untyped-def]
+    """Return the rows whose ``mask`` (bool array) is ``value``: one array, no temporaries."""
+    rows = np.empty(mask.size, np.int64)
+    k = 0
+    for i in range(mask.size):
+        if mask[i] == value:
+            rows[k] = i
+            k += 1
+    return rows[:k]
+
+
+@numba.njit(cache=True, inline="always")
+def _rows_and_not(a, b):  # type: ignore[no-untyped-def]
+    """Return the rows with ``a`` and not ``b`` (bool arrays): one array, no temporaries."""
+    rows = np.empty(a.size, np.int64)
+    k = 0
+    for i in range(a.size):
+        if a[i] and not b[i]:
+            rows[k] = i
+            k += 1
+    return rows[:k]
+
+
 @numba.njit(cache=True)
 def predict_tracks(  # type: ignore[no-untyped-def]
     x, p, t, stopped, direction, time_s, accel_psd, lateral_psd, stopped_psd
@@ -307,7 +331,7 @@ def confirmed_rows(  # type: ignore[no-untyped-def]
     which :func:`merged_rows` drops once they have moved; one that outlives that test is
     another road user.
     """
-    rows = np.flatnonzero(confirmed)
+    rows = rows_where(confirmed, True)
     status = np.empty(rows.size, np.int64)
     for k in range(rows.size):
         i = rows[k]
@@ -550,11 +574,19 @@ def associate_scan(  # type: ignore[no-untyped-def]
             roads, bounds[corridor[i], 0], bounds[corridor[i], 1], x[i, 0]
         )
     lanes = gated[:, 4:]
-    road_user = moved & confirmed
+    road_user = np.empty(n_t, np.bool_)
+    starting = np.empty(n_t, np.bool_)  # stopped road users (may start: gate_scan)
+    moving = np.empty(n_t, np.bool_)  # moving road users
+    standing = False
+    for i in range(n_t):
+        road_user[i] = moved[i] and confirmed[i]
+        starting[i] = stopped[i] and moved[i]
+        moving[i] = road_user[i] and not stopped[i]
+        standing |= stopped[i] and road_user[i]
     behind = np.full(n_t, -1, dtype=np.int64)  # the stopped road user hiding a queued track
     sight = np.zeros((0, 3))  # the tracks' lines of sight, if needed (:func:`sight_lines`)
-    queued = np.flatnonzero(stopped)
-    if occlusion_gate and queued.size and (stopped & road_user).any():
+    if occlusion_gate and standing:
+        queued = rows_where(stopped, True)
         # of the queued tracks and the road users (the rest NaN: not needed here)
         sight = np.full((n_t, 3), np.nan)
         sight_lines(np.flatnonzero(stopped | road_user), x, spread, lanes, radar, sight)
@@ -563,7 +595,7 @@ def associate_scan(  # type: ignore[no-untyped-def]
             if nearest[k] >= 0 and stopped[nearest[k]]:  # else the nearest is moving
                 behind[queued[k]] = nearest[k]
     seen = gate_scan(
-        x, p, spread, stopped & moved, road_user, road_user & ~stopped, behind, direction,
+        x, p, spread, starting, road_user, moving, behind, direction,
         corridor, roads, bounds, radar, noise_tab, noise_cnt, fields, across_std,
         start_speed_max, extent_gate, passing_gate, beside_m, gate, z, d2, logdet, gated,
     )  # fmt: skip
@@ -625,17 +657,23 @@ def apply_scan(  # type: ignore[no-untyped-def]
     for i in range(n_t):
         if hit[i]:
             miss_run[i] = 1.0
-    missed = np.flatnonzero(seen & ~hit)
+    missed = _rows_and_not(seen, hit)
     nearer = np.full(missed.size, -1, np.int64)
     if missed.size:  # lines of sight after the updates: those of the updated tracks anew
         lanes = gated[:, 4:]
-        for i in np.flatnonzero(hit):
-            lanes[i, 0], lanes[i, 1], lanes[i, 2], lanes[i, 3], lanes[i, 4] = lane_at(
-                roads, bounds[corridor[i], 0], bounds[corridor[i], 1], x[i, 0]
-            )
+        for i in range(n_t):
+            if hit[i]:
+                lanes[i, 0], lanes[i, 1], lanes[i, 2], lanes[i, 3], lanes[i, 4] = lane_at(
+                    roads, bounds[corridor[i], 0], bounds[corridor[i], 1], x[i, 0]
+                )
         if sight.shape[0] == n_t:
-            stale = hit | np.isnan(sight[:, 0])
-            sight_lines(np.flatnonzero(stale), x, spread, lanes, radar, sight)
+            stale = np.empty(n_t, np.int64)
+            m = 0
+            for i in range(n_t):
+                if hit[i] or math.isnan(sight[i, 0]):
+                    stale[m] = i
+                    m += 1
+            sight_lines(stale[:m], x, spread, lanes, radar, sight)
         else:
             sight = np.zeros((n_t, 3))
             sight_lines(np.arange(n_t), x, spread, lanes, radar, sight)
@@ -661,12 +699,13 @@ def apply_scan(  # type: ignore[no-untyped-def]
         moving_missed[:m], x, p, spread, miss_run, corridor, roads, bounds, radar, noise_tab,
         noise_cnt, fields, pd_tab, pd_cnt,
     )  # fmt: skip
-    rows = np.flatnonzero(seen & ~occluded)
-    ready = np.zeros(rows.size, np.bool_)
+    rows = _rows_and_not(seen, occluded)
+    ready, row_hit = np.empty(rows.size, np.bool_), np.empty(rows.size, np.bool_)
     for k in range(rows.size):
         ready[k] = p[rows[k], 1, 1] < confirm_speed_var
+        row_hit[k] = hit[rows[k]]
     now = record_hits(
-        history, misses, last_hit_s, confirmed, rows, hit[rows], time_s, ready, window_mask,
+        history, misses, last_hit_s, confirmed, rows, row_hit, time_s, ready, window_mask,
         confirm_hits,
     )  # fmt: skip
     for i in now:
@@ -1191,7 +1230,7 @@ def retired_rows(  # type: ignore[no-untyped-def]
         dead[i] = x[i, 0] < 0 or x[i, 0] > length_m[corridor[i]]
     for i in gone:
         dead[i] = True
-    alive = np.flatnonzero(~dead)
+    alive = rows_where(dead, False)
     young = np.zeros(alive.size, dtype=np.bool_)
     settled = np.zeros(alive.size, dtype=np.bool_)
     for k in range(alive.size):
@@ -1199,7 +1238,9 @@ def retired_rows(  # type: ignore[no-untyped-def]
         age = track_time_s[i] - born_s[i]
         young[k] = absorb_young_static and age < clutter_age_s
         settled[k] = confirmed[i] and moved[i] and age > settled_s
-    static = stopped & ~moved
+    static = np.empty(n, np.bool_)
+    for i in range(n):
+        static[i] = stopped[i] and not moved[i]
     if alive.size < n:  # the survivors' rows (most scans lose none)
         corridor, x, p, spread, static = (
             corridor[alive],

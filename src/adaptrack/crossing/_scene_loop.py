@@ -32,6 +32,7 @@ from ._scene_kernels import (
     planar_rows,
     predict_tracks,
     retired_rows,
+    rows_where,
     split_rows,
 )
 
@@ -481,7 +482,10 @@ def learnt_clutter(stopped, moved, time_s, born_s, clutter_age_s):  # type: igno
     Barrier posts, rails: their detections are their own (:func:`._scene_kernels.reserve_clutter`);
     a young one may be a vehicle waiting at a closure.
     """
-    return stopped & ~moved & (time_s - born_s >= clutter_age_s)
+    clutter = np.empty(stopped.size, np.bool_)
+    for i in range(stopped.size):
+        clutter[i] = stopped[i] and not moved[i] and time_s[i] - born_s[i] >= clutter_age_s
+    return clutter
 
 
 @numba.njit(cache=True)
@@ -619,7 +623,7 @@ def run_scans(  # type: ignore[no-untyped-def]
             n_used += used[j]
         log[0] += n_used
         if n_used < used.size:  # open tentative tracks from the detections left over
-            left = ~used
+            left = rows_where(used, False)
             corridor, x, p, _, first = open_tracks(
                 z[left], radar, noise_tab, noise_cnt, site.roads, site.bounds,
                 s.cluster_radius_m, s.initial_speed_var, s.body_along_std_m**2,
