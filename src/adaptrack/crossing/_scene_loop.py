@@ -508,13 +508,13 @@ def _out_room(o, n_out, more):  # type: ignore[no-untyped-def]
 def write_rows(t, n, time_s, s, site, rows_out, n_out):  # type: ignore[no-untyped-def]
     """Append the confirmed tracks at ``time_s``; return the buffer (grown if full), count."""
     rows_out = _out_room(rows_out, n_out, n)
-    return rows_out, _write_rows_into(t, n, time_s, s, site, _borrowed_out(rows_out), n_out)
+    v = _live(t, n)
+    return rows_out, _write_rows_into(v, time_s, s, site, _borrowed_out(rows_out), n_out)
 
 
 @numba.njit(cache=True)
-def _write_rows_into(t, n, time_s, s, site, rows_out, n_out):  # type: ignore[no-untyped-def]
-    """:func:`write_rows` into a buffer with room for ``n`` more rows; return its count."""
-    v = _live(t, n)
+def _write_rows_into(v, time_s, s, site, rows_out, n_out):  # type: ignore[no-untyped-def]
+    """:func:`write_rows` of the live rows ``v`` into a buffer with room; return its count."""
     rows, status = confirmed_rows(
         v.confirmed, v.time_s, v.last_hit_s, v.stopped, v.moved, v.x, v.spread, v.corridor,
         s.merge_lateral_m, s.coasting_s, s.status_codes,
@@ -562,6 +562,7 @@ def run_scans(  # type: ignore[no-untyped-def]
     # and views without reference counting for the scans
     rows_own, t = t, _borrowed_tracks(t)
     out_own, out = rows_out, _borrowed_out(rows_out)
+    v = _live(t, n)  # the live rows' views, renewed whenever the rows change or grow
     for k in range(scan_radar.size):
         r = scan_radar[k]
         radars.last_stamp_s[r] = scan_stamp[k]
@@ -576,7 +577,6 @@ def run_scans(  # type: ignore[no-untyped-def]
         radar = site.radar[r]
         noise_tab, noise_cnt = site.noise_tab[r], site.noise_cnt[r]
         fields = site.fields[r, : site.field_count[r]]
-        v = _live(t, n)
         predict_tracks(
             v.x, v.p, v.time_s, v.stopped, v.direction, time_s, s.accel_psd, s.lateral_psd,
             s.stopped_psd,
@@ -640,8 +640,8 @@ def run_scans(  # type: ignore[no-untyped-def]
             next_id += m
             log[1] += m
             log[2] += used.size - n_used - m
+            v = _live(t, n)  # the rows grew
         # modes and hazard events
-        v = _live(t, n)
         hazard, on_road = mode_changes(
             time_s, v.x, v.p, v.corridor, v.confirmed, v.last_hit_s, v.anchor_u, v.stopped,
             v.moved, v.direction, v.slow_since, v.event_raised, v.doppler_seen_s,
@@ -674,8 +674,8 @@ def run_scans(  # type: ignore[no-untyped-def]
                 t.ids[j], t.born_s[j] = next_id + g, time_s
             n += rows.size
             next_id += rows.size
+            v = _live(t, n)  # the rows grew
         # delete the expired, the departed and the younger of two tracks on one body
-        v = _live(t, n)
         dead = retired_rows(
             time_s, v.time_s, v.x, v.p, v.corridor, site.length_m, v.spread, v.stopped,
             v.moved, v.occluded, v.ids, v.confirmed, v.misses, v.born_s, v.last_hit_s,
@@ -687,9 +687,10 @@ def run_scans(  # type: ignore[no-untyped-def]
         )  # fmt: skip
         if dead.any():
             n = _compacted(v, n, dead)  # rows move within the live ones
+            v = _live(t, n)
         if record:
             if n_out + n > out_own.track_id.shape[0]:
                 out_own = _out_room(out_own, n_out, n)
                 out = _borrowed_out(out_own)
-            n_out = _write_rows_into(t, n, time_s, s, site, out, n_out)
+            n_out = _write_rows_into(v, time_s, s, site, out, n_out)
     return rows_own, n, next_id, events, n_events, out_own, n_out
