@@ -185,6 +185,15 @@ def _lane_frame(roads, bounds, c, u, d):  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True, inline="always")
+def _store_lane(lanes, i, roads, bounds, corridor, x):  # type: ignore[no-untyped-def]
+    """Set row ``i`` of ``lanes`` (T, 5) to track ``i``'s lane frame at its ``u`` (``lane_at``)."""
+    c = corridor[i]
+    lanes[i, 0], lanes[i, 1], lanes[i, 2], lanes[i, 3], lanes[i, 4] = lane_at(
+        roads, bounds[c, 0], bounds[c, 1], x[i, 0]
+    )
+
+
+@numba.njit(cache=True, inline="always")
 def _ground_point(z_row, radar):  # type: ignore[no-untyped-def]
     """Ground point (x, y) and horizontal range of a detection (range, azimuth, ...)."""
     rho = math.sqrt(max(z_row[0] ** 2 - radar[2] ** 2, 0.01))
@@ -569,11 +578,9 @@ def associate_scan(  # type: ignore[no-untyped-def]
     d2 = np.empty((n_t, n_d))
     logdet = np.empty(n_t)
     gated = np.empty((n_t, 9))  # visible parts (gate_scan) and lane frames of the tracks
-    for i in range(n_t):
-        gated[i, 4], gated[i, 5], gated[i, 6], gated[i, 7], gated[i, 8] = lane_at(
-            roads, bounds[corridor[i], 0], bounds[corridor[i], 1], x[i, 0]
-        )
     lanes = gated[:, 4:]
+    for i in range(n_t):
+        _store_lane(lanes, i, roads, bounds, corridor, x)
     road_user = np.empty(n_t, np.bool_)
     starting = np.empty(n_t, np.bool_)  # stopped road users (may start: gate_scan)
     moving = np.empty(n_t, np.bool_)  # moving road users
@@ -663,9 +670,7 @@ def apply_scan(  # type: ignore[no-untyped-def]
         lanes = gated[:, 4:]
         for i in range(n_t):
             if hit[i]:
-                lanes[i, 0], lanes[i, 1], lanes[i, 2], lanes[i, 3], lanes[i, 4] = lane_at(
-                    roads, bounds[corridor[i], 0], bounds[corridor[i], 1], x[i, 0]
-                )
+                _store_lane(lanes, i, roads, bounds, corridor, x)
         if sight.shape[0] == n_t:
             stale = np.empty(n_t, np.int64)
             m = 0
