@@ -633,7 +633,11 @@ def apply_scan(  # type: ignore[no-untyped-def]
     track) and updates it (:func:`update_tracks`, which sets ``doppler_seen_s``); the assigned
     detection's sensor id becomes its track's (column ``radar_col`` of ``sensor_id``). A track
     in view without a detection is hidden if a nearer track covers it (:func:`nearer_occluders`; its
-    miss tells nothing), else takes what the miss tells (:func:`miss_updates`, moving ones).
+    miss tells nothing), else takes what the miss tells (:func:`miss_updates`, moving ones). A
+    static object (stopped, never moved) whose spread is below ``shadow_spread`` [m] hides
+    nothing: a post, a barrier arm or a rail is thin or low, and the radar sees past it (a
+    false alarm behind a post near the radar would otherwise keep a tentative track for
+    seconds, its misses telling nothing).
     Tracks in view and not hidden record the hit or miss in the track book's arrays
     (:func:`adaptrack.tracking.lifecycle.record_hits`; confirmed once their speed variance is
     below ``confirm_speed_var``), and one confirmed now anchors where it is. A moving body
@@ -682,7 +686,10 @@ def apply_scan(  # type: ignore[no-untyped-def]
         else:
             sight = np.zeros((n_t, 3))
             sight_lines(np.arange(n_t), x, spread, lanes, radar, sight)
-        nearer = nearer_occluders(missed, x, spread, corridor, sight, np.ones(n_t, np.bool_))
+        can_hide = np.empty(n_t, np.bool_)  # a static object shorter than a truck: none
+        for i in range(n_t):
+            can_hide[i] = moved[i] or not stopped[i] or spread[i] >= shadow_spread
+        nearer = nearer_occluders(missed, x, spread, corridor, sight, can_hide)
     for i in range(n_t):
         if hit[i]:
             occluded[i] = False

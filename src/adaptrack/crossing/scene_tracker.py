@@ -23,7 +23,8 @@ give every further gated detection to the track most likely to have made it (the
 other reflections; least ``d2 + ln det S``); update (a body reaching out of the radar's field
 of view is measured at the centre of its part in view); apply what a miss tells (the Doppler
 gate hides slow vehicles; a miss behind a nearer track tells nothing,
-unless it lies within that track's own body: a duplicate; a tentative track's miss behind a
+unless it lies within that track's own body: a duplicate, or the nearer track is a static
+object shorter than ``shadow_spread_m``: a post; a tentative track's miss behind a
 moving body shorter than ``shadow_spread_m`` that it moves with counts against its
 confirmation: the radar sees over a car, and what is seen rarely there, moving with the car,
 is its multipath ghost); record hits and misses
@@ -140,7 +141,8 @@ class SceneTrackerConfig:
     body_extent_gate: bool = True  # a detection beyond the body's end along the lane costs more
     occlusion_gate: bool = True  # a track hidden in a queue takes none of its occluder's
     shadow_spread_m: float = 1.4  # a moving body this long (spread) hides a new track behind it
-    # (a shorter one, a car, does not: the radar on its pole sees over it; 0: every body hides)
+    # (a shorter one, a car, does not: the radar on its pole sees over it; 0: every body hides);
+    # a static object shorter than this (a post, a barrier arm) hides no track at all
     absorb_young_static: bool = True  # a new static object on a stopped body is its reflection
     gate_probability: float = 0.999
     clutter_gate_probability: float = 0.99  # a static object's own detections (reserved) ...
