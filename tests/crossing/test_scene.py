@@ -334,6 +334,80 @@ def test_learnt_clutter_reserves_its_own_detections():
     np.testing.assert_array_equal(d2[2], [np.inf, 0.5, np.inf])
 
 
+def test_learnt_clutter_is_frozen_and_a_young_static_object_is_not():
+    """A static object older than ``clutter_age_s`` (learnt clutter) is neither predicted nor
+    updated by its detections: its state and covariance stay as they were, while a young
+    static object's are updated (its place converges on its reflections)."""
+    from adaptrack.crossing.scene_tracker import SceneTrackerConfig, _Tracks
+
+    tracker = SceneTracker(SITE, SceneTrackerConfig(clutter_age_s=100.0))
+    cor, radar, half_lane = _queue_lane(tracker)
+    u = np.array([cor.crossing_u - 60.0, cor.crossing_u - 40.0])  # old, young
+    x = np.column_stack([u + 0.4, np.zeros(2), np.zeros(2), np.full(2, -half_lane)])
+    p = np.tile(np.diag([0.25, 1e-4, 1e-4, 0.04]), (2, 1, 1))
+    tracker.book.add(1, 0.0)
+    tracker.book.add(1, 150.0)
+    tracker.book.confirmed[:] = True
+    tracker.tracks = _Tracks.opened(np.zeros(2, int), x, p, 200.0, 0.3, len(SITE.radars))
+    tracker.tracks.stopped[:] = True  # never moved: static
+    rng = np.random.default_rng(4)
+    for k in range(1, 41):  # 2 s, each detected at its true place (0.4 m short of the state)
+        z = np.vstack([_body_scan(rng, radar, cor, c, -half_lane, 0.2, 0.2, 1) for c in u])
+        tracker.step(radar.name, 200.0 + k * radar.period_s, z)
+    tr = tracker.tracks
+    assert tracker.book.ids.tolist() == [1, 2] and tracker.log.updated == 80
+    np.testing.assert_array_equal(tr.x[0], x[0])
+    np.testing.assert_array_equal(tr.p[0], p[0])
+    assert abs(tr.x[1, 0] - u[1]) < 0.1 and tr.p[1, 0, 0] < 0.01
+
+
+def test_stored_clutter_views_equal_views_made_anew():
+    """A frozen track's view of a radar is stored the first time it is gated and read back
+    after; tracking 90 s of a scene (learnt clutter after 10 s; cars, trucks and clutter)
+    with the stored views gives the same tracks, to the last bit, as making every view anew
+    (the stored views cleared before each scan)."""
+    from adaptrack.crossing.scene_tracker import SceneTrackerConfig, iter_scans
+
+    spec = scene_spec(SITE, duration_s=90.0)
+    rec = simulate_scene(SITE, spec, 5)
+    config = SceneTrackerConfig(clutter_age_s=10.0)
+    stored, anew = SceneTracker(SITE, config), SceneTracker(SITE, config)
+    frozen_scans, rows = 0, {"stored": [], "anew": []}
+    for name, time_s, z, ids in iter_scans(rec.detections):
+        anew.tracks.clutter_views[:] = 0.0
+        for key, tracker in (("stored", stored), ("anew", anew)):
+            tracker.step(name, time_s, z, ids)
+            rows[key].append(tracker.rows(time_s))
+        frozen_scans += int((stored.tracks.clutter_views[:, :, 0] == 1.0).any())
+    assert frozen_scans > 500  # the stored views were used
+    pd.testing.assert_frame_equal(pd.concat(rows["stored"]), pd.concat(rows["anew"]))
+    for name in ("x", "p", "spread"):
+        np.testing.assert_array_equal(getattr(stored.tracks, name), getattr(anew.tracks, name))
+    # the gate itself, on the last scan of each radar: the same to the last bit
+    from adaptrack.crossing._scene_kernels import associate_scan
+    from adaptrack.crossing._scene_loop import learnt_clutter
+
+    t, st, site = stored._rows(), stored._settings, stored._tables
+    clutter = learnt_clutter(t.stopped, t.moved, t.time_s, t.born_s, config.clutter_age_s)
+    assert clutter.sum() >= 3
+    last = {name: z for name, _, z, _ in iter_scans(rec.detections)}
+    for r, radar in enumerate(SITE.radars):
+        gates = []
+        for views in (t.clutter_views[:, r].copy(), np.zeros_like(t.clutter_views[:, r])):
+            out = associate_scan(
+                t.x, t.p, t.spread, t.stopped, t.moved, t.confirmed, clutter, t.direction,
+                t.corridor, t.sensor_id[:, r], site.roads, site.bounds, site.radar[r],
+                site.noise_tab[r], site.noise_cnt[r], site.fields[r, : site.field_count[r]],
+                st.body_across_std_m, st.start_speed_max_mps, st.body_extent_gate,
+                st.occlusion_gate, st.passing_gate, st.beside_m, st.gate, st.clutter_gate,
+                st.sensor_id_bonus, last[radar.name], np.full(len(last[radar.name]), -1), views,
+            )  # fmt: skip
+            assert (views[clutter, 0] == 1.0).all()  # stored now if not before
+            gates.append(out[:4])  # seen, d2, logdet, gated
+        for stored_part, anew_part in zip(*gates, strict=True):
+            np.testing.assert_array_equal(stored_part, anew_part)
+
+
 def test_will_not_stop_before_the_stop_line_rule():
     """Hand-made tracks on corridor 0 approaching the crossing (u increasing), lights flashing.
 

@@ -57,7 +57,8 @@ def test_predicted_tracks_equal_the_generic_kalman_prediction_to_the_last_bit():
     direction[5], x[5, 1], x[5, 2] = 1.0, 0.1, -5.0  # brakes through zero: held at a standstill
     psd, lateral, stopped_psd = 3.0, 0.2, 1e-4
     xp, pp, tp = x.copy(), p.copy(), t.copy()
-    predict_tracks(xp, pp, tp, stopped, direction, 10.0, psd, lateral, stopped_psd)
+    frozen = np.zeros(n, bool)
+    predict_tracks(xp, pp, tp, stopped, direction, frozen, 10.0, psd, lateral, stopped_psd)
     assert np.all(tp == 10.0)
     for i in range(n):
         dt = 10.0 - t[i]

@@ -40,6 +40,7 @@ GHOST_SPEED_MPS = 2.0  # a multipath ghost moves with the body that makes it (wi
 BODY_HALF_SPREADS = 2.0  # a body reaches this many spreads either side of its centre
 DETECTION_D_RATE = 0.2  # moving-average rate of a track's detections' offset across
 VISIBLE_SAMPLES = 17  # points over a body tested against a field of view
+CLUTTER_VIEW = 29  # a frozen track's stored view of one radar (_store_view)
 NEAREST_BLOCK = 32  # centreline samples searched as a block once it may hold the nearest
 NEAREST_GROUP = 32  # blocks tested as a group first
 
@@ -88,12 +89,13 @@ def _rows_and_not(a, b):  # type: ignore[no-untyped-def]
 
 @numba.njit(cache=True)
 def predict_tracks(  # type: ignore[no-untyped-def]
-    x, p, t, stopped, direction, time_s, accel_psd, lateral_psd, stopped_psd
+    x, p, t, stopped, direction, frozen, time_s, accel_psd, lateral_psd, stopped_psd
 ):
     """Predict every track to ``time_s`` in place (white-jerk CA; stopped rows held).
 
     A track with a known ``direction`` (+1 / -1 along ``u``) does not reverse: a predicted
     speed against it becomes a standstill (speed and acceleration 0), as a braking vehicle.
+    ``frozen`` rows (learnt clutter: :func:`update_tracks`) keep their state and covariance.
     """
     q_moving, q_stopped = on_stack((N_STATE, N_STATE)), on_stack((N_STATE, N_STATE))
     tmp = on_stack((N_STATE, N_STATE))
@@ -101,7 +103,7 @@ def predict_tracks(  # type: ignore[no-untyped-def]
     for i in range(x.shape[0]):
         dt = max(time_s - t[i], 0.0)
         t[i] = max(t[i], time_s)
-        if dt == 0.0:
+        if dt == 0.0 or frozen[i]:
             continue
         if stopped[i]:
             if dt != stopped_dt:  # tracks mostly share the step
@@ -374,13 +376,58 @@ def _whitened_square(lo, w):  # type: ignore[no-untyped-def]
     return acc
 
 
+@numba.njit(cache=True, inline="always")
+def _store_view(  # type: ignore[no-untyped-def]
+    views, i, gated, seen, logdet, usable, doppler, zp, lo, s00, px, py, tx, ty, half
+):  # fmt: skip
+    """Store track ``i``'s view of the radar as :func:`gate_scan` made it, in ``views[i]``.
+
+    For a frozen track (learnt clutter: neither predicted nor updated) it is the same at every
+    scan of the radar. Layout (``CLUTTER_VIEW`` values): 1 (stored), ``gated[i]`` (9), seen,
+    log det S, usable (S factored), Doppler usable, the predicted detection (3), the lower
+    Cholesky factor of S (6), ``S_rr``, the body's centre point (2), the lane's tangent (2)
+    and the body's half length.
+    """
+    v = views[i]
+    v[0] = 1.0
+    for c in range(9):
+        v[1 + c] = gated[i, c]
+    v[10], v[11] = 1.0 if seen else 0.0, logdet
+    v[12], v[13] = 1.0 if usable else 0.0, 1.0 if doppler else 0.0
+    v[14], v[15], v[16] = zp[0], zp[1], zp[2]
+    v[17], v[18], v[19] = lo[0, 0], lo[1, 0], lo[1, 1]
+    v[20], v[21], v[22] = lo[2, 0], lo[2, 1], lo[2, 2]
+    v[23], v[24], v[25], v[26], v[27], v[28] = s00, px, py, tx, ty, half
+
+
+@numba.njit(cache=True, inline="always")
+def _stored_view(views, i, gated, seen, logdet, zp, lo):  # type: ignore[no-untyped-def]
+    """Restore track ``i``'s view stored by :func:`_store_view`.
+
+    Sets its ``gated`` row, ``seen``, ``logdet``, ``zp`` and ``lo``; returns ``(usable,
+    doppler, S_rr, px, py, tx, ty, half)``.
+    """
+    v = views[i]
+    for c in range(9):
+        gated[i, c] = v[1 + c]
+    seen[i], logdet[i] = v[10] != 0.0, v[11]
+    zp[0], zp[1], zp[2] = v[14], v[15], v[16]
+    lo[0, 0], lo[1, 0], lo[1, 1] = v[17], v[18], v[19]
+    lo[2, 0], lo[2, 1], lo[2, 2] = v[20], v[21], v[22]
+    return v[12] != 0.0, v[13] != 0.0, v[23], v[24], v[25], v[26], v[27], v[28]
+
+
 @numba.njit(cache=True)
 def gate_scan(  # type: ignore[no-untyped-def]
     x, p, spread, starting, road_user, moving, occluder, direction, corridor, roads, bounds,
     radar, noise_tab, noise_cnt, fields, across_std, start_speed_max, extent_gate,
-    passing_gate, beside_m, gate, z, d2, logdet, gated,
+    passing_gate, beside_m, gate, z, d2, logdet, gated, clutter, views,
 ):  # fmt: skip
     """Fill ``d2`` (T, D) with each detection's squared Mahalanobis distance to each track.
+
+    ``clutter`` rows are frozen (:func:`update_tracks`): their view of the radar (visible
+    part, predicted detection, factored innovation covariance) is stored in ``views`` (T,
+    ``CLUTTER_VIEW``) the first time and read back after (:func:`_store_view`).
 
     ``logdet`` (T,) receives the log-determinant of each track's innovation covariance
     (``inf`` where ``d2`` is). ``gated`` (T, 9) holds each track's lane frame at its ``u`` in
@@ -431,38 +478,51 @@ def gate_scan(  # type: ignore[no-untyped-def]
     held = np.full((n_t, n_d), np.inf)  # a starting row's d2 at its held zero speed
     for i in range(n_t):
         logdet[i] = np.inf
-        lo_i, hi_i = bounds[corridor[i], 0], bounds[corridor[i], 1]
-        lane = gated[i, 4], gated[i, 5], gated[i, 6], gated[i, 7], gated[i, 8]
-        part = _visible_part(x[i, 0], x[i, 3], spread[i], lo_i, hi_i, roads, radar, fields, lane)
-        gated[i, 0], gated[i, 1], gated[i, 2], gated[i, 3] = part
-        if part[3]:  # wholly out of view, its predicted detection too (seen stays False)
+        if clutter[i] and views[i, 0] == 1.0:  # a frozen track: its view of this radar, stored
+            usable, doppler, s00, px, py, tx, ty, half = _stored_view(
+                views, i, gated, seen, logdet, zp, lo
+            )
+        else:
+            usable, doppler, s00, px, py, tx, ty, half = False, False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+            cx = cy = part_spread = 0.0
+            lo_i, hi_i = bounds[corridor[i], 0], bounds[corridor[i], 1]
+            lane = gated[i, 4], gated[i, 5], gated[i, 6], gated[i, 7], gated[i, 8]
+            part = _visible_part(
+                x[i, 0], x[i, 3], spread[i], lo_i, hi_i, roads, radar, fields, lane
+            )
+            gated[i, 0], gated[i, 1], gated[i, 2], gated[i, 3] = part
+            if not part[3]:  # else wholly out of view, its predicted detection too (not seen)
+                part_spread, cx, cy, tx, ty = _model(
+                    i, x, spread, corridor, roads, bounds, radar, noise_tab, noise_cnt, fields,
+                    across_std, xv, zp, h, rm, jp, jv, part, lane,
+                )  # fmt: skip
+                seen[i] = in_view(zp[0], off_boresight(zp[1], radar), fields, radar[4])
+            if seen[i]:
+                doppler = doppler_usable(h, p[i], rm, radar)
+                for a in range(3):
+                    for b in range(3):
+                        acc = rm[a, b]
+                        for c in range(N_STATE):
+                            for e in range(N_STATE):
+                                acc += h[a, c] * p[i, c, e] * h[b, e]
+                        s[a, b] = acc
+                usable = cholesky_into(s, lo)
+            if usable:
+                logdet[i] = 2.0 * (math.log(lo[0, 0]) + math.log(lo[1, 1]) + math.log(lo[2, 2]))
+                s00 = s[0, 0]
+                px, py = cx - xv[3] * ty, cy + xv[3] * tx
+                half = BODY_HALF_SPREADS * part_spread
+            if clutter[i]:
+                _store_view(
+                    views, i, gated, seen[i], logdet[i], usable, doppler, zp, lo, s00, px, py,
+                    tx, ty, half,
+                )  # fmt: skip
+        if not usable or n_d == 0:
             d2[i, :] = np.inf
             continue
-        part_spread, cx, cy, tx, ty = _model(
-            i, x, spread, corridor, roads, bounds, radar, noise_tab, noise_cnt, fields,
-            across_std, xv, zp, h, rm, jp, jv, part, lane,
-        )  # fmt: skip
-        seen[i] = in_view(zp[0], off_boresight(zp[1], radar), fields, radar[4])
-        if not seen[i] or n_d == 0:
-            d2[i, :] = np.inf
-            continue
-        doppler = doppler_usable(h, p[i], rm, radar)
-        for a in range(3):
-            for b in range(3):
-                acc = rm[a, b]
-                for c in range(N_STATE):
-                    for e in range(N_STATE):
-                        acc += h[a, c] * p[i, c, e] * h[b, e]
-                s[a, b] = acc
-        if not cholesky_into(s, lo):
-            d2[i, :] = np.inf
-            continue
-        logdet[i] = 2.0 * (math.log(lo[0, 0]) + math.log(lo[1, 1]) + math.log(lo[2, 2]))
-        px, py = cx - xv[3] * ty, cy + xv[3] * tx
-        half = BODY_HALF_SPREADS * part_spread
         for j in range(n_d):
             wr = z[j, 0] - zp[0]  # range alone: d2 >= wr^2 / S_rr (start fitting keeps wr)
-            if wr * wr > gate * s[0, 0]:
+            if wr * wr > gate * s00:
                 d2[i, j] = np.inf  # beyond the gate; no penalty: every use compares to it
                 continue
             innovation_into(z[j], zp, radar, doppler, w)
@@ -554,7 +614,7 @@ def favour_sensor_ids(d2, sensor_id, ids, bonus, gate):  # type: ignore[no-untyp
 def associate_scan(  # type: ignore[no-untyped-def]
     x, p, spread, stopped, moved, confirmed, clutter, direction, corridor, sensor_id, roads,
     bounds, radar, noise_tab, noise_cnt, fields, across_std, start_speed_max, extent_gate,
-    occlusion_gate, passing_gate, beside_m, gate, clutter_gate, id_bonus, z, ids,
+    occlusion_gate, passing_gate, beside_m, gate, clutter_gate, id_bonus, z, ids, views,
 ):  # fmt: skip
     """Gate a scan's detections ``z`` (D, 3) to the predicted tracks; try the simple assignment.
 
@@ -563,7 +623,8 @@ def associate_scan(  # type: ignore[no-untyped-def]
     ``clutter_gate`` of an old static object (``clutter`` rows: never moved, older than the
     clutter age) is its reflection alone (the other rows' ``d2`` set to ``inf``: a road user
     passing over a barrier post would take it and leave a track behind on it:
-    :func:`reserve_clutter`). With ``id_bonus`` > 0, a gated detection whose sensor id
+    :func:`reserve_clutter`; their stored views of the radar: ``views``, see
+    :func:`gate_scan`). With ``id_bonus`` > 0, a gated detection whose sensor id
     (``ids`` (D,), -1 none) is the one this radar last gave a track (``sensor_id`` (T,))
     costs that much less (:func:`favour_sensor_ids`).
     Returns ``(seen, d2, logdet, gated, simple, tracks, detections, sight)``: each track in
@@ -580,7 +641,11 @@ def associate_scan(  # type: ignore[no-untyped-def]
     gated = np.empty((n_t, 9))  # visible parts (gate_scan) and lane frames of the tracks
     lanes = gated[:, 4:]
     for i in range(n_t):
-        _store_lane(lanes, i, roads, bounds, corridor, x)
+        if clutter[i] and views[i, 0] == 1.0:  # stored (gate_scan)
+            for c in range(5):
+                lanes[i, c] = views[i, 5 + c]
+        else:
+            _store_lane(lanes, i, roads, bounds, corridor, x)
     road_user = np.empty(n_t, np.bool_)
     starting = np.empty(n_t, np.bool_)  # stopped road users (may start: gate_scan)
     moving = np.empty(n_t, np.bool_)  # moving road users
@@ -605,6 +670,7 @@ def associate_scan(  # type: ignore[no-untyped-def]
         x, p, spread, starting, road_user, moving, behind, direction,
         corridor, roads, bounds, radar, noise_tab, noise_cnt, fields, across_std,
         start_speed_max, extent_gate, passing_gate, beside_m, gate, z, d2, logdet, gated,
+        clutter, views,
     )  # fmt: skip
     if n_d == 0:
         none = np.zeros(0, np.int64)
@@ -618,19 +684,18 @@ def associate_scan(  # type: ignore[no-untyped-def]
 
 @numba.njit(cache=True)
 def apply_scan(  # type: ignore[no-untyped-def]
-    time_s, seen, d2, logdet, gated, sight, gate, tracks, dets, z, ids, radar_col, x, p, spread,
-    along_m2,
-    along_m4, stopped, moved, direction, slow_since, corridor, miss_run, occluded, anchor_u,
-    doppler_seen_s, detection_d, sensor_id, history, misses, last_hit_s, confirmed, roads,
+    time_s, seen, clutter, d2, logdet, gated, sight, gate, tracks, dets, z, ids, radar_col, x, p,
+    spread, along_m2, along_m4, stopped, moved, direction, slow_since, corridor, miss_run, occluded,
+    anchor_u, doppler_seen_s, detection_d, sensor_id, history, misses, last_hit_s, confirmed, roads,
     bounds, radar, noise_tab, noise_cnt, fields, pd_tab, pd_cnt, across_std, moving_radial,
-    start_speed_var, learning_rate, shape_rate, spread_lo, spread_hi, align, lane_half_width,
-    bias, bias_stats, bias_forget, bias_gate, confirm_speed_var, window_mask, confirm_hits,
-    shadow_spread,
+    start_speed_var, learning_rate, shape_rate, spread_lo, spread_hi, align, lane_half_width, bias,
+    bias_stats, bias_forget, bias_gate, confirm_speed_var, window_mask, confirm_hits, shadow_spread,
 ):  # fmt: skip
     """Update the tracks with a gated scan (:func:`associate_scan`, its ``gated``, ``sight``).
 
     Every gated detection goes to its owner (:func:`owners`: the assignment's, then the likeliest
-    track) and updates it (:func:`update_tracks`, which sets ``doppler_seen_s``); the assigned
+    track) and updates it (:func:`update_tracks`, which sets ``doppler_seen_s``; ``clutter``
+    rows stay as they are); the assigned
     detection's sensor id becomes its track's (column ``radar_col`` of ``sensor_id``). A track
     in view without a detection is hidden if a nearer track covers it (:func:`nearer_occluders`; its
     miss tells nothing), else takes what the miss tells (:func:`miss_updates`, moving ones). A
@@ -654,9 +719,9 @@ def apply_scan(  # type: ignore[no-untyped-def]
     if n_d:
         owner, order = owners(d2, logdet, gate, tracks, dets)
         update_tracks(
-            time_s, order, owner, gated, z, x, p, spread, along_m2, along_m4, stopped, moved,
-            direction, slow_since, doppler_seen_s, detection_d, corridor, roads, bounds, radar,
-            noise_tab, noise_cnt, fields, across_std, moving_radial, start_speed_var,
+            time_s, order, owner, clutter, gated, z, x, p, spread, along_m2, along_m4, stopped,
+            moved, direction, slow_since, doppler_seen_s, detection_d, corridor, roads, bounds,
+            radar, noise_tab, noise_cnt, fields, across_std, moving_radial, start_speed_var,
             learning_rate, shape_rate, spread_lo, spread_hi, align, lane_half_width, bias,
             bias_stats, bias_forget, bias_gate,
         )  # fmt: skip
@@ -673,7 +738,7 @@ def apply_scan(  # type: ignore[no-untyped-def]
     if missed.size:  # lines of sight after the updates: those of the updated tracks anew
         lanes = gated[:, 4:]
         for i in range(n_t):
-            if hit[i]:
+            if hit[i] and not clutter[i]:  # a frozen track's stays
                 _store_lane(lanes, i, roads, bounds, corridor, x)
         if sight.shape[0] == n_t:
             stale = np.empty(n_t, np.int64)
@@ -793,12 +858,17 @@ def unambiguous_assignment(d2, gate):  # type: ignore[no-untyped-def]
 
 @numba.njit(cache=True)
 def update_tracks(  # type: ignore[no-untyped-def]
-    time_s, order, owner, gated, z, x, p, spread, along_m2, along_m4, stopped, moved, direction,
-    slow_since, doppler_seen_s, detection_d, corridor, roads, bounds, radar, noise_tab,
+    time_s, order, owner, clutter, gated, z, x, p, spread, along_m2, along_m4, stopped, moved,
+    direction, slow_since, doppler_seen_s, detection_d, corridor, roads, bounds, radar, noise_tab,
     noise_cnt, fields, across_std, moving_radial, start_speed_var, learning_rate, shape_rate,
     spread_lo, spread_hi, align, lane_half_width, bias, bias_stats, bias_forget, bias_gate,
 ):  # fmt: skip
     """Update each owning track with its detections in ``order`` (sequential EKF updates).
+
+    ``clutter`` rows (learnt static clutter: :func:`._scene_loop.learnt_clutter`) are frozen:
+    after standing longer than any closure, a post's or a rail's place and body are known, and
+    its detections only need to be its own (:func:`reserve_clutter`); they are not updated
+    (nor predicted: :func:`predict_tracks`), which leaves its gate as it is.
 
     ``gated`` (T, 9): the tracks' visible parts and lane frames as gated (:func:`gate_scan`),
     those of a track not updated since.
@@ -839,6 +909,8 @@ def update_tracks(  # type: ignore[no-untyped-def]
     as_gated = np.ones(gated.shape[0], np.bool_)  # the state the gate saw (gated holds)
     for j in order:
         i = owner[j]
+        if clutter[i]:
+            continue
         # body spread: along-track residual of the detection's ground point
         lo_i, hi_i = bounds[corridor[i], 0], bounds[corridor[i], 1]
         if as_gated[i]:

@@ -70,6 +70,7 @@ class TrackRows(NamedTuple):
     doppler_seen_s: np.ndarray
     detection_d: np.ndarray
     sensor_id: np.ndarray
+    clutter_views: np.ndarray
 
 
 class Settings(NamedTuple):
@@ -220,7 +221,7 @@ def _live(t, n):  # type: ignore[no-untyped-def]
         borrowed(t.line_event_raised[:n]), borrowed(t.anchor_u[:n]), borrowed(t.spread[:n]),
         borrowed(t.along_m2[:n]), borrowed(t.along_m4[:n]), borrowed(t.direction[:n]),
         borrowed(t.miss_run[:n]), borrowed(t.occluded[:n]), borrowed(t.doppler_seen_s[:n]),
-        borrowed(t.detection_d[:n]), borrowed(t.sensor_id[:n]),
+        borrowed(t.detection_d[:n]), borrowed(t.sensor_id[:n]), borrowed(t.clutter_views[:n]),
     )  # fmt: skip
 
 
@@ -248,6 +249,7 @@ def _borrowed_tracks(t):  # type: ignore[no-untyped-def]
         borrowed(t.anchor_u), borrowed(t.spread), borrowed(t.along_m2), borrowed(t.along_m4),
         borrowed(t.direction), borrowed(t.miss_run), borrowed(t.occluded),
         borrowed(t.doppler_seen_s), borrowed(t.detection_d), borrowed(t.sensor_id),
+        borrowed(t.clutter_views),
     )  # fmt: skip
 
 
@@ -297,7 +299,7 @@ def with_room(t, n, need):  # type: ignore[no-untyped-def]
         _grown(t.spread, n, size), _grown(t.along_m2, n, size), _grown(t.along_m4, n, size),
         _grown(t.direction, n, size), _grown(t.miss_run, n, size), _grown(t.occluded, n, size),
         _grown(t.doppler_seen_s, n, size), _grown(t.detection_d, n, size),
-        _grown(t.sensor_id, n, size),
+        _grown(t.sensor_id, n, size), _grown(t.clutter_views, n, size),
     )  # fmt: skip
 
 
@@ -322,6 +324,7 @@ def _copy_row(t, src, dst):  # type: ignore[no-untyped-def]
         t.occluded[src],
     )
     t.doppler_seen_s[dst], t.detection_d[dst] = t.doppler_seen_s[src], t.detection_d[src]
+    t.clutter_views[dst] = t.clutter_views[src]
 
 
 @numba.njit(cache=True)
@@ -369,6 +372,7 @@ def new_row(t, i, track_id, time_s, corridor, x, p, spread, radar_col, sensor_id
     t.doppler_seen_s[i], t.detection_d[i] = -np.inf, np.nan
     t.sensor_id[i] = -1
     t.sensor_id[i, radar_col] = sensor_id
+    t.clutter_views[i, :, 0] = 0.0  # none stored
 
 
 @numba.njit(cache=True)
@@ -577,9 +581,14 @@ def run_scans(  # type: ignore[no-untyped-def]
         radar = site.radar[r]
         noise_tab, noise_cnt = site.noise_tab[r], site.noise_cnt[r]
         fields = site.fields[r, : site.field_count[r]]
+        # learnt clutter (as of the tracks' last scans) is frozen: neither predicted nor updated
+        clutter = learnt_clutter(v.stopped, v.moved, v.time_s, v.born_s, s.clutter_age_s)
+        for i in range(n):
+            if not clutter[i]:  # its stored views of the radars are out of date
+                v.clutter_views[i, :, 0] = 0.0
         predict_tracks(
-            v.x, v.p, v.time_s, v.stopped, v.direction, time_s, s.accel_psd, s.lateral_psd,
-            s.stopped_psd,
+            v.x, v.p, v.time_s, v.stopped, v.direction, clutter, time_s, s.accel_psd,
+            s.lateral_psd, s.stopped_psd,
         )  # fmt: skip
         view = detections_in_view(z, radar, fields)
         n_out_view = 0
@@ -591,13 +600,12 @@ def run_scans(  # type: ignore[no-untyped-def]
             z, ids = z[view], ids[view]
         used = np.zeros(z.shape[0], np.bool_)
         if n:
-            clutter = learnt_clutter(v.stopped, v.moved, v.time_s, v.born_s, s.clutter_age_s)
             seen, d2, logdet, gated, simple, ti, di, sight = associate_scan(
                 v.x, v.p, v.spread, v.stopped, v.moved, v.confirmed, clutter, v.direction,
                 v.corridor, v.sensor_id[:, r], site.roads, site.bounds, radar, noise_tab,
                 noise_cnt, fields, s.body_across_std_m, s.start_speed_max_mps,
                 s.body_extent_gate, s.occlusion_gate, s.passing_gate, s.beside_m, s.gate,
-                s.clutter_gate, s.sensor_id_bonus, z, ids,
+                s.clutter_gate, s.sensor_id_bonus, z, ids, v.clutter_views[:, r],
             )  # fmt: skip
             if not simple:
                 solved, ti, di = assignment_by_components(d2, s.gate, MAX_CHOICES)
@@ -605,16 +613,16 @@ def run_scans(  # type: ignore[no-untyped-def]
                     ti, di = _assign(d2, s.gate)
             stats = radars.bias_stats[r]
             used = apply_scan(
-                time_s, seen, d2, logdet, gated, sight, s.gate, ti, di, z, ids, r, v.x, v.p,
-                v.spread, v.along_m2, v.along_m4, v.stopped, v.moved, v.direction, v.slow_since,
-                v.corridor, v.miss_run, v.occluded, v.anchor_u, v.doppler_seen_s,
+                time_s, seen, clutter, d2, logdet, gated, sight, s.gate, ti, di, z, ids, r, v.x,
+                v.p, v.spread, v.along_m2, v.along_m4, v.stopped, v.moved, v.direction,
+                v.slow_since, v.corridor, v.miss_run, v.occluded, v.anchor_u, v.doppler_seen_s,
                 v.detection_d, v.sensor_id, v.history, v.misses, v.last_hit_s, v.confirmed,
                 site.roads, site.bounds, radar, noise_tab, noise_cnt, fields, site.pd_tab[r],
-                site.pd_cnt[r], s.body_across_std_m, s.moving_radial_mps,
-                s.start_speed_max_mps**2, s.spread_learning_rate, s.shape_learning_rate,
-                s.spread_lo_m, s.spread_hi_m, s.estimate_azimuth_bias, site.half_lane_m, bias,
-                stats, s.bias_forget, s.bias_gate_m, s.confirm_speed_var, s.window_mask,
-                s.confirm_hits, s.shadow_spread_m,
+                site.pd_cnt[r], s.body_across_std_m, s.moving_radial_mps, s.start_speed_max_mps**2,
+                s.spread_learning_rate, s.shape_learning_rate, s.spread_lo_m, s.spread_hi_m,
+                s.estimate_azimuth_bias, site.half_lane_m, bias, stats, s.bias_forget,
+                s.bias_gate_m, s.confirm_speed_var, s.window_mask, s.confirm_hits,
+                s.shadow_spread_m,
             )  # fmt: skip
             if stats[2] >= s.bias_min_samples:
                 radars.azimuth_bias_rad[r] = stats[1] / stats[0]

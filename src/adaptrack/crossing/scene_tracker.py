@@ -18,7 +18,8 @@ its own body: a detection in the occluder's gate beyond it is the occluder's,
 ``occlusion_gate``);
 assign one detection per track by global nearest neighbour
 (:func:`adaptrack.tracking.gnn_assign`; a static object that has stood longer than
-``clutter_age_s`` keeps the detections in its own tight gate: learnt clutter such as a rail);
+``clutter_age_s`` keeps the detections in its own tight gate: learnt clutter such as a rail,
+which is frozen from then on, neither predicted nor updated, its view of each radar stored);
 give every further gated detection to the track most likely to have made it (the body's
 other reflections; least ``d2 + ln det S``); update (a body reaching out of the radar's field
 of view is measured at the centre of its part in view); apply what a miss tells (the Doppler
@@ -86,7 +87,7 @@ import pandas as pd
 from .._toml import load_toml
 from .._typing import FloatArray
 from ..tracking import LifecycleRules, TrackBook, TrackStatus, gate_threshold
-from ._scene_kernels import BODY_HALF_SPREADS
+from ._scene_kernels import BODY_HALF_SPREADS, CLUTTER_VIEW
 from ._scene_loop import (
     EVENT_FIELDS,
     EVENT_NAMES,
@@ -276,6 +277,7 @@ class _Tracks:
     doppler_seen_s: FloatArray  # last hit whose radial speed measured the speed [s] (-inf)
     detection_d: FloatArray  # its own detections' offset across (moving average) [m], NaN
     sensor_id: np.ndarray  # (T, radars) the object id each radar last reported for it (-1 none)
+    clutter_views: FloatArray  # (T, radars, CLUTTER_VIEW) a learnt clutter's gate, per radar
 
     @classmethod
     def opened(
@@ -308,6 +310,7 @@ class _Tracks:
             moved=no, event_raised=no, line_event_raised=no, anchor_u=real, spread=real,
             along_m2=real, along_m4=real, direction=real, miss_run=real, occluded=no,
             doppler_seen_s=real, detection_d=real, sensor_id=np.zeros((0, n_radars), np.int64),
+            clutter_views=np.zeros((0, n_radars, CLUTTER_VIEW)),
         )  # fmt: skip
 
     @property
