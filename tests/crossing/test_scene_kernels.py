@@ -315,8 +315,8 @@ def test_the_younger_of_two_tracks_on_one_body_is_dropped_unless_it_is_the_confi
 
     def drop(confirmed):
         return merged_rows(
-            corridor, x, p, spread, static, no, no, ids, confirmed, 1.2, 1.0, 4.0, no, no, 0.5,
-            np.zeros(4),
+            np.arange(4), corridor, x, p, spread, static, no, no, ids, confirmed, 1.2, 1.0, 4.0, no,
+            no, 0.5, np.zeros(4),
         ).tolist()  # fmt: skip
 
     assert drop(np.array([True, True, False, True])) == [False, True, True, False]
@@ -382,7 +382,7 @@ def test_a_road_user_followed_for_long_is_not_merged_into_one_beside_it():
     def drop(settled, across=1.1):
         x[1, 3] = across
         return merged_rows(
-            corridor, x, p, spread, no, no, yes, ids, yes, 1.2, 1.0, 4.0, no,
+            np.arange(2), corridor, x, p, spread, no, no, yes, ids, yes, 1.2, 1.0, 4.0, no,
             np.array(settled), 0.5, np.zeros(2),
         ).tolist()  # fmt: skip
 
@@ -494,8 +494,8 @@ def test_two_moving_parts_of_one_long_body_are_one_track_two_cars_are_not():
         x[1, 0] = gap_m
         x[:, 1] = speed
         return merged_rows(
-            corridor, x, p, np.full(2, spread), no, stopped, moved, ids, yes, 1.2, 1.0, 4.0, no,
-            no, 0.5, np.zeros(2),
+            np.arange(2), corridor, x, p, np.full(2, spread), no, stopped, moved, ids, yes, 1.2,
+            1.0, 4.0, no, no, 0.5, np.zeros(2),
         ).tolist()  # fmt: skip
 
     assert drop(4.4, 1.6) == [False, True]  # halves of a 12 m bus, 4.4 m apart: one body
@@ -527,9 +527,9 @@ def test_a_young_static_object_on_a_stopped_bus_is_its_reflection_an_old_one_is_
         x[1, 0], x[1, 3] = along, across
         spread[1] = own_spread
         return merged_rows(
-            corridor, x, p, spread, static, stopped, moved, ids, np.ones(2, bool), 1.2, 1.0,
-            4.0, np.array([False, young]), np.zeros(2, bool), 0.5,
-            np.array([40.0, static_born_s]),
+            np.arange(2), corridor, x, p, spread, static, stopped, moved, ids, np.ones(2, bool),
+            1.2, 1.0, 4.0, np.array([False, young]), np.zeros(2, bool), 0.5, np.array([40.0,
+            static_born_s]),
         ).tolist()  # fmt: skip
 
     assert drop(True) == [False, True]

@@ -1224,10 +1224,13 @@ def open_tracks(  # type: ignore[no-untyped-def]
 
 @numba.njit(cache=True)
 def merged_rows(  # type: ignore[no-untyped-def]
-    corridor, x, p, spread, static, stopped, moved, ids, confirmed, lateral_m, speed_mps,
+    rows, corridor, x, p, spread, static, stopped, moved, ids, confirmed, lateral_m, speed_mps,
     parts_speed, young, settled, settled_lateral_m, born,
 ):  # fmt: skip
-    """Rows to drop: the younger of two tracks on one body (see ``SceneTracker._retire``).
+    """Of the tracks ``rows``, those to drop (bool per entry of ``rows``).
+
+    The younger of two tracks on one body (see ``SceneTracker._retire``); the other arrays are
+    per track.
 
     Pairs in row order; a confirmed track outlives an unconfirmed one whatever their ages; a track
     already dropped removes no other. Besides tracks within their spreads of each other, two
@@ -1245,20 +1248,23 @@ def merged_rows(  # type: ignore[no-untyped-def]
     beside it: two road users side by side (a motorcycle filtering past a queue) stay apart,
     while a duplicate of one body sits in its lane.
     """
-    n = x.shape[0]
-    drop = np.zeros(n, dtype=np.bool_)
-    for a in range(n):
-        for b in range(a + 1, n):
+    m = rows.size
+    drop = np.zeros(m, dtype=np.bool_)  # per entry of rows
+    for ka in range(m):
+        a = rows[ka]
+        for kb in range(ka + 1, m):
+            b = rows[kb]
             if corridor[a] != corridor[b]:
                 continue
             if static[a] != static[b]:
                 s, r = (a, b) if static[a] else (b, a)  # the static one, the road user
+                ks, kr = (ka, kb) if static[a] else (kb, ka)
                 if (
-                    young[s] and born[s] > born[r] and stopped[r] and moved[r] and not drop[r]
+                    young[s] and born[s] > born[r] and stopped[r] and moved[r] and not drop[kr]
                     and bodies_overlap(x, spread, s, r)
                     and abs(x[s, 3] - x[r, 3]) < lateral_m
                 ):  # fmt: skip
-                    drop[s] = True
+                    drop[ks] = True
                 continue
             sv = math.sqrt(p[a, 1, 1] + p[b, 1, 1])
             du = abs(x[a, 0] - x[b, 0])
@@ -1273,10 +1279,10 @@ def merged_rows(  # type: ignore[no-untyped-def]
                 and abs(x[a, 1] - x[b, 1]) < speed_mps + 3.0 * sv
             ):
                 continue
-            older, younger = (a, b) if ids[a] < ids[b] else (b, a)
-            if confirmed[younger] and not confirmed[older]:
+            older, younger = (ka, kb) if ids[a] < ids[b] else (kb, ka)
+            if confirmed[rows[younger]] and not confirmed[rows[older]]:
                 older, younger = younger, older
-            if settled[younger] and abs(x[a, 3] - x[b, 3]) > settled_lateral_m:
+            if settled[rows[younger]] and abs(x[a, 3] - x[b, 3]) > settled_lateral_m:
                 continue
             if not drop[older]:
                 drop[younger] = True
@@ -1315,29 +1321,17 @@ def retired_rows(  # type: ignore[no-untyped-def]
     for i in gone:
         dead[i] = True
     alive = rows_where(dead, False)
-    young = np.zeros(alive.size, dtype=np.bool_)
-    settled = np.zeros(alive.size, dtype=np.bool_)
-    for k in range(alive.size):
-        i = alive[k]
-        age = track_time_s[i] - born_s[i]
-        young[k] = absorb_young_static and age < clutter_age_s
-        settled[k] = confirmed[i] and moved[i] and age > settled_s
+    young = np.empty(n, dtype=np.bool_)
+    settled = np.empty(n, dtype=np.bool_)
     static = np.empty(n, np.bool_)
     for i in range(n):
+        age = track_time_s[i] - born_s[i]
+        young[i] = absorb_young_static and age < clutter_age_s
+        settled[i] = confirmed[i] and moved[i] and age > settled_s
         static[i] = stopped[i] and not moved[i]
-    if alive.size < n:  # the survivors' rows (most scans lose none)
-        corridor, x, p, spread, static = (
-            corridor[alive],
-            x[alive],
-            p[alive],
-            spread[alive],
-            static[alive],
-        )
-        stopped, moved, ids, confirmed = stopped[alive], moved[alive], ids[alive], confirmed[alive]
-        born_s = born_s[alive]
     merged = merged_rows(
-        corridor, x, p, spread, static, stopped, moved, ids, confirmed, lateral_m, speed_mps,
-        parts_speed, young, settled, settled_lateral_m, born_s,
+        alive, corridor, x, p, spread, static, stopped, moved, ids, confirmed, lateral_m,
+        speed_mps, parts_speed, young, settled, settled_lateral_m, born_s,
     )  # fmt: skip
     for k in range(alive.size):
         dead[alive[k]] |= merged[k]
