@@ -648,8 +648,9 @@ def _track_scene_file(
     Console().print(
         f"wrote {out} ({tracks['track_id'].nunique()} tracks) and {ev_path} "
         f"({len(events_frame)} events); detections: {log.updated} updated tracks, "
-        f"{log.opened + log.joined_new} opened tracks, {log.rejected_outside_view} rejected "
-        f"(outside every field of view), {log.total} of {len(det)}"
+        f"{log.opened + log.joined_new} opened tracks, {log.off_road} beside every road (no "
+        f"track opened), {log.rejected_outside_view} rejected (outside every field of view), "
+        f"{log.total} of {len(det)}"
     )
 
 

@@ -222,6 +222,27 @@ def test_bad_scans_are_refused_with_a_reason():
     assert tracker.log.rejected_outside_view == 1
 
 
+@pytest.mark.parametrize(("across_m", "opens"), [(5.0, True), (25.0, False)])
+def test_a_detection_beside_every_road_opens_no_track_and_is_counted(across_m, opens):
+    """A left-over detection in radar_A's view, ``across_m`` beside its lane's corridor: 5 m
+    (a footway) opens a tentative track; 25 m (a field beside the site's roads, farther than
+    ``max_open_offset_m`` = 15 m from every corridor) opens none and is counted as
+    ``off_road``; every detection is accounted for either way."""
+    from adaptrack.crossing._scene_kernels import nearest_sample
+
+    tracker = SceneTracker(SITE)
+    cor, radar, _ = _queue_lane(tracker)
+    ground = cor.path.lane_geometry(np.array([cor.crossing_u - 40.0]), np.array([across_m]))[0]
+    _, _, d = nearest_sample(tracker._tables.roads, tracker._tables.bounds, *ground[0])
+    assert abs(abs(d) - across_m) < 0.5  # no other corridor nearer
+    rng_m, az = radar.polar(ground)
+    assert radar.in_view(rng_m, az).all()
+    tracker.step(radar.name, 1.0, np.stack([rng_m, az, np.zeros(1)], -1))
+    log = tracker.log
+    assert (tracker.book.ids.size, log.opened, log.off_road) == ((1, 1, 0) if opens else (0, 0, 1))
+    assert log.total == 1
+
+
 def _write(tmp_path, text):
     path = tmp_path / "det.csv"
     path.write_text(text)

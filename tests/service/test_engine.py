@@ -35,7 +35,7 @@ def test_live_tracks_and_events_equal_offline_exactly(scene_files, offline):
     got = pd.DataFrame([r for r in recs if r["type"] == "event"]).drop(columns="type")
     pd.testing.assert_frame_equal(got.fillna(np.nan), events, check_exact=True)  # null: NaN
     assert len(events) >= 1  # the scene's closure gives something to compare
-    assert live.used == log.updated + log.opened + log.joined_new
+    assert live.used == log.updated + log.opened + log.joined_new + log.off_road
     assert_accounted(live)
     assert live.stats()["pending"] == 0
 

@@ -38,7 +38,7 @@ from ._scene_kernels import (
 
 EVENT_NAMES = ("stopped_between_barriers", "will_not_stop_before_stop_line")  # by event code
 EVENT_FIELDS = 6  # time [s], event code, track id, east [m], north [m], lead [s] (NaN: none)
-LOG_FIELDS = ("updated", "opened", "joined_new", "rejected_outside_view")
+LOG_FIELDS = ("updated", "opened", "joined_new", "rejected_outside_view", "off_road")
 MAX_CHOICES = 4096  # a scan's conflict with more choices goes to SciPy's assignment
 
 
@@ -104,6 +104,7 @@ class Settings(NamedTuple):
     window_mask: int
     confirm_hits: int
     cluster_radius_m: float
+    max_open_offset_m: float
     initial_speed_var: float
     moved_speed_mps: float
     moving_speed_std_mps: float
@@ -632,23 +633,32 @@ def run_scans(  # type: ignore[no-untyped-def]
         log[0] += n_used
         if n_used < used.size:  # open tentative tracks from the detections left over
             left = rows_where(used, False)
-            corridor, x, p, _, first = open_tracks(
+            corridor, x, p, labels, first = open_tracks(
                 z[left], radar, noise_tab, noise_cnt, site.roads, site.bounds,
                 s.cluster_radius_m, s.initial_speed_var, s.body_along_std_m**2,
             )  # fmt: skip
-            m = corridor.size
-            rows_own, t = _room(rows_own, t, n, n + m)
-            left_ids = ids[left]
-            for g in range(m):
-                new_row(
-                    t, n + g, next_id + g, time_s, corridor[g], x[g], p[g],
-                    s.body_along_std_m, r, left_ids[first[g]],
-                )  # fmt: skip
-            n += m
-            next_id += m
+            m, off_road = 0, 0  # bodies opened; detections beside every road (none opened)
+            for g in range(corridor.size):
+                m += abs(x[g, 3]) <= s.max_open_offset_m
+            for j in range(left.size):
+                off_road += abs(x[labels[j], 3]) > s.max_open_offset_m
+            if m:
+                rows_own, t = _room(rows_own, t, n, n + m)
+                left_ids = ids[left]
+                k = n
+                for g in range(corridor.size):
+                    if abs(x[g, 3]) <= s.max_open_offset_m:
+                        new_row(
+                            t, k, next_id + k - n, time_s, corridor[g], x[g], p[g],
+                            s.body_along_std_m, r, left_ids[first[g]],
+                        )  # fmt: skip
+                        k += 1
+                n += m
+                next_id += m
+                v = _live(t, n)  # the rows grew
             log[1] += m
-            log[2] += used.size - n_used - m
-            v = _live(t, n)  # the rows grew
+            log[2] += left.size - m - off_road
+            log[4] += off_road
         # modes and hazard events
         hazard, on_road = mode_changes(
             time_s, v.x, v.p, v.corridor, v.confirmed, v.last_hit_s, v.anchor_u, v.stopped,

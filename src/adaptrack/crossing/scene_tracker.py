@@ -31,7 +31,9 @@ confirmation: the radar sees over a car, and what is seen rarely there, moving w
 is its multipath ghost); record hits and misses
 (M-of-N confirmation once the speed sigma is below ``confirm_speed_std_mps``, deletion by
 coasting time or, for a stopped track, by misses in a row: :mod:`adaptrack.tracking.lifecycle`);
-open tentative tracks from the detections left over, clustered within ``cluster_radius_m``;
+open tentative tracks from the detections left over, clustered within ``cluster_radius_m``
+(a body farther than ``max_open_offset_m`` across from every corridor opens none: it is
+beside every road of the site, counted as ``off_road``);
 split a stopped track whose reflections come from two bodies of a queue
 (:meth:`SceneTracker._split`); merge two tracks on one body (two moving parts of one long
 vehicle among them; a young static object whose body overlaps a stopped road user's,
@@ -149,6 +151,8 @@ class SceneTrackerConfig:
     clutter_gate_probability: float = 0.99  # a static object's own detections (reserved) ...
     clutter_age_s: float = 300.0  # ... once it has stood longer than any closure
     cluster_radius_m: float = 3.0
+    max_open_offset_m: float = 15.0  # a body farther across from every corridor opens no track
+    # (beside every road of the site: a field, a car park; a false alarm there)
     stop_speed_mps: float = 0.3  # a track this slow is slowing to a stop ...
     stop_exit_sigmas: float = 2.0  # ... stays slowing unless this many sigmas faster ...
     stop_confirm_s: float = 0.5  # ... and stops after this
@@ -211,11 +215,12 @@ _RATES = ("spread_learning_rate", "shape_learning_rate")
 _POSITIVE = (
     "accel_psd", "body_along_std_m", "body_across_std_m", "cluster_radius_m",
     "initial_speed_std_mps", "confirm_speed_std_mps", "moving_speed_std_mps",
-    "stop_decel_mps2",
+    "stop_decel_mps2", "max_open_offset_m",
 )  # fmt: skip
 _NO_LIMIT = (  # inf: no limit
     "merge_parts_speed_mps", "merge_settled_s", "clutter_age_s", "stop_seen_s",
     "bias_min_samples", "stop_confirm_s", "moved_distance_m", "shadow_spread_m",
+    "max_open_offset_m",
 )  # fmt: skip
 
 
@@ -332,11 +337,15 @@ class ScanLog:
     opened: int = 0
     joined_new: int = 0  # clustered into a new track's first detection
     rejected_outside_view: int = 0
+    off_road: int = 0  # left over beside every road (``max_open_offset_m``): no track opened
 
     @property
     def total(self) -> int:
         """Detections accounted for."""
-        return self.updated + self.opened + self.joined_new + self.rejected_outside_view
+        return (
+            self.updated + self.opened + self.joined_new + self.rejected_outside_view
+            + self.off_road
+        )  # fmt: skip
 
 
 class SceneTracker:
