@@ -637,17 +637,19 @@ def run_scans(  # type: ignore[no-untyped-def]
                 z[left], radar, noise_tab, noise_cnt, site.roads, site.bounds,
                 s.cluster_radius_m, s.initial_speed_var, s.body_along_std_m**2,
             )  # fmt: skip
-            m, off_road = 0, 0  # bodies opened; detections beside every road (none opened)
+            near_road = np.empty(corridor.size, np.bool_)  # else beside every road: not opened
+            m, off_road = 0, 0  # bodies opened; detections of the bodies beside every road
             for g in range(corridor.size):
-                m += abs(x[g, 3]) <= s.max_open_offset_m
+                near_road[g] = abs(x[g, 3]) <= s.max_open_offset_m
+                m += near_road[g]
             for j in range(left.size):
-                off_road += abs(x[labels[j], 3]) > s.max_open_offset_m
+                off_road += not near_road[labels[j]]
             if m:
                 rows_own, t = _room(rows_own, t, n, n + m)
                 left_ids = ids[left]
                 k = n
                 for g in range(corridor.size):
-                    if abs(x[g, 3]) <= s.max_open_offset_m:
+                    if near_road[g]:
                         new_row(
                             t, k, next_id + k - n, time_s, corridor[g], x[g], p[g],
                             s.body_along_std_m, r, left_ids[first[g]],
