@@ -141,16 +141,27 @@ def filter_log(
     log_file: Path = typer.Argument(..., help="CSV/Parquet position log (the fit's layout)."),
     config: Path = typer.Option(..., "--config", help="TOML written by `adaptrack fit`."),
     smooth: bool = typer.Option(False, "--smooth", help="RTS smoothing (not causal)."),
+    refit: bool = typer.Option(
+        False,
+        "--refit-online",
+        help="Refit the parameters from the log's own earlier fixes as the filter goes "
+        "(maximum likelihood, starting at the config's; causal; not with --smooth).",
+    ),
     out: Path = typer.Option(..., "--out", help="Output CSV or Parquet."),
 ) -> None:
     """Filter (or smooth) a log with a fit: estimates with sigmas and covariance at each fix."""
     check_outputs(out)
+    if refit and smooth:
+        raise typer.BadParameter("--refit-online filters causally; it does not take --smooth")
     try:
         result: MotionFit
         result, measurement = fit_from_toml(load_toml(config), str(config))
     except (ValueError, OSError) as exc:
         fail(str(exc))
     log = _read(log_file, measurement)
+    if refit:
+        _filter_refitting(log_file, log, result, out)
+        return
     try:
         run = result.run(log)
         check = None if isinstance(run, IMMResult) else innovation_consistency(run)
@@ -176,3 +187,24 @@ def filter_log(
     Console().print(
         f"wrote {out} ({log.times.size} epochs, {'smoothed' if smooth else 'filtered'})"
     )
+
+
+def _filter_refitting(
+    log_file: Path, log: PositionLog | RadarLog, result: MotionFit, out: Path
+) -> None:
+    """``filter --refit-online``: causal estimates, the parameters refitted as it goes."""
+    try:
+        mean, cov, online = result.filter_online(log)
+    except ValueError as exc:
+        fail(f"{log_file}: {exc}")
+    table = estimates_table(log, mean, cov, result.offset_s, result.model == "ct", None)
+    write_table_atomic(table, out)
+    if online.fits:
+        last = ", ".join(f"{k} {v:.4g}" for k, v in online.params[-1].items())
+        Console().print(
+            f"refitted {len(online.fits)} times, the last on the fixes up to "
+            f"{online.fit_times[-1]:.1f} s: {last}"
+        )
+    else:
+        Console().print("not refitted: too few fixes (20 per parameter before the first refit)")
+    Console().print(f"wrote {out} ({log.times.size} epochs, filtered, refitted online)")

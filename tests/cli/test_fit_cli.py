@@ -264,3 +264,43 @@ def test_fit_and_filter_an_imm_of_cv_and_the_coordinated_turn(tmp_path, cli):
     raw = np.sqrt(np.mean(np.sum((meas - pos) ** 2, axis=1)))
     smoothed = np.sqrt(np.mean(np.sum((est[["east_m", "north_m"]].to_numpy() - pos) ** 2, 1)))
     assert smoothed < 0.6 * raw, (smoothed, raw)
+
+
+def test_filter_refit_online_writes_the_causal_refitted_estimates(tmp_path, cli):
+    """The CLI's refitted run is MotionFit.filter_online's; its first estimates, before any
+    refit, are the plain filter's."""
+    from adaptrack._toml import load_toml
+    from adaptrack.tuning.position_log import fit_from_toml, read_position_log
+
+    gnss_log(tmp_path / "log.csv", seed=8)
+    code, _, err = cli(
+        "fit", tmp_path / "log.csv", "--measurement", "gnss", "--out", tmp_path / "fit.toml"
+    )
+    assert code == 0, err
+    code, out, err = cli(
+        "filter", tmp_path / "log.csv", "--config", tmp_path / "fit.toml", "--refit-online",
+        "--out", tmp_path / "est.csv",
+    )  # fmt: skip
+    assert code == 0, err
+    assert "refitted 4 times" in out, out  # 4 parameters: after 80, 160, 320, 640 of 1200
+    est = pd.read_csv(tmp_path / "est.csv")
+    fit, _ = fit_from_toml(load_toml(tmp_path / "fit.toml"), "fit.toml")
+    log = read_position_log(tmp_path / "log.csv", "gnss")
+    mean, cov, online = fit.filter_online(log)
+    np.testing.assert_allclose(est[["east_m", "north_m", "up_m"]].to_numpy(), mean[:, :3],
+                               atol=1e-6)  # fmt: skip
+    plain, _ = fit.filter(log)
+    np.testing.assert_array_equal(mean[:80], plain[:80])
+    assert not np.allclose(mean[80:], plain[80:])
+    assert np.all(np.linalg.eigvalsh(cov) > 0)
+    assert len(online.fits) == 4
+
+
+def test_filter_refit_online_refuses_smoothing(tmp_path, cli):
+    gnss_log(tmp_path / "log.csv")
+    (tmp_path / "c.toml").write_text("")
+    code, _, err = cli(
+        "filter", tmp_path / "log.csv", "--config", tmp_path / "c.toml", "--refit-online",
+        "--smooth", "--out", tmp_path / "e.csv",
+    )  # fmt: skip
+    assert code == 2 and "does not take --smooth" in err

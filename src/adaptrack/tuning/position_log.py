@@ -11,9 +11,9 @@ variance per measured component.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 import pandas as pd
@@ -44,6 +44,7 @@ from ..models.continuous import MotionModel
 from ..smoothers import imm_smooth, rts_smooth
 from ..types import FilterResult, GaussianState
 from .calibration import fit_clock_offset
+from .causal import OnlineFit, refit_online
 from .likelihood import LikelihoodFit, fit_by_likelihood
 from .radar_log import TURN_PRIOR_STD, VELOCITY_PRIOR_STD_MPS, radar_inputs, radar_parameters
 
@@ -193,6 +194,28 @@ class MotionFit:
         out = imm_smooth(run, models, switching_rates=_switching(values))
         return out.smoothed, out.mode_probabilities
 
+    def filter_online(
+        self, log: PositionLog | RadarLog
+    ) -> tuple[FloatArray, FloatArray, OnlineFit]:
+        """Return causal estimates, the parameters refitted from the log's own earlier fixes.
+
+        :func:`~adaptrack.tuning.refit_online` starting at this fit's values (noise variances
+        included): each estimate uses the fixes up to it, with the parameters of the last
+        refit before it. Returns the filtered means (T, n), covariances (T, n, n), the refits.
+        """
+        n = self.run(_head(log, 1)).filtered.mean.shape[-1]  # checks the fit against the log
+
+        def run(times: FloatArray, _: FloatArray, values: dict[str, float]) -> tuple[Any, Any]:
+            out = _run(_head(log, times.size), self.model, values)
+            ll = out.info.log_likelihood if isinstance(out, FilterResult) else out.log_likelihood
+            est = out.filtered
+            return ll, np.concatenate([est.mean, est.cov.reshape(times.size, -1)], axis=1)
+
+        values = {name: self.fit.value(name) for name in self.fit.names}
+        online = refit_online([(log.times, _measured(log))], run, values)
+        flat = online.estimates[0]
+        return flat[:, :n], flat[:, n:].reshape(-1, n, n), online
+
     def run(self, log: PositionLog | RadarLog) -> FilterResult | IMMResult:
         """Return the filter's full result on ``log`` (an IMM's, or its innovations included)."""
         if log.n_axes != self.n_axes:
@@ -204,6 +227,15 @@ class MotionFit:
                     f"the fit has no noise variance for the log's {missing}: fit this layout"
                 )
         return _run(log, self.model, {name: self.fit.value(name) for name in self.fit.names})
+
+
+def _head(log: PositionLog | RadarLog, k: int) -> PositionLog | RadarLog:
+    """Return the log's first ``k`` fixes or plots."""
+    if isinstance(log, RadarLog):
+        accel = None if log.range_accel is None else log.range_accel[:k]
+        return replace(log, times=log.times[:k], plots=log.plots[:k], range_accel=accel)
+    velocity = None if log.velocity is None else log.velocity[:k]
+    return replace(log, times=log.times[:k], enu=log.enu[:k], velocity=velocity)
 
 
 def _psds(values: dict[str, float], n_axes: int, prefix: str = "q") -> list[float]:
