@@ -16,6 +16,10 @@ Leave one flight out: every estimator is tuned on the other flights and scored o
   acceleration (``cv+ca``) or with the coordinated turn (``cv+ct``), horizontal and vertical
   PSDs apart; PSDs and switching rate fitted by maximum likelihood of the plots (no truth;
   radar noise from the sensor's specification);
+* ours refitted online: the same IMM starting from that fit, its parameters refitted causally
+  by maximum likelihood of the held-out recording's own plots received so far
+  (:func:`adaptrack.tuning.causal.refit_online`; no truth, each estimate from earlier plots
+  only);
 * FilterPy: ``IMMEstimator`` of two ``KalmanFilter`` (CV padded to the CA state) on the plots
   converted to east-north-up, each with its converted covariance; its two PSDs and switching
   probability chosen by grid search against the truth, on the isotropic grid (one PSD per
@@ -25,6 +29,9 @@ Offline, for a recording (not causal): our IMM smoother (:func:`adaptrack.smooth
 of the same fitted IMMs, against FilterPy's Kalman filter and RTS smoother (``batch_filter``,
 ``rts_smoother``; FilterPy has no IMM smoother) of one model, CV or CA, whose PSD and vertical
 fraction are chosen by grid search against the truth.
+
+``--oracle`` instead prints, for our IMMs, the RMSE when tuned against the truth of the very
+data they are scored on: a bound on any tuning of that IMM (same plots, same seed).
 
 Prints the position RMSE of each on each held-out flight and pooled (first three scans of each
 track left out), and the ratios. First the car drive (``ground_*.csv``): a 10 Hz GNSS (2 m
@@ -66,6 +73,7 @@ from adaptrack.models import (
     filterpy_order,
 )
 from adaptrack.smoothers import imm_smooth
+from adaptrack.tuning.causal import refit_online
 from adaptrack.tuning.likelihood import fit_by_likelihood
 from adaptrack.tuning.position_log import read_position_log
 
@@ -163,6 +171,20 @@ def fit_ours(tracks: list[Track], kind: str, gnss: bool = False) -> dict[str, fl
 
     fit = fit_by_likelihood(loglik, START[kind, gnss])
     return {n: fit.value(n) for n in fit.names}
+
+
+def ours_online(
+    tracks: list[Track], kind: str, start: Mapping[str, float], gnss: bool = False
+) -> list[np.ndarray]:
+    """Our IMM on a recording's tracks in time order, its parameters refitted causally by
+    maximum likelihood of the plots received so far (:func:`refit_online`), starting at
+    ``start``; positions (T, 3) of each track."""
+
+    def run(times: np.ndarray, plots: np.ndarray, v: dict[str, float]) -> tuple[Any, Any]:
+        res = ours_run(Track(tracks[0].flight, times, plots, plots), kind, v, gnss)  # no truth
+        return res.log_likelihood, res.filtered.mean[:, :3]
+
+    return refit_online([(tr.times, tr.plots) for tr in tracks], run, start).estimates
 
 
 def filterpy_run(
@@ -360,8 +382,11 @@ def report(
     for kind in kinds:
         print(f"  ours, IMM {kind}: {r[kind]:.2f} m ({describe(params[kind])})"
               if kind in params else f"  ours, IMM {kind}: {r[kind]:.2f} m")  # fmt: skip
+    for kind in kinds:
+        print(f"  ours, IMM {kind} refitted online (causal): {r[f'{kind} online']:.2f} m")
     for label in FILTERPY:
-        ratios = ", ".join(f"{k} {r[k] / r[label]:.3f}" for k in kinds)
+        rows = [*kinds, *(f"{k} online" for k in kinds)]
+        ratios = ", ".join(f"{k} {r[k] / r[label]:.3f}" for k in rows)
         extra = f" ({describe(params[label])})" if label in params else ""
         print(f"  FilterPy, {label} grid: {r[label]:.2f} m{extra}; ours / FilterPy: {ratios}")
     if OFFLINE not in r:
@@ -383,6 +408,9 @@ def car_comparison(path: Path, rng: np.random.Generator, kinds: list[str]) -> No
     params[OFFLINE] = tune_filterpy_smoother([train], CAR_GRIDS, gnss=True)
     runs = {kind: ours_run(test, kind, params[kind], True) for kind in kinds}
     sq = {kind: [squared_errors(runs[kind].filtered.mean[:, :3], test)] for kind in kinds}
+    for kind in kinds:  # the drive in time order: refits from the first half on
+        online = ours_online([train, test], kind, params[kind], gnss=True)[1]
+        sq[f"{kind} online"] = [squared_errors(online, test)]
     for label in FILTERPY:
         sq[label] = [squared_errors(filterpy_run(test, **params[label], gnss=True), test)]
     for kind in kinds:
@@ -392,6 +420,61 @@ def car_comparison(path: Path, rng: np.random.Generator, kinds: list[str]) -> No
     raw = rmse([test], lambda tr: tr.plots)
     report(f"car (second half, 10 Hz GNSS of {GNSS_STD_M} m; fixes {raw:.2f} m)", sq, params,
            kinds)  # fmt: skip
+
+
+def oracle_rmse(tracks: list[Track], kind: str, start: Mapping[str, float], gnss: bool) -> float:
+    """Position RMSE [m] of our IMM with its parameters tuned against the truth of the very
+    ``tracks`` it is scored on (Nelder-Mead in log space from ``start``): a bound on what
+    any tuning of this IMM can reach on them, not a tuning anyone could do."""
+    from scipy.optimize import minimize
+
+    names = list(start)
+
+    def mse(log_values: np.ndarray) -> float:
+        v = dict(zip(names, np.exp(log_values).tolist(), strict=True))
+        try:
+            sq = [squared_errors(ours_run(tr, kind, v, gnss).filtered.mean[:, :3], tr)
+                  for tr in tracks]  # fmt: skip
+        except ValueError:  # parameters the filter cannot run with
+            return math.inf
+        value = float(np.concatenate(sq).mean())
+        return value if math.isfinite(value) else math.inf
+
+    x0 = np.log([start[n] for n in names])
+    best = minimize(mse, x0, method="Nelder-Mead", options={"maxfev": 400 * len(names)})
+    return math.sqrt(min(best.fun, mse(x0)))
+
+
+def oracle_bounds(data: Path, scan_s: float, rng: np.random.Generator, kinds: list[str]) -> None:
+    """Print each oracle bound (:func:`oracle_rmse`) next to the likelihood fit it starts
+    from (car: fitted on the first half; flights: on the other flights), same plots as the
+    comparison."""
+    for car in sorted(data.glob("ground_*.csv")):
+        train, test = car_halves(car, rng)
+        for kind in kinds:
+            fit = fit_ours([train], kind, gnss=True)
+            fitted = rmse(
+                [test], lambda tr, k=kind, v=fit: ours_run(tr, k, v, True).filtered.mean[:, :3]
+            )
+            print(f"car, second half, IMM {kind}: fitted {fitted:.3f} m, "
+                  f"oracle {oracle_rmse([test], kind, fit, True):.3f} m")  # fmt: skip
+    flights = {p.stem: flight_tracks(p, scan_s, rng) for p in sorted(data.glob("air_*.csv"))}
+    for kind in kinds:
+        sq_fit: list[np.ndarray] = []
+        sq_oracle = 0.0
+        for name, test in flights.items():
+            train = [tr for other, trs in flights.items() if other != name for tr in trs]
+            fit = fit_ours(train, kind)
+            errs = [squared_errors(ours_run(tr, kind, fit).filtered.mean[:, :3], tr) for tr in test]
+            sq_fit.extend(errs)
+            bound = oracle_rmse(test, kind, fit, False)
+            sq_oracle += bound**2 * sum(e.size for e in errs)
+            fitted = math.sqrt(np.concatenate(errs).mean())
+            print(f"{name}, IMM {kind}: fitted on the others {fitted:.2f} m, oracle {bound:.2f} m")
+        n = sum(e.size for e in sq_fit)
+        fitted = math.sqrt(np.concatenate(sq_fit).mean())
+        print(f"flights pooled, IMM {kind}: fitted {fitted:.2f} m, "
+              f"oracle {math.sqrt(sq_oracle / n):.2f} m")  # fmt: skip
 
 
 def rmse(tracks: list[Track], estimate: Any) -> float:
@@ -408,6 +491,11 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--car-only", action="store_true", help="only the car drive")
     parser.add_argument(
+        "--oracle",
+        action="store_true",
+        help="instead: our IMMs tuned against the truth they are scored on (a bound)",
+    )
+    parser.add_argument(
         "--models",
         default=",".join(MODEL_SETS),
         help="our IMMs, comma-separated: cv+ca, cv+ct",
@@ -420,6 +508,9 @@ def main() -> None:
     if not set(kinds) <= set(MODEL_SETS):
         parser.error(f"--models takes {', '.join(MODEL_SETS)}")
     rng = np.random.default_rng(args.seed)
+    if args.oracle:
+        oracle_bounds(data, args.scan, rng, kinds)
+        return
     for car in sorted(data.glob("ground_*.csv")):
         car_comparison(car, rng, kinds)
     if args.car_only:
@@ -428,7 +519,8 @@ def main() -> None:
     for name, tracks in flights.items():
         n = sum(tr.times.size for tr in tracks)
         print(f"{name}: {len(tracks)} radar stretches, {n} scans")
-    labels = [*kinds, *FILTERPY, *(f"{k} smoothed" for k in kinds), OFFLINE]
+    labels = [*kinds, *(f"{k} online" for k in kinds), *FILTERPY,
+              *(f"{k} smoothed" for k in kinds), OFFLINE]  # fmt: skip
     pooled: dict[str, list[np.ndarray]] = {k: [] for k in labels}
     for name, test in flights.items():
         train = [tr for other, trs in flights.items() if other != name for tr in trs]
@@ -442,6 +534,11 @@ def main() -> None:
                    for run, tr in zip(runs[kind], test, strict=True)]
             for kind in kinds
         }  # fmt: skip
+        for kind in kinds:
+            sq[f"{kind} online"] = [
+                squared_errors(est, tr)
+                for est, tr in zip(ours_online(test, kind, params[kind]), test, strict=True)
+            ]
         for label in FILTERPY:
             sq[label] = [squared_errors(filterpy_run(tr, **params[label]), tr) for tr in test]
         for kind in kinds:
