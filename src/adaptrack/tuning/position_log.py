@@ -206,10 +206,10 @@ class MotionFit:
         n = self.run(_head(log, 1)).filtered.mean.shape[-1]  # checks the fit against the log
 
         def run(times: FloatArray, _: FloatArray, values: dict[str, float]) -> tuple[Any, Any]:
-            out = _run(_head(log, times.size), self.model, values)
-            ll = out.info.log_likelihood if isinstance(out, FilterResult) else out.log_likelihood
+            out = _compiled_run(_head(log, times.size), self.model, values)
             est = out.filtered
-            return ll, np.concatenate([est.mean, est.cov.reshape(times.size, -1)], axis=1)
+            flat = np.concatenate([est.mean, est.cov.reshape(times.size, -1)], axis=1)
+            return _step_log_likelihoods(out), flat
 
         values = {name: self.fit.value(name) for name in self.fit.names}
         online = refit_online([(log.times, _measured(log))], run, values)
@@ -338,20 +338,30 @@ def _run(
     )
 
 
-def _log_likelihood(log: PositionLog | RadarLog, model: str, values: dict[str, float]) -> float:
-    """Log-likelihood of the log's measurements under the filter of :func:`_run`.
+def _compiled_run(
+    log: PositionLog | RadarLog, model: str, values: dict[str, float]
+) -> FilterResult | IMMResult:
+    """Run :func:`_run`'s filter, an EKF on the compiled IMM kernel.
 
-    An EKF (a radar log, or the coordinated turn) runs compiled, as the IMM kernel with this
-    one model: the same predictions and Joseph-form updates (a test checks that the
-    log-likelihoods agree), some fifty times faster on one track than ``ekf_filter``, which
-    steps in NumPy. A fit evaluates it hundreds of times.
+    An EKF (a radar log, or the coordinated turn) runs as the IMM kernel with this one model:
+    the same predictions and Joseph-form updates (a test checks that the log-likelihoods
+    agree), some fifty times faster on one track than ``ekf_filter``, which steps in NumPy.
+    A fit evaluates it hundreds of times.
     """
     models, sensor, priors = _inputs(log, model, values)
     if len(models) > 1 or isinstance(log, RadarLog) or isinstance(models[0], NonlinearMotionModel):
-        return float(_imm(log, models, sensor, priors, values).log_likelihood.sum())
-    run = _run(log, model, values)  # the linear Kalman filter, compiled already
-    assert isinstance(run, FilterResult)
-    return float(run.info.log_likelihood.sum())
+        return _imm(log, models, sensor, priors, values)
+    return _run(log, model, values)  # the linear Kalman filter, compiled already
+
+
+def _log_likelihood(log: PositionLog | RadarLog, model: str, values: dict[str, float]) -> float:
+    """Log-likelihood of the log's measurements under the filter of :func:`_compiled_run`."""
+    return float(_step_log_likelihoods(_compiled_run(log, model, values)).sum())
+
+
+def _step_log_likelihoods(out: FilterResult | IMMResult) -> FloatArray:
+    """Each step's log-likelihood of a run (T,)."""
+    return out.info.log_likelihood if isinstance(out, FilterResult) else out.log_likelihood
 
 
 def fit_motion(
