@@ -31,7 +31,9 @@ of the same fitted IMMs, against FilterPy's Kalman filter and RTS smoother (``ba
 fraction are chosen by grid search against the truth.
 
 ``--oracle`` instead prints, for our IMMs, the RMSE when tuned against the truth of the very
-data they are scored on: a bound on any tuning of that IMM (same plots, same seed).
+data they are scored on: a bound on any tuning of that IMM (same plots, same seed); and, for
+the car, the best causal linear filter of the last 20, 40 or 80 fixes trained by least
+squares against the truth of the first half (:func:`linear_filter_rmse`).
 
 Prints the position RMSE of each on each held-out flight and pooled (first three scans of each
 track left out), and the ratios. First the car drive (``ground_*.csv``): a 10 Hz GNSS (2 m
@@ -445,6 +447,26 @@ def oracle_rmse(tracks: list[Track], kind: str, start: Mapping[str, float], gnss
     return math.sqrt(min(best.fun, mse(x0)))
 
 
+def linear_filter_rmse(train: Track, test: Track, taps: int) -> float:
+    """Position RMSE [m] on ``test`` of the best causal linear filter of the last ``taps``
+    fixes, per axis, its weights fitted by least squares against the truth of ``train``:
+    a peer stronger than any fixed Kalman filter tuned on ``train`` (whose steady state is
+    such a filter), up to the fixes' irregular spacing, which it ignores."""
+
+    def lagged(z: np.ndarray) -> np.ndarray:  # row k: fixes k + taps - 1, ..., k
+        return np.stack([z[taps - 1 - j : z.size - j] for j in range(taps)], axis=1)
+
+    sq = np.zeros(test.times.size - taps + 1)
+    for axis in range(3):
+        weights = np.linalg.lstsq(lagged(train.plots[:, axis]), train.truth[taps - 1 :, axis],
+                                  rcond=None)[0]  # fmt: skip
+        sq += (lagged(test.plots[:, axis]) @ weights - test.truth[taps - 1 :, axis]) ** 2
+    return math.sqrt(float(sq.mean()))
+
+
+LINEAR_TAPS = (20, 40, 80)  # lengths of the linear filters of linear_filter_rmse [fixes]
+
+
 def oracle_bounds(data: Path, scan_s: float, rng: np.random.Generator, kinds: list[str]) -> None:
     """Print each oracle bound (:func:`oracle_rmse`) next to the likelihood fit it starts
     from (car: fitted on the first half; flights: on the other flights), same plots as the
@@ -458,6 +480,9 @@ def oracle_bounds(data: Path, scan_s: float, rng: np.random.Generator, kinds: li
             )
             print(f"car, second half, IMM {kind}: fitted {fitted:.3f} m, "
                   f"oracle {oracle_rmse([test], kind, fit, True):.3f} m")  # fmt: skip
+        for taps in LINEAR_TAPS:
+            print(f"car, second half, best causal linear filter of {taps} fixes (trained "
+                  f"against the first half's truth): {linear_filter_rmse(train, test, taps):.3f} m")
     flights = {p.stem: flight_tracks(p, scan_s, rng) for p in sorted(data.glob("air_*.csv"))}
     for kind in kinds:
         sq_fit: list[np.ndarray] = []

@@ -101,3 +101,24 @@ def test_recorded_imm_online_run_is_the_fitted_run_before_its_first_refit():
     for est, track in zip(online, tracks, strict=True):
         fixed = ri.ours_run(track, "cv+ct", start).filtered.mean[:, :3]
         np.testing.assert_array_equal(est, fixed)
+
+
+def test_recorded_imm_linear_filter_bound_of_a_parked_car_is_the_running_mean():
+    """For a car standing still (truth constant) and white fix noise, the best linear filter
+    of the last N fixes is their mean: RMSE sqrt(sum sigma^2 / N). The training weights are
+    fitted on 20,000 fixes and scored on 20,000 others; the moving-average errors leave about
+    20,000 / N independent squares, so the RMSE's relative spread is about sqrt(N / 20,000) / 2
+    (1.1 %); the tolerance is 4 % (3.5 sigma)."""
+    import numpy as np
+    from benchmarks import recorded_imm as ri
+
+    rng = np.random.default_rng(11)
+    taps, n = 10, 20_000
+    std = np.array(ri.GNSS_STD_M)
+    tracks = []
+    for start in (0.0, 2000.0):
+        times = start + 0.1 * np.arange(n)
+        truth = np.broadcast_to([120.0, -40.0, 15.0], (n, 3))
+        tracks.append(ri.Track("parked", times, truth + rng.standard_normal((n, 3)) * std, truth))
+    expected = np.sqrt(np.sum(std**2) / taps)
+    assert ri.linear_filter_rmse(*tracks, taps) == pytest.approx(expected, rel=0.04)
