@@ -105,8 +105,32 @@ def test_a_start_a_thousand_times_too_large_is_unlearnt():
         ([(np.arange(3.0), np.zeros((2, 1)))], {}, "must have 3 rows"),
         ([(np.arange(3.0), np.zeros((3, 1)))], {"first": 1}, "first must be an int >= 2"),
         ([(np.arange(3.0), np.zeros((3, 1)))], {"growth": 1.0}, "growth must be"),
+        ([(np.arange(3.0), np.zeros((3, 1)))], {"max_relative_error": 0.0}, "max_relative_e"),
+        ([(np.arange(3.0), np.zeros((3, 1)))], {"max_relative_error": np.nan}, "max_relative_e"),
     ],
 )
 def test_bad_input_is_named(segments, kwargs, message):
     with pytest.raises(ValueError, match=message):
         refit_online(segments, _run, {"q": 1.0}, **kwargs)
+
+
+def test_measurements_are_checked_by_the_filter_it_wraps():
+    """A NaN fix is the wrapped filter's to judge: a filter that raises on it stops the run
+    with its error (naming the step); one that takes NaN as missing gets a run whose missing
+    steps add nothing to the likelihood and whose estimates are all finite."""
+    rng = np.random.default_rng(4)
+    (ta, za), (tb, zb) = _two_segments(rng)
+    za[[5, 70]] = np.nan
+    with pytest.raises(ValueError, match="NaN"):
+        refit_online([(ta, za), (tb, zb)], _run, {"q": 1.0}, first=40)
+
+    def run_missing(times, meas, p):
+        prior = at.GaussianState([meas[0, 0], 0.0], np.diag([R, 100.0]), times[0])
+        res = at.kalman_filter(times, meas, ConstantVelocity(p["q"]), ["x"], [[R]], prior,
+                               nan_policy="missing")  # fmt: skip
+        return res.info.log_likelihood, res.filtered.mean
+
+    online = refit_online([(ta, za), (tb, zb)], run_missing, {"q": 1.0}, first=40)
+    assert all(np.all(np.isfinite(est)) for est in online.estimates)
+    assert run_missing(ta, za, {"q": 1.0})[0][[5, 70]].tolist() == [0.0, 0.0]
+    assert len(online.fits) == 3  # 200 measurements: refits at 40, 80 and 160

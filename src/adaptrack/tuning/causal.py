@@ -85,7 +85,9 @@ def refit_online(
         The recording's tracks; times [s] strictly increasing within each. Measurements of
         different segments at one time are taken in segment order.
     run : callable
-        :data:`SegmentRun`: the filter, run on a segment's first measurements.
+        :data:`SegmentRun`: the filter, run on a segment's first measurements. It judges the
+        measurements: NaN is an error or a missing value as the filter it wraps says (e.g.
+        ``kalman_filter``'s ``nan_policy``).
     initial : mapping of str to float
         Starting parameters (> 0), e.g. fitted on other recordings; they name the parameters.
     first : int, optional
