@@ -481,8 +481,10 @@ def oracle_bounds(data: Path, scan_s: float, rng: np.random.Generator, kinds: li
             print(f"car, second half, IMM {kind}: fitted {fitted:.3f} m, "
                   f"oracle {oracle_rmse([test], kind, fit, True):.3f} m")  # fmt: skip
         for taps in LINEAR_TAPS:
-            print(f"car, second half, best causal linear filter of {taps} fixes (trained "
-                  f"against the first half's truth): {linear_filter_rmse(train, test, taps):.3f} m")
+            print(
+                f"car, second half, best causal linear filter of {taps} fixes (trained "
+                f"against the first half's truth): {linear_filter_rmse(train, test, taps):.3f} m"
+            )
     flights = {p.stem: flight_tracks(p, scan_s, rng) for p in sorted(data.glob("air_*.csv"))}
     for kind in kinds:
         sq_fit: list[np.ndarray] = []
