@@ -340,12 +340,12 @@ def _radar_prior(z0: np.ndarray) -> np.ndarray:
     return np.concatenate([pos, np.zeros_like(pos)], -1)
 
 
-def adaptrack_radar_ekf(t: np.ndarray, z: np.ndarray) -> np.ndarray:
+def adaptrack_radar_ekf(t: np.ndarray, z: np.ndarray, backend: str = "auto") -> np.ndarray:
     """``ekf_filter`` over every track at once; means (N, T, 6)."""
     n = z.shape[0]
     prior = at.GaussianState(_radar_prior(z[:, 0]), np.broadcast_to(RADAR_P0, (n, 6, 6)), t[0])
     model = at.models.ConstantVelocity(RADAR_Q, n_axes=3)
-    return at.ekf_filter(t, z, model, RADAR, prior).filtered.mean
+    return at.ekf_filter(t, z, model, RADAR, prior, backend=backend).filtered.mean  # type: ignore[arg-type]
 
 
 def filterpy_radar_ekf(t: np.ndarray, z: np.ndarray) -> np.ndarray:

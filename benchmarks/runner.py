@@ -15,7 +15,8 @@ Workloads (full sizes; ``--quick`` shrinks them to a smoke test):
 * ``imm``: a two-mode IMM over 1,000 tracks x 1,000 steps, the default ``auto`` beside the
   Joseph and square-root forms, against FilterPy's ``IMMEstimator``;
 * ``radar_ekf``: a 3-D radar (range, azimuth, elevation, range-rate) constant-velocity EKF
-  over 1,000 tracks x 200 scans, against FilterPy's ``ExtendedKalmanFilter``;
+  over 1,000 tracks x 200 scans, and (``radar_ekf_1``) over one track of 5,000 scans, compiled
+  and in NumPy, against FilterPy's ``ExtendedKalmanFilter``;
 * ``radar_imm``: the same radar, an IMM-EKF of two CV modes (the compiled kernel and its NumPy
   reference) against FilterPy's ``IMMEstimator`` of two ``ExtendedKalmanFilter``;
 * ``lx_mc``: the ``lx_default`` level-crossing compliance Monte Carlo;

@@ -302,19 +302,34 @@ def imm(quick: bool, repeats: int) -> list[Result]:
 
 def radar_ekf(quick: bool, repeats: int) -> list[Result]:
     """3-D radar with range-rate, constant-velocity EKF over 1,000 tracks x 200 scans (20 x 50
-    ``quick``): adaptrack's batched ``ekf_filter`` and FilterPy's ``ExtendedKalmanFilter``."""
-    n_tracks, n_steps = (20, 50) if quick else (1_000, 200)
-    t, z = peers.radar_data(n_tracks, n_steps, seed=8)
-    return _compare(
-        "radar_ekf",
-        t,
-        z,
-        {
-            "adaptrack": (peers.adaptrack_radar_ekf, n_tracks, n_steps),
-            "filterpy": (peers.filterpy_radar_ekf, 2 if quick else 20, n_steps),
-        },
-        repeats,
-    )
+    ``quick``), then over one track of 5,000 scans (200 ``quick``): adaptrack's ``ekf_filter``
+    compiled and in NumPy, FilterPy's ``ExtendedKalmanFilter``."""
+    rows = []
+    for workload, (n_tracks, n_steps) in (
+        ("radar_ekf", (20, 50) if quick else (1_000, 200)),
+        ("radar_ekf_1", (1, 200) if quick else (1, 5_000)),
+    ):
+        t, z = peers.radar_data(n_tracks, n_steps, seed=8)
+        rows += _compare(
+            workload,
+            t,
+            z,
+            {
+                "adaptrack": (
+                    lambda t, z: peers.adaptrack_radar_ekf(t, z, "numba"),
+                    n_tracks,
+                    n_steps,
+                ),
+                "adaptrack (NumPy)": (
+                    lambda t, z: peers.adaptrack_radar_ekf(t, z, "numpy"),
+                    n_tracks,
+                    n_steps,
+                ),
+                "filterpy": (peers.filterpy_radar_ekf, min(n_tracks, 2 if quick else 20), n_steps),
+            },
+            repeats,
+        )
+    return rows
 
 
 def radar_imm(quick: bool, repeats: int) -> list[Result]:

@@ -5,10 +5,12 @@ import pytest
 from scipy import stats
 
 import adaptrack as at
+from adaptrack.filters import _nonlinear_run
 from adaptrack.filters.ekf import ekf_update_step
 from adaptrack.models import (
     ConstantAcceleration,
     ConstantVelocity,
+    CoordinatedTurn,
     FunctionMeasurement,
     PositionMeasurement,
     RadarMeasurement,
@@ -201,3 +203,91 @@ def test_a_known_state_component_is_kept_by_both_filters():
         res = run(t, z, model, radar, prior)
         np.testing.assert_allclose(res.filtered.mean[:, 2:], [[5.0, 0.0]] * 10, atol=1e-9)
         assert np.all(np.linalg.eigvalsh(res.filtered.cov) > -1e-9)
+
+
+def _same_result(got, ref):
+    """Every array of two FilterResults, to rounding at each array's own scale."""
+    pairs = [(got.predicted.mean, ref.predicted.mean), (got.predicted.cov, ref.predicted.cov),
+             (got.filtered.mean, ref.filtered.mean), (got.filtered.cov, ref.filtered.cov),
+             (got.transition, ref.transition), (got.process_cov, ref.process_cov),
+             (got.control, ref.control), (got.measurement_matrix, ref.measurement_matrix),
+             (got.measurement_cov, ref.measurement_cov), (got.mask, ref.mask)]  # fmt: skip
+    pairs += [
+        (getattr(got.info, f), getattr(ref.info, f))
+        for f in ("innovation", "innovation_cov", "nis", "log_likelihood", "gain", "n_observed")
+    ]
+    for a, b in pairs:
+        assert a.shape == b.shape
+        np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-9 * max(1.0, np.abs(b).max()))
+
+
+@pytest.mark.parametrize("form", ["joseph", "standard"])
+@pytest.mark.parametrize("case", ["radar3d+rr, CV", "radar2d, CT", "position 3-D, CA", "one track"])
+def test_compiled_ekf_gives_the_numpy_result(case, form, monkeypatch):
+    """``backend="numba"`` records every output of the NumPy EKF, to rounding: three tracks on
+    their own irregular time grids with their own priors, missing components (NaN), per-step
+    ``R``; radars with a heading and an offset position (the azimuth wrapping across south
+    included: the targets fly through it), a coordinated turn (its F and Q per step)."""
+    rng = np.random.default_rng(sum(map(ord, case)))
+    n_tr, n_st = (1, 80) if case == "one track" else (3, 50)
+    t = np.cumsum(rng.uniform(0.3, 2.0, (n_tr, n_st)), axis=1)
+    if case.startswith("radar3d") or case == "one track":
+        measure = RadarMeasurement(np.diag([25.0, 1e-6, 4e-6, 0.25]),
+                                   ("range", "azimuth", "elevation", "range_rate"), n_axes=3,
+                                   sensor_position=[50.0, -20.0, 10.0], heading=0.3)  # fmt: skip
+        model = ConstantVelocity(0.5, n_axes=3)
+    elif case.startswith("radar2d"):
+        measure = RadarMeasurement(np.diag([25.0, 1e-6]), heading=-0.2, sensor_position=[30, 5])
+        model = CoordinatedTurn(0.5, 1e-3)
+    else:
+        measure = PositionMeasurement(np.diag([9.0, 16.0, 25.0]), ("x", "y", "z"))
+        model = ConstantAcceleration(jerk_psd=[0.3, 0.3, 0.05], n_axes=3)
+    n = model.state_dim
+    k = 3 if measure.reads[-1] == "z" or len(measure.reads) > 3 else 2
+    pos = np.zeros((n_tr, n_st, k))
+    pos[..., 0] = 1500.0 - 60.0 * t  # passes south of the radar: the azimuth wraps
+    pos[..., 1] = -3000.0 + 10.0 * t
+    s = np.zeros((n_tr, n_st, len(measure.reads)))
+    s[..., :k] = pos
+    if len(measure.reads) > k:  # the velocities a range-rate reads
+        s[..., k:] = [-60.0, 10.0, 0.0][: len(measure.reads) - k]
+    z = measure.predict(s) + rng.normal(size=(n_tr, n_st, len(measure.names))) * np.sqrt(
+        np.diag(measure.noise_cov))  # fmt: skip
+    mask = rng.uniform(size=z.shape) > 0.15
+    z[~mask] = np.nan
+    r = np.broadcast_to(measure.noise_cov, (n_tr, n_st) + measure.noise_cov.shape).copy()
+    r[:, ::7] *= 4.0
+    mean0 = np.zeros((n_tr, n))
+    mean0[:, :2] = [1500.0, -3000.0]
+    mean0[:, k] = -60.0
+    mean0 += rng.normal(size=(n_tr, n)) * 5.0
+    if isinstance(model, CoordinatedTurn):
+        mean0[:, -1] = 0.01
+    var = np.r_[[400.0] * k, [100.0] * (n - k)]
+    if isinstance(model, CoordinatedTurn):
+        var[-1] = 1e-3
+    prior = GaussianState(mean0, np.broadcast_to(np.diag(var), (n_tr, n, n)), t[:, 0] - 0.5)
+    kw = dict(measurement_cov=r, mask=mask, nan_policy="missing", form=form)
+    if isinstance(measure, RadarMeasurement):
+        jumps = np.abs(np.diff(np.where(mask[..., 1], z[..., 1], np.nan), axis=-1))
+        assert np.nanmax(jumps) > np.pi  # the measured azimuth wraps
+    ref = at.ekf_filter(t, z, model, measure, prior, backend="numpy", **kw)
+    monkeypatch.setattr(_nonlinear_run, "_steps", None)  # the NumPy loop must not run
+    got = at.ekf_filter(t, z, model, measure, prior, backend="numba", **kw)
+    _same_result(got, ref)
+    assert np.all(np.isfinite(got.filtered.mean))
+
+
+def test_compiled_ekf_leaves_what_it_cannot_run_to_numpy():
+    """A state on the radar's vertical axis stops the kernel: the NumPy path names it. A
+    measurement model the kernel does not cover (a user's function) runs in NumPy."""
+    radar = RadarMeasurement(noise_cov=[25.0, 1e-6])
+    t, z = np.arange(3.0), np.tile([10.0, 0.1], (3, 1))
+    prior = GaussianState(np.zeros(4), np.diag([1e4, 1e4, 400, 400]), 0.0)
+    with pytest.raises(ValueError, match="vertical axis"):
+        at.ekf_filter(t, z, ConstantVelocity(0.1, n_axes=2), radar, prior, backend="numba")
+    user = FunctionMeasurement(lambda s: s, ("x", "y"), ("x_m", "y_m"), [4.0, 4.0])
+    zz = np.stack([t, 2 * t], -1)
+    got = at.ekf_filter(t, zz, ConstantVelocity(0.1, n_axes=2), user, prior, backend="numba")
+    ref = at.ekf_filter(t, zz, ConstantVelocity(0.1, n_axes=2), user, prior, backend="numpy")
+    _same_result(got, ref)

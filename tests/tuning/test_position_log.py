@@ -5,6 +5,7 @@ import pandas as pd
 import pymap3d
 import pytest
 
+import adaptrack as at
 from adaptrack.tuning.position_log import (
     estimates_table,
     fit_motion,
@@ -157,11 +158,10 @@ def test_the_coordinated_turn_fits_a_drive_with_bends_better_than_cv(tmp_path):
     ],
 )  # fmt: skip
 def test_the_fit_s_compiled_likelihood_is_the_ekf_s(tmp_path, layout, model, values):
-    """The fit's log-likelihood (the IMM kernel with one model) equals the sum over the
-    NumPy EKF's steps (``ekf_filter``, what `adaptrack filter` runs), at parameters away from
-    the fit's maximum."""
+    """The fit's log-likelihood (the compiled filter) equals the sum over the NumPy EKF's
+    steps (``ekf_filter(backend="numpy")``), at parameters away from the fit's maximum."""
     from adaptrack.io.radar_plots import read_radar_log
-    from adaptrack.tuning.position_log import _log_likelihood, _run
+    from adaptrack.tuning.position_log import _inputs, _log_likelihood, _measured
     from tests.tuning.test_radar_log import radar_plot_list
 
     if layout == "position":
@@ -177,7 +177,9 @@ def test_the_fit_s_compiled_likelihood_is_the_ekf_s(tmp_path, layout, model, val
             frame = frame.drop(columns=["elevation_deg", "snr_db"])
         frame.to_csv(tmp_path / "log.csv", index=False)
         log = read_radar_log(tmp_path / "log.csv", layout)
-    ekf = float(_run(log, model, values).info.log_likelihood.sum())
+    (motion,), sensor, (prior,) = _inputs(log, model, values)
+    ref = at.ekf_filter(log.times, _measured(log), motion, sensor, prior, backend="numpy")
+    ekf = float(ref.info.log_likelihood.sum())
     assert _log_likelihood(log, model, values) == pytest.approx(ekf, rel=1e-9, abs=1e-6)
 
 

@@ -347,8 +347,9 @@ def imm_kernel(  # type: ignore[no-untyped-def]
                     if radar:
                         ok, nis, logdet, nobs = radar_update_into(
                             xp[:nj], pp[:nj, :nj], z[i, k], mask[i, k], codes, pose, reads[j],
-                            r[ir, kr], xs[j, :nj], ps[j, :nj, :nj], tmp[:nj, :nj], hm[:, :nj], rm,
-                            hp[:, :nj], s, lo, kt[:, :nj], nu, wv, ikh[:nj, :nj], zp, jac, sread,
+                            r[ir, kr], True, xs[j, :nj], ps[j, :nj, :nj], tmp[:nj, :nj],
+                            hm[:, :nj], rm, hp[:, :nj], s, lo, kt[:, :nj], nu, wv, ikh[:nj, :nj],
+                            zp, jac, sread,
                         )  # fmt: skip
                     else:
                         ok, nis, logdet, nobs = masked_update_into(

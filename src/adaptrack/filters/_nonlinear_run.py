@@ -10,6 +10,7 @@ the batch at once, each on its own time grid.
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -44,6 +45,44 @@ Update = Callable[
 ]
 
 
+@dataclass(frozen=True)
+class NonlinearRun:
+    """A validated run, broadcast to its batch of tracks ``batch``.
+
+    ``times``, ``steps`` [s] (..., T); ``measurements`` (..., T, m) and ``mask``; ``r`` as
+    given (shared, per track or per step: ``r_per_step``); ``model`` the motion model, with
+    ``transition``, ``process_cov``, ``control`` (..., T, n[, n]) of each step if it is linear
+    (else ``moving`` is it, and they are empty); ``reads`` the state indices that
+    ``measurement_model`` reads.
+    """
+
+    batch: tuple[int, ...]
+    times: FloatArray
+    steps: FloatArray
+    measurements: FloatArray
+    mask: BoolArray
+    r: FloatArray
+    r_per_step: bool
+    initial: GaussianState
+    model: MotionModel | NonlinearMotionModel
+    moving: NonlinearMotionModel | None
+    measurement_model: MeasurementModel
+    reads: np.ndarray
+    transition: FloatArray
+    process_cov: FloatArray
+    control: FloatArray
+
+    def noise_per_step(self) -> FloatArray:
+        """``R`` broadcast to the result's shape, (..., [T,] m, m)."""
+        m = self.measurements.shape[-1]
+        per_step = (self.times.shape[-1],) if self.r_per_step else ()
+        return np.broadcast_to(self.r, self.batch + per_step + (m, m))
+
+
+Compiled = Callable[[NonlinearRun], FilterResult | None]
+"""A compiled path for a validated run: its result, or None where it does not apply."""
+
+
 def check_measurement_model(value: object) -> MeasurementModel:
     """Return ``value`` if it implements :class:`~adaptrack.models.MeasurementModel`."""
     if not isinstance(value, MeasurementModel):
@@ -68,8 +107,13 @@ def run_nonlinear(
     order: int,
     update: Update,
     predict_nonlinear: Predict,
+    compiled: Compiled | None = None,
 ) -> FilterResult:
-    """Validate a run's inputs, then predict and ``update`` step by step over the batch."""
+    """Validate a run's inputs, then filter it step by step.
+
+    The ``compiled`` path's result is taken where it gives one; else each step predicts and
+    calls ``update`` over the whole batch (NumPy).
+    """
     moving = model if isinstance(model, NonlinearMotionModel) else None
     if moving is None:
         model = as_motion_model(model)
@@ -98,11 +142,27 @@ def run_nonlinear(
         tb, phi_b, qd_b, u_b = _per_track(batch, t, phi, qd, u)
     else:
         tb = np.broadcast_to(t, batch + (n_steps,))
-        phi_b, qd_b = np.empty(batch + (n_steps, n, n)), np.empty(batch + (n_steps, n, n))
+        phi_b = qd_b = np.empty(0)  # the prediction's linearisation, filled step by step
         u_b = np.zeros(batch + (n_steps, n))
-        dt = np.diff(tb, axis=-1, prepend=t_init[..., None])
+    dt = np.diff(tb, axis=-1, prepend=t_init[..., None])
+    run = NonlinearRun(batch, tb, dt, z, mk, r, r_per_step, initial, model, moving, mm, idx,
+                       phi_b, qd_b, u_b)  # fmt: skip
+    result = None if compiled is None else compiled(run)
+    return _steps(run, update, predict_nonlinear) if result is None else result
+
+
+def _steps(run: NonlinearRun, update: Update, predict_nonlinear: Predict) -> FilterResult:
+    """Predict and ``update`` step by step over the batch (NumPy)."""
+    batch, tb, dt, z, mk, r = run.batch, run.times, run.steps, run.measurements, run.mask, run.r
+    phi_b, qd_b, u_b, moving, mm, idx = (run.transition, run.process_cov, run.control,
+                                         run.moving, run.measurement_model, run.reads)  # fmt: skip
+    n_steps, m = z.shape[-2:]
+    n = run.model.state_dim
+    if moving is not None:
+        phi_b, qd_b = np.empty(batch + (n_steps, n, n)), np.empty(batch + (n_steps, n, n))
     out = _Recorder(batch, n_steps, n, m)
     h_all = np.empty(batch + (n_steps, m, n))
+    initial = run.initial
     x = np.broadcast_to(initial.mean, batch + (n,))
     p = np.broadcast_to(initial.cov, batch + (n, n))
     for k in range(n_steps):
@@ -112,7 +172,7 @@ def run_nonlinear(
             prior = predict(state, phi_b[sv], qd_b[sv], time=tb[sv], control=u_b[sv])
         else:
             prior, phi_b[sv], qd_b[sv] = predict_nonlinear(state, moving, dt[sv], tb[sv])
-        rk = r[sv] if r_per_step else r
+        rk = r[sv] if run.r_per_step else r
         try:
             post, info, h_all[sv] = update(prior, z[sv], mm, idx, rk, mk[sv])
         except np.linalg.LinAlgError:
@@ -122,8 +182,7 @@ def run_nonlinear(
             ) from None
         x, p = post.mean, post.cov
         out.store(sv, prior.mean, prior.cov, x, p, info)
-    r_b = np.broadcast_to(r, batch + ((n_steps,) if r_per_step else ()) + (m, m))
-    return out.result(tb, phi_b, qd_b, u_b, mk, h_all, r_b)
+    return out.result(tb, phi_b, qd_b, u_b, mk, h_all, run.noise_per_step())
 
 
 def observed(z: FloatArray, z_pred: FloatArray, mask: BoolArray) -> FloatArray:

@@ -1,7 +1,8 @@
 """Compiled (numba) EKF update with a :class:`~adaptrack.models.RadarMeasurement`.
 
 The radar's geometry, its analytic Jacobian and the wrapped innovation, as the NumPy model
-computes them, followed by the Joseph update of :func:`adaptrack.filters._kernels.update_into`.
+computes them, followed by the update of :func:`adaptrack.filters._kernels.update_into`
+(Joseph or standard form).
 The IMM kernel calls it for every model when its measurement is a radar.
 """
 
@@ -79,13 +80,14 @@ def radar_into(s, codes, pose, zp, jac):  # type: ignore[no-untyped-def]
 
 @numba.njit(cache=True, inline="always")
 def radar_update_into(  # type: ignore[no-untyped-def]
-    xp, pp, z, mask, codes, pose, reads, r, x, p, tmp, hm, rm, hp, s, lo, kt, nu, w, ikh, zp,
-    jac, sread,
+    xp, pp, z, mask, codes, pose, reads, r, joseph, x, p, tmp, hm, rm, hp, s, lo, kt, nu, w,
+    ikh, zp, jac, sread,
 ):  # fmt: skip
-    """Update the prior ``xp``, ``pp`` with the radar (EKF, Joseph form) into ``x``, ``p``.
+    """Update the prior ``xp``, ``pp`` with the radar (EKF) into ``x``, ``p``.
 
     ``reads`` (k,) the state indices the radar reads; ``zp`` (m,), ``jac`` (m, k), ``sread``
-    (k,) scratch; the rest as :func:`~adaptrack.filters._kernels.masked_update_into`. Returns
+    (k,) scratch; ``joseph`` the covariance form; the rest as
+    :func:`~adaptrack.filters._kernels.masked_update_into`. Returns
     ``(ok, nis, log det S, observed components)``.
     """
     n = xp.shape[0]
@@ -110,5 +112,5 @@ def radar_update_into(  # type: ignore[no-untyped-def]
             nu[a] = _wrap(d) if codes[a] == AZIMUTH or codes[a] == ELEVATION else d
         else:
             nu[a] = 0.0
-    ok, nis, logdet = update_into(xp, pp, nu, hm, rm, True, x, p, hp, s, lo, kt, w, ikh, tmp)
+    ok, nis, logdet = update_into(xp, pp, nu, hm, rm, joseph, x, p, hp, s, lo, kt, w, ikh, tmp)
     return ok, nis, logdet, nobs

@@ -14,17 +14,18 @@ from typing import Literal
 
 import numpy as np
 
+from .._backend import Backend, use_compiled
 from .._linalg import matvec, mT, symmetrize
 from .._typing import ArrayLike, BoolArray, FloatArray
 from ..models.continuous import MotionModel
 from ..models.discretize import Method, Noise
-from ..models.measurement import MeasurementModel, residual
-from ..models.turn import NonlinearMotionModel
+from ..models.measurement import MeasurementModel, PositionMeasurement, RadarMeasurement, residual
+from ..models.turn import CoordinatedTurn, NonlinearMotionModel
 from ..types import FilterResult, GaussianState, StepInfo, _trusted
 from ._measurement import masked_model
-from ._nonlinear_run import full_jacobian, observed, run_nonlinear
+from ._nonlinear_run import NonlinearRun, full_jacobian, observed, run_nonlinear
 from .kalman import _covariance_update, _gain, _innovation_stats
-from .run import NanPolicy
+from .run import NanPolicy, _result
 
 EKFForm = Literal["joseph", "standard"]
 
@@ -88,6 +89,7 @@ def ekf_filter(
     noise: Noise = "white",
     order: int = 2,
     form: EKFForm = "joseph",
+    backend: Backend = "auto",
 ) -> FilterResult:
     """Run an extended Kalman filter over one track or a batch of tracks.
 
@@ -118,6 +120,13 @@ def ekf_filter(
         Discretisation options of :func:`adaptrack.discretize`.
     form : {"joseph", "standard"}
         Covariance update with the linearised ``H``.
+    backend : {"auto", "numpy", "numba"}
+        ``"numba"`` runs the compiled kernel where it covers the models (a linear motion
+        model or :class:`~adaptrack.models.CoordinatedTurn`, with a
+        :class:`~adaptrack.models.PositionMeasurement` or
+        :class:`~adaptrack.models.RadarMeasurement`; others run in NumPy): the same
+        arithmetic, tens of times faster per step on one track. ``"auto"`` does so from
+        20,000 track-steps (a first call compiles it, then it is cached on disk).
 
     Returns
     -------
@@ -141,12 +150,73 @@ def ekf_filter(
     """
     if form not in ("joseph", "standard"):
         raise ValueError(f"form must be 'joseph' or 'standard'; got {form!r}")
+    z_size = np.size(measurements) // max(1, len(getattr(measurement_model, "names", ())))
+    compiled = use_compiled(backend, z_size)
 
     return run_nonlinear(
         times, measurements, model, measurement_model, initial, measurement_cov, mask,
         nan_policy, method, noise, order, partial(ekf_update_step, form=form),
-        ekf_predict_step,
+        ekf_predict_step, partial(_compiled_run, joseph=form == "joseph") if compiled else None,
     )  # fmt: skip
+
+
+def _compiled_run(run: NonlinearRun, joseph: bool) -> FilterResult | None:
+    """Return the run's result from the compiled kernel (:mod:`adaptrack.filters._ekf_kernel`).
+
+    None where the kernel does not cover its models, or a covariance stopped being positive
+    definite (the NumPy path then names the step).
+    """
+    mm, moving = run.measurement_model, run.moving
+    if not isinstance(mm, PositionMeasurement | RadarMeasurement) or not (
+        moving is None or isinstance(moving, CoordinatedTurn)
+    ):
+        return None
+    from ._ekf_kernel import ekf_kernel
+    from ._radar_update import radar_layout
+    from ._turn_kernel import turn_parameters
+
+    batch, (n_steps, m), n = run.batch, run.measurements.shape[-2:], run.model.state_dim
+    n_tr = int(np.prod(batch, dtype=int))
+
+    def tracks(a: np.ndarray, tail: tuple[int, ...]) -> np.ndarray:  # (N, ...), writable
+        return writable(np.broadcast_to(a, batch + tail).reshape((n_tr, *tail)))
+
+    turn_par: np.ndarray = np.zeros(4)
+    if moving is None:
+        phi, qd = (tracks(a, (n_steps, n, n)) for a in (run.transition, run.process_cov))
+    else:  # the kernel writes each step's F and Q
+        phi, qd = np.zeros((n_tr, n_steps, n, n)), np.zeros((n_tr, n_steps, n, n))
+        turn_par = turn_parameters(moving)
+    h = np.zeros((m, n))
+    codes: np.ndarray = np.zeros(0, np.int64)
+    pose: np.ndarray = np.zeros(8)
+    if isinstance(mm, RadarMeasurement):
+        codes, pose = radar_layout(mm)
+    else:
+        h[np.arange(m), run.reads] = 1.0
+    r = run.r
+    r4 = (r.reshape(n_tr, n_steps, m, m) if run.r_per_step
+          else r[None, None] if r.shape == (m, m) else r.reshape(n_tr, 1, m, m))  # fmt: skip
+    *out, h_steps, status = ekf_kernel(
+        writable(run.initial.mean.reshape(-1, n)),
+        writable(run.initial.cov.reshape(-1, n, n)),
+        phi, qd, tracks(run.control, (n_steps, n)), tracks(run.steps, (n_steps,)),
+        tracks(run.measurements, (n_steps, m)), tracks(run.mask, (n_steps, m)),
+        writable(r4), h, turn_par, codes, pose, run.reads.astype(np.int64), joseph,
+    )  # fmt: skip
+    if status.any():
+        return None
+    pm, pc, fm, fc, nu, s, nis, ll, k, nobs = (a.reshape(batch + a.shape[1:]) for a in out)
+    return _result(
+        run.times, pm, pc, fm, fc, phi.reshape(batch + phi.shape[1:]),
+        qd.reshape(batch + qd.shape[1:]), run.control, nu, s, nis, ll, k, nobs, run.mask,
+        h_steps.reshape(batch + h_steps.shape[1:]), run.noise_per_step(),
+    )  # fmt: skip
+
+
+def writable(a: np.ndarray) -> np.ndarray:
+    """Return ``a`` as a C-contiguous writable array (a copy only if it is not one)."""
+    return np.require(a, requirements=("C", "W"))
 
 
 __all__ = ["ekf_filter", "ekf_predict_step", "ekf_update_step"]

@@ -206,7 +206,7 @@ class MotionFit:
         n = self.run(_head(log, 1)).filtered.mean.shape[-1]  # checks the fit against the log
 
         def run(times: FloatArray, _: FloatArray, values: dict[str, float]) -> tuple[Any, Any]:
-            out = _compiled_run(_head(log, times.size), self.model, values)
+            out = _run(_head(log, times.size), self.model, values)
             est = out.filtered
             flat = np.concatenate([est.mean, est.cov.reshape(times.size, -1)], axis=1)
             return _step_log_likelihoods(out), flat
@@ -313,50 +313,34 @@ def _imm(
     priors: list[GaussianState],
     values: dict[str, float],
 ) -> IMMResult:
-    """Run the compiled IMM kernel: an IMM's two models, or one model alone (the EKF)."""
-    z = _measured(log)
-    if len(models) == 1:
-        return imm_filter(log.times, z, models, sensor, None, priors, transition_probs=[[1.0]],
-                          initial_probs=[1.0], backend="numba")  # fmt: skip
-    return imm_filter(log.times, z, models, sensor, None, priors, initial_probs=[0.5, 0.5],
-                      switching_rates=_switching(values), backend="numba")  # fmt: skip
+    """Run the compiled IMM kernel of the two models."""
+    return imm_filter(log.times, _measured(log), models, sensor, None, priors,
+                      initial_probs=[0.5, 0.5], switching_rates=_switching(values),
+                      backend="numba")  # fmt: skip
 
 
 def _run(
     log: PositionLog | RadarLog, model: str, values: dict[str, float]
 ) -> FilterResult | IMMResult:
-    """Filter ``log`` with these parameters (priors from the first fix or plot)."""
+    """Filter ``log`` with these parameters (priors from the first fix or plot), compiled.
+
+    A fit evaluates it hundreds of times.
+    """
     models, sensor, priors = _inputs(log, model, values)
     if model in IMM_MODELS:
         return _imm(log, models, sensor, priors, values)
     (motion,), (prior,) = models, priors
     if isinstance(log, RadarLog) or isinstance(motion, NonlinearMotionModel):
-        return ekf_filter(log.times, _measured(log), motion, sensor, prior)
+        return ekf_filter(log.times, _measured(log), motion, sensor, prior, backend="numba")
     k = log.n_axes
     return kalman_filter(
         log.times, log.enu, motion, list(_AXES[:k]), sensor.noise_cov, prior, backend="numba"
     )
 
 
-def _compiled_run(
-    log: PositionLog | RadarLog, model: str, values: dict[str, float]
-) -> FilterResult | IMMResult:
-    """Run :func:`_run`'s filter, an EKF on the compiled IMM kernel.
-
-    An EKF (a radar log, or the coordinated turn) runs as the IMM kernel with this one model:
-    the same predictions and Joseph-form updates (a test checks that the log-likelihoods
-    agree), some fifty times faster on one track than ``ekf_filter``, which steps in NumPy.
-    A fit evaluates it hundreds of times.
-    """
-    models, sensor, priors = _inputs(log, model, values)
-    if len(models) > 1 or isinstance(log, RadarLog) or isinstance(models[0], NonlinearMotionModel):
-        return _imm(log, models, sensor, priors, values)
-    return _run(log, model, values)  # the linear Kalman filter, compiled already
-
-
 def _log_likelihood(log: PositionLog | RadarLog, model: str, values: dict[str, float]) -> float:
-    """Log-likelihood of the log's measurements under the filter of :func:`_compiled_run`."""
-    return float(_step_log_likelihoods(_compiled_run(log, model, values)).sum())
+    """Log-likelihood of the log's measurements under the filter of :func:`_run`."""
+    return float(_step_log_likelihoods(_run(log, model, values)).sum())
 
 
 def _step_log_likelihoods(out: FilterResult | IMMResult) -> FloatArray:
