@@ -620,8 +620,9 @@ def imm_case(src: Source) -> Case:
 
 
 def nonlinear_case(src: Source) -> Case:
-    """``ekf_filter`` with a linear measurement model equals ``kalman_filter`` (Joseph form);
-    spoiled times, measurements, noise or prior are rejected by name.
+    """``ekf_filter`` with a linear measurement model equals ``kalman_filter`` (both ``auto``:
+    Joseph, or the square root where Joseph would lose digits), and its compiled kernel its
+    NumPy steps; spoiled times, measurements, noise or prior are rejected by name.
 
     The UKF is not fuzzed here: its sigma-point moments depart from the Kalman filter on
     about 2 % of these random problems (steps to 1e4 s, ``R`` of condition to 1e12, prior
@@ -643,8 +644,11 @@ def nonlinear_case(src: Source) -> Case:
         out.state(res.filtered.mean, res.filtered.cov)
         if not kw:
             ref = at.kalman_filter(p.times, z, p.model, p.h, p.r, p.prior, mask=p.mask,
-                                   form="joseph", backend="numpy")  # fmt: skip
+                                   backend="numpy")  # fmt: skip
             out.compare(f"{run.__name__}/kalman_filter", res.filtered, ref.filtered)
+            compiled_agrees(out, "ekf_filter numpy/numba", run, args, lambda q: dict(
+                times=q.times, measurements=q.z, measurement_model=PositionMeasurement(q.r, names),
+                initial=q.prior), replace(p, z=z))  # fmt: skip
         return out
 
     if src.integer(0, 2):
@@ -668,6 +672,25 @@ def nonlinear_case(src: Source) -> Case:
             bad = p.z.copy()
             bad[tuple(idx[src.integer(0, len(idx) - 1)])] = np.nan
     return Case(run.__name__, lambda: call(**{arg: bad}), arg, how)
+
+
+def compiled_agrees(
+    out: Outputs, label: str, run: Callable[..., Any], args: dict[str, Any],
+    changed: Callable[[Problem], dict[str, Any]], p: Problem,
+) -> None:  # fmt: skip
+    """Record ``run(**args)`` on both backends (they must agree) and how far the NumPy result
+    moves on the rounding-perturbed copies of ``p`` (``changed`` gives their arguments).
+
+    The default form (``auto``) on both: the compiled Joseph form where it keeps its digits,
+    else the NumPy square root. (Forced to Joseph past that limit, each backend loses digits
+    its own way: both strayed from the square-root filter by up to hundreds of sigmas.)
+    """
+    a = run(**args, backend="numpy")
+    b = run(**args, backend="numba")
+    out.state(b.filtered.mean, b.filtered.cov)
+    out.compare(label, b.filtered, a.filtered)
+    for q in perturbed(p):
+        out.sensitivity(label, run(**{**args, **changed(q)}, backend="numpy").filtered, a.filtered)
 
 
 def turn_case(src: Source) -> Case:
@@ -715,6 +738,11 @@ def turn_case(src: Source) -> Case:
             out.compare(label, res_cv, ref)
             for moved in perturbed(cv_problem):
                 out.sensitivity(label, _filter(moved, form="joseph", backend="numpy").filtered, ref)
+        if run is at.ekf_filter and not kw:
+            same = Problem(times, z, ct, np.eye(n)[:axes], r, prior, np.ones(z.shape, bool), None)
+            compiled_agrees(out, "ekf_filter(CT) numpy/numba", run, args, lambda q: dict(
+                times=q.times, measurements=q.z, initial=q.prior,
+                measurement_model=PositionMeasurement(q.r, names)), same)  # fmt: skip
         return out
 
     label = f"{run.__name__}(CT)"

@@ -31,6 +31,7 @@ from .run import (
     check_sequence,
     present_mask,
 )
+from .square_root import covariance, lower_factor, sqrt_predict
 
 Predict = Callable[
     [GaussianState, NonlinearMotionModel, FloatArray, FloatArray],
@@ -108,11 +109,15 @@ def run_nonlinear(
     update: Update,
     predict_nonlinear: Predict,
     compiled: Compiled | None = None,
+    square_root: bool = False,
 ) -> FilterResult:
     """Validate a run's inputs, then filter it step by step.
 
     The ``compiled`` path's result is taken where it gives one; else each step predicts and
-    calls ``update`` over the whole batch (NumPy).
+    calls ``update`` over the whole batch (NumPy). ``square_root``: the states carry a
+    covariance factor (``GaussianState.factor``) that ``update`` and ``predict_nonlinear`` use
+    and return; a linear prediction propagates it
+    (:func:`~adaptrack.filters.square_root.sqrt_predict`).
     """
     moving = model if isinstance(model, NonlinearMotionModel) else None
     if moving is None:
@@ -148,10 +153,12 @@ def run_nonlinear(
     run = NonlinearRun(batch, tb, dt, z, mk, r, r_per_step, initial, model, moving, mm, idx,
                        phi_b, qd_b, u_b)  # fmt: skip
     result = None if compiled is None else compiled(run)
-    return _steps(run, update, predict_nonlinear) if result is None else result
+    return _steps(run, update, predict_nonlinear, square_root) if result is None else result
 
 
-def _steps(run: NonlinearRun, update: Update, predict_nonlinear: Predict) -> FilterResult:
+def _steps(
+    run: NonlinearRun, update: Update, predict_nonlinear: Predict, square_root: bool
+) -> FilterResult:
     """Predict and ``update`` step by step over the batch (NumPy)."""
     batch, tb, dt, z, mk, r = run.batch, run.times, run.steps, run.measurements, run.mask, run.r
     phi_b, qd_b, u_b, moving, mm, idx = (run.transition, run.process_cov, run.control,
@@ -160,15 +167,23 @@ def _steps(run: NonlinearRun, update: Update, predict_nonlinear: Predict) -> Fil
     n = run.model.state_dim
     if moving is not None:
         phi_b, qd_b = np.empty(batch + (n_steps, n, n)), np.empty(batch + (n_steps, n, n))
-    out = _Recorder(batch, n_steps, n, m)
+    out = _Recorder(batch, n_steps, n, m, factors=square_root)
     h_all = np.empty(batch + (n_steps, m, n))
     initial = run.initial
     x = np.broadcast_to(initial.mean, batch + (n,))
     p = np.broadcast_to(initial.cov, batch + (n, n))
+    f = None
+    if square_root:
+        f = np.broadcast_to(lower_factor(np.asarray(initial.cov)) if initial.factor is None
+                            else initial.factor, batch + (n, n))  # fmt: skip
+        sq = lower_factor(qd_b) if moving is None else None
     for k in range(n_steps):
         sv = (slice(None),) * len(batch) + (k,)
-        state = _trusted(GaussianState, mean=x, cov=p, time=tb[sv])
-        if moving is None:
+        state = _trusted(GaussianState, mean=x, cov=p, time=tb[sv], factor=f)
+        if moving is None and f is not None:
+            xp, fp = sqrt_predict(x, f, phi_b[sv], sq[sv], u_b[sv])  # type: ignore[index]
+            prior = _trusted(GaussianState, mean=xp, cov=covariance(fp), time=tb[sv], factor=fp)
+        elif moving is None:
             prior = predict(state, phi_b[sv], qd_b[sv], time=tb[sv], control=u_b[sv])
         else:
             prior, phi_b[sv], qd_b[sv] = predict_nonlinear(state, moving, dt[sv], tb[sv])
@@ -180,8 +195,8 @@ def _steps(run: NonlinearRun, update: Update, predict_nonlinear: Predict) -> Fil
                 f"a covariance is not positive definite at step {k}; check the model, "
                 "measurement_cov and the prior"
             ) from None
-        x, p = post.mean, post.cov
-        out.store(sv, prior.mean, prior.cov, x, p, info)
+        x, p, f = post.mean, post.cov, post.factor
+        out.store(sv, prior.mean, prior.cov, x, p, info, f)
     return out.result(tb, phi_b, qd_b, u_b, mk, h_all, run.noise_per_step())
 
 

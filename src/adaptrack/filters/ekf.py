@@ -24,10 +24,11 @@ from ..models.turn import CoordinatedTurn, NonlinearMotionModel
 from ..types import FilterResult, GaussianState, StepInfo, _trusted
 from ._measurement import masked_model
 from ._nonlinear_run import NonlinearRun, full_jacobian, observed, run_nonlinear
-from .kalman import _covariance_update, _gain, _innovation_stats
-from .run import NanPolicy, _result
+from .kalman import CovarianceError, _covariance_update, _gain, _innovation_stats
+from .run import JOSEPH_MAX_RATIO, NanPolicy, _result
+from .square_root import covariance, lower_factor, sqrt_update, triangularize
 
-EKFForm = Literal["joseph", "standard"]
+EKFForm = Literal["auto", "joseph", "standard", "sqrt"]
 
 
 def ekf_update_step(
@@ -37,7 +38,7 @@ def ekf_update_step(
     idx: np.ndarray,
     r: FloatArray,
     mask: BoolArray,
-    form: EKFForm = "joseph",
+    form: Literal["joseph", "standard"] = "joseph",
 ) -> tuple[GaussianState, StepInfo, FloatArray]:
     """One batched EKF update; returns the posterior, its StepInfo and ``H`` (..., m, n).
 
@@ -67,12 +68,44 @@ def ekf_predict_step(
 ) -> tuple[GaussianState, FloatArray, FloatArray]:
     """Predict ``state`` through a nonlinear motion model, linearised at its mean.
 
-    ``dt`` (...) [s]; returns the prior, ``F`` and ``Q`` (..., n, n).
+    ``dt`` (...) [s]; returns the prior, ``F`` and ``Q`` (..., n, n). A state that carries a
+    covariance factor gets a predicted factor, ``tria([F S, sqrt(Q)])``.
     """
     mean, f = model.propagate(state.mean, dt)
     q = model.process_cov(dt)
+    if state.factor is not None:
+        factor = triangularize(np.concatenate([f @ state.factor, lower_factor(q)], -1))
+        prior = _trusted(GaussianState, mean=mean, cov=covariance(factor), time=time,
+                         factor=factor)  # fmt: skip
+        return prior, f, q
     cov = symmetrize(f @ state.cov @ mT(f) + q)
     return _trusted(GaussianState, mean=mean, cov=cov, time=time), f, q
+
+
+def ekf_sqrt_update_step(
+    prior: GaussianState,
+    z: FloatArray,
+    model: MeasurementModel,
+    idx: np.ndarray,
+    r: FloatArray,
+    mask: BoolArray,
+) -> tuple[GaussianState, StepInfo, FloatArray]:
+    """One batched EKF update in square-root form, from the prior's covariance factor.
+
+    The linearised measurement ``H`` at the predicted mean and the innovation ``z - h(x)`` go
+    through :func:`~adaptrack.filters.square_root.sqrt_update`: the posterior factor comes from
+    an orthogonal triangularisation, positive semi-definite by construction. Returns as
+    :func:`ekf_update_step`.
+    """
+    s = prior.mean[..., idx]
+    z_pred = model.predict(s)
+    h = full_jacobian(model.jacobian(s), idx, prior.dim)
+    nu = residual(model, observed(z, z_pred, mask), z_pred) * mask
+    factor = lower_factor(prior.cov) if prior.factor is None else prior.factor
+    mean, post_factor, info = sqrt_update(prior.mean, factor, z, h, r, mask, None, nu)
+    post = _trusted(GaussianState, mean=mean, cov=covariance(post_factor), time=prior.time,
+                    factor=post_factor)  # fmt: skip
+    return post, info, h * mask[..., :, None]
 
 
 def ekf_filter(
@@ -88,7 +121,7 @@ def ekf_filter(
     method: Method = "expm",
     noise: Noise = "white",
     order: int = 2,
-    form: EKFForm = "joseph",
+    form: EKFForm = "auto",
     backend: Backend = "auto",
 ) -> FilterResult:
     """Run an extended Kalman filter over one track or a batch of tracks.
@@ -118,8 +151,12 @@ def ekf_filter(
         A NaN under a True mask is an error, or a missing component.
     method, noise, order
         Discretisation options of :func:`adaptrack.discretize`.
-    form : {"joseph", "standard"}
-        Covariance update with the linearised ``H``.
+    form : {"auto", "joseph", "standard", "sqrt"}
+        Covariance update with the linearised ``H``: Joseph, the textbook ``(I - K H) P``, or
+        the square-root (array) form (:func:`ekf_sqrt_update_step`, NumPy). ``"auto"``: Joseph
+        unless it would lose digits (a covariance not positive definite, or a step whose
+        ``trace(S) / lambda_min(R)``, both scaled by ``R``'s standard deviations, exceeds
+        :data:`~adaptrack.filters.run.JOSEPH_MAX_RATIO`), then the square root.
     backend : {"auto", "numpy", "numba"}
         ``"numba"`` runs the compiled kernel where it covers the models (a linear motion
         model or :class:`~adaptrack.models.CoordinatedTurn`, with a
@@ -148,16 +185,50 @@ def ekf_filter(
     >>> res.filtered.mean.shape
     (5, 4)
     """
-    if form not in ("joseph", "standard"):
-        raise ValueError(f"form must be 'joseph' or 'standard'; got {form!r}")
+    if form not in ("auto", "joseph", "standard", "sqrt"):
+        raise ValueError(f"form must be 'auto', 'joseph', 'standard' or 'sqrt'; got {form!r}")
     z_size = np.size(measurements) // max(1, len(getattr(measurement_model, "names", ())))
     compiled = use_compiled(backend, z_size)
 
-    return run_nonlinear(
-        times, measurements, model, measurement_model, initial, measurement_cov, mask,
-        nan_policy, method, noise, order, partial(ekf_update_step, form=form),
-        ekf_predict_step, partial(_compiled_run, joseph=form == "joseph") if compiled else None,
-    )  # fmt: skip
+    def run(form: str) -> FilterResult:
+        if form == "sqrt":
+            return run_nonlinear(
+                times, measurements, model, measurement_model, initial, measurement_cov, mask,
+                nan_policy, method, noise, order, ekf_sqrt_update_step, ekf_predict_step,
+                square_root=True,
+            )  # fmt: skip
+        update = partial(ekf_update_step, form="joseph" if form == "joseph" else "standard")
+        return run_nonlinear(
+            times, measurements, model, measurement_model, initial, measurement_cov, mask,
+            nan_policy, method, noise, order, update,
+            ekf_predict_step, partial(_compiled_run, joseph=form == "joseph") if compiled else None,
+        )  # fmt: skip
+
+    if form != "auto":
+        return run(form)
+    try:
+        joseph = run("joseph")
+    except CovarianceError:
+        return run("sqrt")
+    return joseph if scaled_joseph_ratio(joseph) <= JOSEPH_MAX_RATIO else run("sqrt")
+
+
+def scaled_joseph_ratio(result: FilterResult) -> float:
+    """Return the largest ``trace(S) / lambda_min(R)`` over a run's steps, scaled.
+
+    Both matrices are scaled to ``R``'s unit diagonal: measurement components in different
+    units (a radar's metres and radians) are no ill-conditioning. A missing component counts 1.
+    """
+    s = result.info.innovation_cov
+    r = result.measurement_cov
+    if 2 < r.ndim < s.ndim:  # one R per track: the same at every step
+        r = r[..., None, :, :]
+    r = np.broadcast_to(r, s.shape)
+    _, rm = masked_model(np.zeros(s.shape[:-1] + (1,)), r, result.mask)
+    d = 1.0 / np.sqrt(np.diagonal(rm, axis1=-2, axis2=-1))
+    scale = d[..., :, None] * d[..., None, :]
+    s_trace = np.trace(s * scale, axis1=-2, axis2=-1)
+    return float(np.max(s_trace / np.linalg.eigvalsh(rm * scale)[..., 0], initial=0.0))
 
 
 def _compiled_run(run: NonlinearRun, joseph: bool) -> FilterResult | None:
@@ -219,4 +290,4 @@ def writable(a: np.ndarray) -> np.ndarray:
     return np.require(a, requirements=("C", "W"))
 
 
-__all__ = ["ekf_filter", "ekf_predict_step", "ekf_update_step"]
+__all__ = ["ekf_filter", "ekf_predict_step", "ekf_sqrt_update_step", "ekf_update_step"]

@@ -77,12 +77,15 @@ def sqrt_update(
     r: FloatArray,
     mask: BoolArray,
     offset: FloatArray | None,
+    innovation: FloatArray | None = None,
 ) -> tuple[FloatArray, FloatArray, StepInfo]:
     """Posterior mean and covariance factor of the prior ``mean``, ``factor`` given ``z``.
 
     ``z`` (..., m) with missing components (``mask`` False) ignored; ``h`` (m, n); ``r``
     (..., m, m) positive definite. Returns the posterior and the step's
     :class:`~adaptrack.types.StepInfo` (innovation, its covariance, NIS, log-likelihood, gain).
+    ``innovation`` (..., m), if given, replaces ``z - offset - H mean`` (an EKF's
+    ``z - h(mean)``, angles wrapped; zero where missing).
     """
     n = factor.shape[-1]
     m = z.shape[-1]
@@ -94,8 +97,11 @@ def sqrt_update(
     pre[..., m:, m:] = factor
     post = triangularize(pre)
     ss, kb, post_factor = post[..., :m, :m], post[..., m:, :m], post[..., m:, m:]
-    zm = np.where(mask, z - (0.0 if offset is None else offset), 0.0)
-    nu = zm - matvec(hm, mean)
+    if innovation is None:
+        zm = np.where(mask, z - (0.0 if offset is None else offset), 0.0)
+        nu = zm - matvec(hm, mean)
+    else:
+        nu = np.where(mask, innovation, 0.0)
     w = np.linalg.solve(ss, nu[..., None])[..., 0]
     new_mean = mean + matvec(kb, w)
     gain = mT(np.linalg.solve(mT(ss), mT(kb)))
