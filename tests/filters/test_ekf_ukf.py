@@ -392,8 +392,9 @@ def test_square_root_ukf_is_the_ukf_on_a_well_conditioned_radar(motion):
     radar = RadarMeasurement(np.diag([25.0, 1e-6, 1e-6, 0.25]),
                              ("range", "azimuth", "elevation", "range_rate"), n_axes=3,
                              sensor_position=[0.0, 0.0, 10.0])  # fmt: skip
-    t, states, z = simulate_radar_runs(rng, 4, 60, radar, 0.5, [[8000.0, -60.0],
-                                                                 [9000.0, 40.0], [3000.0, 0.0]])
+    t, states, z = simulate_radar_runs(
+        rng, 4, 60, radar, 0.5, [[8000.0, -60.0], [9000.0, 40.0], [3000.0, 0.0]]
+    )
     p0 = np.diag([900.0, 900, 900, 400, 400, 25])
     mean0 = states[:, 0] + rng.normal(0, 1, (4, 6)) * 20
     model = ConstantVelocity(0.5, n_axes=3)
