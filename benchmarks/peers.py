@@ -385,6 +385,51 @@ def filterpy_radar_ekf(t: np.ndarray, z: np.ndarray) -> np.ndarray:
     return out
 
 
+def adaptrack_radar_ukf(t: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """``ukf_filter`` over every track at once; means (N, T, 6)."""
+    n = z.shape[0]
+    prior = at.GaussianState(_radar_prior(z[:, 0]), np.broadcast_to(RADAR_P0, (n, 6, 6)), t[0])
+    model = at.models.ConstantVelocity(RADAR_Q, n_axes=3)
+    return at.ukf_filter(t, z, model, RADAR, prior).filtered.mean
+
+
+def filterpy_radar_ukf(t: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """FilterPy's ``UnscentedKalmanFilter`` (Van der Merwe's points, alpha 1, beta 2, kappa
+    0, as ours), one track at a time; means (N, T, 6) in our order."""
+    from filterpy.common import Q_continuous_white_noise
+    from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
+
+    perm = np.array([0, 3, 1, 4, 2, 5])  # FilterPy (x, vx, y, vy, z, vz) of ours
+    inv = np.argsort(perm)
+    dt = float(t[1] - t[0])
+    f = np.kron(np.eye(3), [[1.0, dt], [0.0, 1.0]])
+    ang = np.array([False, True, True, False])
+
+    def residual(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        d = a - b
+        d[ang] = (d[ang] + np.pi) % (2 * np.pi) - np.pi
+        return d
+
+    out = np.empty(z.shape[:-1] + (6,))
+    x0 = _radar_prior(z[:, 0])
+    points = MerweScaledSigmaPoints(6, alpha=1.0, beta=2.0, kappa=0.0)
+    for i in range(z.shape[0]):
+        ukf = UnscentedKalmanFilter(
+            6, 4, dt, hx=lambda x: RADAR.predict(x[inv]), fx=lambda x, dt: f @ x, points=points,
+            residual_z=residual,
+        )  # fmt: skip
+        ukf.x, ukf.P = x0[i][perm], RADAR_P0[np.ix_(perm, perm)]
+        ukf.Q, ukf.R = Q_continuous_white_noise(2, dt, RADAR_Q, block_size=3), RADAR.noise_cov
+        for k in range(z.shape[1]):
+            if k:
+                ukf.predict()
+            else:  # the sigma points of the prior itself (FilterPy draws them in predict)
+                ukf.predict(fx=lambda x, dt: x)
+            ukf.update(z[i, k])
+            out[i, k] = ukf.x[inv]
+    return out
+
+
 RADAR_IMM_Q = (0.1, 30.0)  # white acceleration PSDs of the quiet and agile CV modes [m^2/s^3]
 RADAR_IMM_PI = np.array([[0.95, 0.05], [0.1, 0.9]])
 RADAR_IMM_MU0 = np.array([0.8, 0.2])

@@ -17,6 +17,8 @@ Workloads (full sizes; ``--quick`` shrinks them to a smoke test):
 * ``radar_ekf``: a 3-D radar (range, azimuth, elevation, range-rate) constant-velocity EKF
   over 1,000 tracks x 200 scans, and (``radar_ekf_1``) over one track of 5,000 scans, compiled
   and in NumPy, against FilterPy's ``ExtendedKalmanFilter``;
+* ``radar_ukf``: the same radar, a constant-velocity UKF on one track of 2,000 scans, against
+  FilterPy's ``UnscentedKalmanFilter``;
 * ``radar_imm``: the same radar, an IMM-EKF of two CV modes (the compiled kernel and its NumPy
   reference) against FilterPy's ``IMMEstimator`` of two ``ExtendedKalmanFilter``;
 * ``lx_mc``: the ``lx_default`` level-crossing compliance Monte Carlo;
@@ -76,6 +78,7 @@ def run(quick: bool, only: list[str] | None = None, workers: int = 2) -> list[Re
         "stream": lambda: workloads.streaming(quick, repeats),
         "imm": lambda: workloads.imm(quick, repeats),
         "radar_ekf": lambda: workloads.radar_ekf(quick, repeats),
+        "radar_ukf": lambda: workloads.radar_ukf(quick, repeats),
         "radar_imm": lambda: workloads.radar_imm(quick, repeats),
         "lx_mc": lambda: workloads.crossing(quick, workers),
         "scene": lambda: workloads.scene(quick),

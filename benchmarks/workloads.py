@@ -332,6 +332,23 @@ def radar_ekf(quick: bool, repeats: int) -> list[Result]:
     return rows
 
 
+def radar_ukf(quick: bool, repeats: int) -> list[Result]:
+    """The same radar, a constant-velocity UKF on one track of 2,000 scans (100 ``quick``):
+    adaptrack's ``ukf_filter`` (NumPy) and FilterPy's ``UnscentedKalmanFilter``."""
+    n_steps = 100 if quick else 2_000
+    t, z = peers.radar_data(1, n_steps, seed=10)
+    return _compare(
+        "radar_ukf_1",
+        t,
+        z,
+        {
+            "adaptrack": (peers.adaptrack_radar_ukf, 1, n_steps),
+            "filterpy": (peers.filterpy_radar_ukf, 1, n_steps),
+        },
+        repeats,
+    )
+
+
 def radar_imm(quick: bool, repeats: int) -> list[Result]:
     """The same radar, an IMM-EKF of two CV modes over 1,000 tracks x 200 scans (20 x 50
     ``quick``): adaptrack's compiled kernel and its NumPy reference, FilterPy's
