@@ -416,3 +416,27 @@ def test_square_root_ukf_is_the_ukf_on_a_well_conditioned_radar(motion):
     with pytest.raises(ValueError, match="non-negative covariance weights"):
         at.ukf_filter(t, z, model, radar, prior, form="sqrt",
                       sigma_points=at.SigmaPoints(alpha=0.1))  # fmt: skip
+
+
+def test_the_auto_rule_does_not_count_units_as_ill_conditioning():
+    """``scaled_joseph_ratio`` is the same whether a component is measured in metres or in
+    kilometres (its R and S entries scale by 1e-6), while the unscaled ``trace(S) /
+    lambda_min(R)`` changes by orders of magnitude; with every component present it is
+    ``trace(S R^-1)`` for a diagonal R."""
+    from adaptrack.filters.ekf import scaled_joseph_ratio
+    from adaptrack.filters.run import worst_joseph_ratio
+
+    rng = np.random.default_rng(3)
+    t = np.cumsum(rng.uniform(0.5, 1.5, 30))
+    xy = np.stack([10.0 * t, -5.0 * t], -1) + rng.normal(size=(30, 2)) * [3.0, 2.0]
+    prior = GaussianState(np.zeros(4), np.diag([1e4, 1e4, 100.0, 100.0]), 0.0)
+    model = ConstantVelocity(0.3, n_axes=2)
+    metres = at.ekf_filter(t, xy, model, PositionMeasurement([9.0, 4.0]), prior, form="joseph")
+    km = FunctionMeasurement(lambda s: s * [1.0, 1e-3], ("x", "y"), ("x_m", "y_km"),
+                             [9.0, 4e-6])  # fmt: skip
+    kilo = at.ekf_filter(t, xy * [1.0, 1e-3], model, km, prior, form="joseph")
+    assert scaled_joseph_ratio(kilo) == pytest.approx(scaled_joseph_ratio(metres), rel=1e-6)
+    assert worst_joseph_ratio(kilo) > 1e5 * worst_joseph_ratio(metres)
+    s = metres.info.innovation_cov
+    expected = np.max(s[..., 0, 0] / 9.0 + s[..., 1, 1] / 4.0)
+    assert scaled_joseph_ratio(metres) == pytest.approx(expected, rel=1e-12)

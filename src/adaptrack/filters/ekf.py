@@ -190,27 +190,28 @@ def ekf_filter(
     z_size = np.size(measurements) // max(1, len(getattr(measurement_model, "names", ())))
     compiled = use_compiled(backend, z_size)
 
-    def run(form: str) -> FilterResult:
-        if form == "sqrt":
+    def run(chosen: str) -> FilterResult:
+        if chosen == "sqrt":
             return run_nonlinear(
                 times, measurements, model, measurement_model, initial, measurement_cov, mask,
                 nan_policy, method, noise, order, ekf_sqrt_update_step, ekf_predict_step,
                 square_root=True,
             )  # fmt: skip
-        update = partial(ekf_update_step, form="joseph" if form == "joseph" else "standard")
+        joseph = chosen == "joseph"
         return run_nonlinear(
             times, measurements, model, measurement_model, initial, measurement_cov, mask,
-            nan_policy, method, noise, order, update,
-            ekf_predict_step, partial(_compiled_run, joseph=form == "joseph") if compiled else None,
+            nan_policy, method, noise, order,
+            partial(ekf_update_step, form="joseph" if joseph else "standard"), ekf_predict_step,
+            partial(_compiled_run, joseph=joseph) if compiled else None,
         )  # fmt: skip
 
     if form != "auto":
         return run(form)
     try:
-        joseph = run("joseph")
+        result = run("joseph")
     except CovarianceError:
         return run("sqrt")
-    return joseph if scaled_joseph_ratio(joseph) <= JOSEPH_MAX_RATIO else run("sqrt")
+    return result if scaled_joseph_ratio(result) <= JOSEPH_MAX_RATIO else run("sqrt")
 
 
 def scaled_joseph_ratio(result: FilterResult) -> float:
@@ -223,12 +224,14 @@ def scaled_joseph_ratio(result: FilterResult) -> float:
     r = result.measurement_cov
     if 2 < r.ndim < s.ndim:  # one R per track: the same at every step
         r = r[..., None, :, :]
-    r = np.broadcast_to(r, s.shape)
-    _, rm = masked_model(np.zeros(s.shape[:-1] + (1,)), r, result.mask)
-    d = 1.0 / np.sqrt(np.diagonal(rm, axis1=-2, axis2=-1))
+    if not bool(result.mask.all()):  # missing components: unit variances, per step
+        r = masked_model(np.zeros(s.shape[:-1] + (1,)), np.broadcast_to(r, s.shape),
+                         result.mask)[1]  # fmt: skip
+    d = 1.0 / np.sqrt(np.diagonal(r, axis1=-2, axis2=-1))
     scale = d[..., :, None] * d[..., None, :]
+    r_min = np.linalg.eigvalsh(r * scale)[..., 0]  # once per distinct R when all are present
     s_trace = np.trace(s * scale, axis1=-2, axis2=-1)
-    return float(np.max(s_trace / np.linalg.eigvalsh(rm * scale)[..., 0], initial=0.0))
+    return float(np.max(s_trace / r_min, initial=0.0))
 
 
 def _compiled_run(run: NonlinearRun, joseph: bool) -> FilterResult | None:
@@ -250,7 +253,7 @@ def _compiled_run(run: NonlinearRun, joseph: bool) -> FilterResult | None:
     n_tr = int(np.prod(batch, dtype=int))
 
     def tracks(a: np.ndarray, tail: tuple[int, ...]) -> np.ndarray:  # (N, ...), writable
-        return writable(np.broadcast_to(a, batch + tail).reshape((n_tr, *tail)))
+        return _writable(np.broadcast_to(a, batch + tail).reshape((n_tr, *tail)))
 
     turn_par: np.ndarray = np.zeros(4)
     if moving is None:
@@ -269,11 +272,11 @@ def _compiled_run(run: NonlinearRun, joseph: bool) -> FilterResult | None:
     r4 = (r.reshape(n_tr, n_steps, m, m) if run.r_per_step
           else r[None, None] if r.shape == (m, m) else r.reshape(n_tr, 1, m, m))  # fmt: skip
     *out, h_steps, status = ekf_kernel(
-        writable(run.initial.mean.reshape(-1, n)),
-        writable(run.initial.cov.reshape(-1, n, n)),
+        _writable(run.initial.mean.reshape(-1, n)),
+        _writable(run.initial.cov.reshape(-1, n, n)),
         phi, qd, tracks(run.control, (n_steps, n)), tracks(run.steps, (n_steps,)),
         tracks(run.measurements, (n_steps, m)), tracks(run.mask, (n_steps, m)),
-        writable(r4), h, turn_par, codes, pose, run.reads.astype(np.int64), joseph,
+        _writable(r4), h, turn_par, codes, pose, run.reads.astype(np.int64), joseph,
     )  # fmt: skip
     if status.any():
         return None
@@ -285,7 +288,7 @@ def _compiled_run(run: NonlinearRun, joseph: bool) -> FilterResult | None:
     )  # fmt: skip
 
 
-def writable(a: np.ndarray) -> np.ndarray:
+def _writable(a: np.ndarray) -> np.ndarray:
     """Return ``a`` as a C-contiguous writable array (a copy only if it is not one)."""
     return np.require(a, requirements=("C", "W"))
 
