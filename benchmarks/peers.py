@@ -418,13 +418,13 @@ def filterpy_radar_ukf(t: np.ndarray, z: np.ndarray) -> np.ndarray:
             6, 4, dt, hx=lambda x: RADAR.predict(x[inv]), fx=lambda x, dt: f @ x, points=points,
             residual_z=residual,
         )  # fmt: skip
-        ukf.x, ukf.P = x0[i][perm], RADAR_P0[np.ix_(perm, perm)]
-        ukf.Q, ukf.R = Q_continuous_white_noise(2, dt, RADAR_Q, block_size=3), RADAR.noise_cov
+        ukf.x, ukf.P, ukf.R = x0[i][perm], RADAR_P0[np.ix_(perm, perm)], RADAR.noise_cov
+        ukf.Q = np.zeros((6, 6))  # FilterPy draws its sigma points in predict: the prior's own
+        ukf.predict(fx=lambda x, dt: x)
+        ukf.Q = Q_continuous_white_noise(2, dt, RADAR_Q, block_size=3)
         for k in range(z.shape[1]):
             if k:
                 ukf.predict()
-            else:  # the sigma points of the prior itself (FilterPy draws them in predict)
-                ukf.predict(fx=lambda x, dt: x)
             ukf.update(z[i, k])
             out[i, k] = ukf.x[inv]
     return out
