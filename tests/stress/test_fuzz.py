@@ -205,3 +205,18 @@ def test_kalman_step_names_a_measurement_cov_that_is_not_positive_definite():
             ConstantVelocity(accel_psd=1.0, n_axes=2), np.eye(2, 4), [[1.0, 0.3], [0.0, 1.0]],
             time=1.0,
         )  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("target", "seed"),
+    [("batch_ls", (31, 13016)), ("ekf_filter", (5, 108)), ("coordinated_turn", (5, 1475))],
+)
+def test_cases_the_long_campaigns_found_stay_fixed(target, seed):
+    """Cases that were defects: a rank-deficient polynomial fit whose evaluated covariance
+    (``G C G^T``) came out indefinite by 6e-12 of its scale (now ``(G F)(G F)^T``); the EKF's
+    Joseph form 18.8 sigma off on an ill-conditioned ``R`` and a valid coordinated-turn
+    problem it rejected (now ``form="auto"`` takes the square root)."""
+    from tests.stress.fuzz import TARGETS, Source, outcome
+
+    case = TARGETS[target](Source(np.random.default_rng(seed)))
+    assert outcome(case)[0] in ("ok", "ok, undetermined")

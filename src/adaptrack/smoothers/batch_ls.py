@@ -27,6 +27,7 @@ from numpy.polynomial import legendre
 
 from .._typing import ArrayLike, FloatArray
 from .._validation import as_float_array, check_symmetric_pd
+from ..filters.square_root import covariance, lower_factor
 from ..types import GaussianState, _trusted
 
 Weights = Literal["full", "diagonal", "diagonal_unscaled"]
@@ -91,10 +92,8 @@ class PolynomialFit:
                 block = slice(axis * (self.degree + 1), (axis + 1) * (self.degree + 1))
                 g[:, 3 * d + axis, block] = rows
         mean = g @ self.coef.reshape(-1)
-        cov = g @ self.coef_cov @ np.swapaxes(g, -1, -2)
-        return _trusted(
-            GaussianState, mean=mean, cov=0.5 * (cov + np.swapaxes(cov, -1, -2)), time=t
-        )
+        gf = g @ lower_factor(self.coef_cov)  # (G F)(G F)^T: PSD to rounding, whatever G's rank
+        return _trusted(GaussianState, mean=mean, cov=covariance(gf), time=t)
 
 
 def fit_polynomial(
