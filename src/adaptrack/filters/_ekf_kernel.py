@@ -17,7 +17,13 @@ import numba
 import numpy as np
 from numba import prange
 
-from ._kernels import _LOG_2PI, filter_outputs, masked_update_into, predict_into, start_track
+from ._kernels import (
+    filter_outputs,
+    masked_update_into,
+    predict_into,
+    start_track,
+    store_step,
+)
 from ._radar_update import radar_update_into
 from ._turn_kernel import turn_predict_into
 
@@ -75,21 +81,9 @@ def ekf_kernel(x0, p0, phi, qd, u, dt, z, mask, r, h, turn_par, codes, pose, rea
             if not ok:
                 status[i] = 1
                 break
-            for a in range(n):
-                pm[i, k, a] = xp[a]
-                fm[i, k, a] = x[a]
-                for b in range(n):
-                    pc[i, k, a, b] = pp[a, b]
-                    fc[i, k, a, b] = p[a, b]
-                for b in range(m):
-                    k_o[i, k, a, b] = kt[b, a]
+            store_step(pm, pc, fm, fc, nu_o, s_o, nis_o, ll_o, k_o, nobs_o, i, k, xp, pp, x, p, kt,
+                       nu, s, nis, logdet, nobs)  # fmt: skip
             for a in range(m):
-                nu_o[i, k, a] = nu[a]
-                for b in range(m):
-                    s_o[i, k, a, b] = s[a, b]
                 for b in range(n):
                     h_o[i, k, a, b] = hm[a, b]
-            nis_o[i, k] = nis
-            ll_o[i, k] = -0.5 * (logdet + nis + nobs * _LOG_2PI) if nobs > 0 else 0.0
-            nobs_o[i, k] = nobs
     return pm, pc, fm, fc, nu_o, s_o, nis_o, ll_o, k_o, nobs_o, h_o, status

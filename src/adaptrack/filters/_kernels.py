@@ -221,7 +221,7 @@ def kalman_kernel(x0, p0, phi, qd, u, z, mask, h, r, off, joseph):  # type: igno
     """
     n_tr, n_st, m = z.shape
     n = h.shape[1]
-    pm, pc, fm, fc, nu_o, s_o, nis_o, ll_o, k_o, nobs_o = filter_outputs(n_tr, n_st, n, m)
+    outs = filter_outputs(n_tr, n_st, n, m)
     x = np.empty(n)
     xp = np.empty(n)
     p = np.empty((n, n))
@@ -267,23 +267,36 @@ def kalman_kernel(x0, p0, phi, qd, u, z, mask, h, r, off, joseph):  # type: igno
             )
             if not ok:
                 raise ValueError("innovation covariance is not positive definite")
-            # store
-            for a in range(n):
-                pm[i, k, a] = xp[a]
-                fm[i, k, a] = x[a]
-                for b in range(n):
-                    pc[i, k, a, b] = pp[a, b]
-                    fc[i, k, a, b] = p[a, b]
-                for b in range(m):
-                    k_o[i, k, a, b] = kt[b, a]
-            for a in range(m):
-                nu_o[i, k, a] = nu[a]
-                for b in range(m):
-                    s_o[i, k, a, b] = s[a, b]
-            nis_o[i, k] = nis
-            ll_o[i, k] = -0.5 * (logdet + nis + nobs * _LOG_2PI) if nobs > 0 else 0.0
-            nobs_o[i, k] = nobs
-    return pm, pc, fm, fc, nu_o, s_o, nis_o, ll_o, k_o, nobs_o
+            store_step(*outs, i, k, xp, pp, x, p, kt, nu, s, nis, logdet, nobs)
+    return outs
+
+
+@numba.njit(cache=True, inline="always")
+def store_step(  # type: ignore[no-untyped-def]
+    pm, pc, fm, fc, nu_o, s_o, nis_o, ll_o, k_o, nobs_o, i, k, xp, pp, x, p, kt, nu, s, nis,
+    logdet, nobs,
+):  # fmt: skip
+    """Write step ``k`` of track ``i`` into the arrays of :func:`filter_outputs` (in its order).
+
+    Moments, innovation, ``S``, NIS, log-likelihood, the gain (from ``kt`` = K^T) and the
+    observed-component count.
+    """
+    n, m = x.shape[0], nu.shape[0]
+    for a in range(n):
+        pm[i, k, a] = xp[a]
+        fm[i, k, a] = x[a]
+        for b in range(n):
+            pc[i, k, a, b] = pp[a, b]
+            fc[i, k, a, b] = p[a, b]
+        for b in range(m):
+            k_o[i, k, a, b] = kt[b, a]
+    for a in range(m):
+        nu_o[i, k, a] = nu[a]
+        for b in range(m):
+            s_o[i, k, a, b] = s[a, b]
+    nis_o[i, k] = nis
+    ll_o[i, k] = -0.5 * (logdet + nis + nobs * _LOG_2PI) if nobs > 0 else 0.0
+    nobs_o[i, k] = nobs
 
 
 def run_kernels(x0, p0, phi, qd, u, z, mask, h, r, off, joseph):  # type: ignore[no-untyped-def]
