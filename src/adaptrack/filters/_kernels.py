@@ -221,7 +221,7 @@ def kalman_kernel(x0, p0, phi, qd, u, z, mask, h, r, off, joseph):  # type: igno
     """
     n_tr, n_st, m = z.shape
     n = h.shape[1]
-    outs = filter_outputs(n_tr, n_st, n, m)
+    pm, pc, fm, fc, nu_o, s_o, nis_o, ll_o, k_o, nobs_o = filter_outputs(n_tr, n_st, n, m)
     x = np.empty(n)
     xp = np.empty(n)
     p = np.empty((n, n))
@@ -267,8 +267,9 @@ def kalman_kernel(x0, p0, phi, qd, u, z, mask, h, r, off, joseph):  # type: igno
             )
             if not ok:
                 raise ValueError("innovation covariance is not positive definite")
-            store_step(*outs, i, k, xp, pp, x, p, kt, nu, s, nis, logdet, nobs)
-    return outs
+            store_step(pm, pc, fm, fc, nu_o, s_o, nis_o, ll_o, k_o, nobs_o, i, k, xp, pp, x, p, kt,
+                       nu, s, nis, logdet, nobs)  # fmt: skip
+    return pm, pc, fm, fc, nu_o, s_o, nis_o, ll_o, k_o, nobs_o
 
 
 @numba.njit(cache=True, inline="always")

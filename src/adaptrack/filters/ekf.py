@@ -9,6 +9,7 @@ standard form. Prediction is exact for a linear motion model; a nonlinear one
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from functools import partial
 from typing import Literal
 
@@ -26,7 +27,7 @@ from ._measurement import masked_model
 from ._nonlinear_run import NonlinearRun, full_jacobian, observed, run_nonlinear
 from .kalman import CovarianceError, _covariance_update, _gain, _innovation_stats
 from .run import JOSEPH_MAX_RATIO, NanPolicy, _result
-from .square_root import covariance, lower_factor, sqrt_update, triangularize
+from .square_root import covariance, lower_factor, sqrt_update, tria
 
 EKFForm = Literal["auto", "joseph", "standard", "sqrt"]
 
@@ -74,7 +75,7 @@ def ekf_predict_step(
     mean, f = model.propagate(state.mean, dt)
     q = model.process_cov(dt)
     if state.factor is not None:
-        factor = triangularize(np.concatenate([f @ state.factor, lower_factor(q)], -1))
+        factor = tria(f @ state.factor, lower_factor(q))
         prior = _trusted(GaussianState, mean=mean, cov=covariance(factor), time=time,
                          factor=factor)  # fmt: skip
         return prior, f, q
@@ -207,11 +208,23 @@ def ekf_filter(
 
     if form != "auto":
         return run(form)
+    return auto_square_root(lambda: run("joseph"), lambda: run("sqrt"))
+
+
+def auto_square_root(
+    joseph: Callable[[], FilterResult], square_root: Callable[[], FilterResult]
+) -> FilterResult:
+    """Apply the ``form="auto"`` rule of the EKF and UKF.
+
+    The ``joseph()`` run, unless it raised :class:`CovarianceError` or its
+    :func:`scaled_joseph_ratio` passes :data:`~adaptrack.filters.run.JOSEPH_MAX_RATIO`; then
+    the ``square_root()`` run.
+    """
     try:
-        result = run("joseph")
+        result = joseph()
     except CovarianceError:
-        return run("sqrt")
-    return result if scaled_joseph_ratio(result) <= JOSEPH_MAX_RATIO else run("sqrt")
+        return square_root()
+    return result if scaled_joseph_ratio(result) <= JOSEPH_MAX_RATIO else square_root()
 
 
 def scaled_joseph_ratio(result: FilterResult) -> float:

@@ -57,6 +57,16 @@ def triangularize(pre: FloatArray) -> FloatArray:
     return mT(upper)
 
 
+def tria(*blocks: FloatArray) -> FloatArray:
+    """Return lower-triangular ``L`` with ``L L^T = B B^T``, ``B`` the blocks side by side.
+
+    The blocks' batch axes are broadcast.
+    """
+    batch = np.broadcast_shapes(*(b.shape[:-2] for b in blocks))
+    return triangularize(np.concatenate([np.broadcast_to(b, batch + b.shape[-2:])
+                                         for b in blocks], -1))  # fmt: skip
+
+
 def sqrt_predict(
     mean: FloatArray,
     factor: FloatArray,
@@ -126,4 +136,4 @@ def covariance(factor: FloatArray) -> FloatArray:
     return symmetrize(factor @ mT(factor))
 
 
-__all__ = ["covariance", "lower_factor", "sqrt_predict", "sqrt_update", "triangularize"]
+__all__ = ["covariance", "lower_factor", "sqrt_predict", "sqrt_update", "tria", "triangularize"]

@@ -27,10 +27,10 @@ from ..models.turn import NonlinearMotionModel
 from ..types import FilterResult, GaussianState, StepInfo, _trusted
 from ._measurement import LOG_2PI, masked_model
 from ._nonlinear_run import observed, run_nonlinear
-from .ekf import scaled_joseph_ratio
-from .kalman import CovarianceError, _innovation_stats
-from .run import JOSEPH_MAX_RATIO, NanPolicy
-from .square_root import covariance, lower_factor, triangularize
+from .ekf import auto_square_root
+from .kalman import _innovation_stats
+from .run import NanPolicy
+from .square_root import covariance, lower_factor, tria, triangularize
 
 
 @dataclass(frozen=True)
@@ -184,16 +184,6 @@ def _factored(state: GaussianState, sigma: SigmaPoints) -> tuple[FloatArray, Flo
     return factor, np.sqrt(wc)
 
 
-def _tria(*blocks: FloatArray) -> FloatArray:
-    """Return lower-triangular ``L`` with ``L L^T = B B^T``, ``B`` the blocks side by side.
-
-    The blocks' batch axes are broadcast.
-    """
-    batch = np.broadcast_shapes(*(b.shape[:-2] for b in blocks))
-    return triangularize(np.concatenate([np.broadcast_to(b, batch + b.shape[-2:])
-                                         for b in blocks], -1))  # fmt: skip
-
-
 def ukf_sqrt_predict_step(
     state: GaussianState,
     model: NonlinearMotionModel,
@@ -214,7 +204,7 @@ def ukf_sqrt_predict_step(
     mean = np.einsum("p,...pi->...i", wm, moved)
     dy = moved - mean[..., None, :]
     q = model.process_cov(dt)
-    new = _tria(np.swapaxes(dy * root_w[:, None], -1, -2), lower_factor(q))
+    new = tria(np.swapaxes(dy * root_w[:, None], -1, -2), lower_factor(q))
     cross = np.einsum("p,...pi,...pj->...ij", wc, dx, dy)
     f = mT(np.linalg.pinv(state.cov, hermitian=True) @ cross)
     prior = _trusted(GaussianState, mean=mean, cov=covariance(new), time=time, factor=new)
@@ -348,11 +338,7 @@ def ukf_filter(
 
     if form != "auto":
         return run(form == "sqrt")
-    try:
-        joseph = run(False)
-    except CovarianceError:
-        return run(True)
-    return joseph if scaled_joseph_ratio(joseph) <= JOSEPH_MAX_RATIO else run(True)
+    return auto_square_root(lambda: run(False), lambda: run(True))
 
 
 __all__ = [
