@@ -348,22 +348,28 @@ def adaptrack_radar_ekf(t: np.ndarray, z: np.ndarray, backend: str = "auto") -> 
     return at.ekf_filter(t, z, model, RADAR, prior, backend=backend).filtered.mean  # type: ignore[arg-type]
 
 
+def _filterpy_radar_layout(dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """FilterPy's state order of ours (``perm``) and back (``inv``), and the CV transition and
+    process noise over ``dt`` [s] in FilterPy's order (x, vx, y, vy, z, vz)."""
+    from filterpy.common import Q_continuous_white_noise
+
+    perm = np.array([0, 3, 1, 4, 2, 5])
+    f = np.kron(np.eye(3), [[1.0, dt], [0.0, 1.0]])
+    return perm, np.argsort(perm), f, Q_continuous_white_noise(2, dt, RADAR_Q, block_size=3)
+
+
+def _radar_residual(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``a - b`` of radar plots, azimuth and elevation wrapped to [-pi, pi)."""
+    d = a - b
+    d[1:3] = (d[1:3] + np.pi) % (2 * np.pi) - np.pi
+    return d
+
+
 def filterpy_radar_ekf(t: np.ndarray, z: np.ndarray) -> np.ndarray:
     """FilterPy's ``ExtendedKalmanFilter``, one track at a time; means (N, T, 6) in our order."""
-    from filterpy.common import Q_continuous_white_noise
     from filterpy.kalman import ExtendedKalmanFilter
 
-    perm = np.array([0, 3, 1, 4, 2, 5])  # FilterPy (x, vx, y, vy, z, vz) of ours
-    inv = np.argsort(perm)
-    dt = float(t[1] - t[0])
-    f = np.kron(np.eye(3), [[1.0, dt], [0.0, 1.0]])
-    q = Q_continuous_white_noise(2, dt, RADAR_Q, block_size=3)
-    ang = np.array([False, True, True, False])
-
-    def residual(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        d = a - b
-        d[ang] = (d[ang] + np.pi) % (2 * np.pi) - np.pi
-        return d
+    perm, inv, f, q = _filterpy_radar_layout(float(t[1] - t[0]))
 
     out = np.empty(z.shape[:-1] + (6,))
     x0 = _radar_prior(z[:, 0])
@@ -380,7 +386,7 @@ def filterpy_radar_ekf(t: np.ndarray, z: np.ndarray) -> np.ndarray:
             if k:
                 ekf.predict()
             ekf.update(z[i, k], lambda x: RADAR.jacobian(x[inv])[:, perm],
-                       lambda x: RADAR.predict(x[inv]), residual=residual)  # fmt: skip
+                       lambda x: RADAR.predict(x[inv]), residual=_radar_residual)  # fmt: skip
             out[i, k] = ekf.x[inv]
     return out
 
@@ -396,19 +402,10 @@ def adaptrack_radar_ukf(t: np.ndarray, z: np.ndarray) -> np.ndarray:
 def filterpy_radar_ukf(t: np.ndarray, z: np.ndarray) -> np.ndarray:
     """FilterPy's ``UnscentedKalmanFilter`` (Van der Merwe's points, alpha 1, beta 2, kappa
     0, as ours), one track at a time; means (N, T, 6) in our order."""
-    from filterpy.common import Q_continuous_white_noise
     from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
 
-    perm = np.array([0, 3, 1, 4, 2, 5])  # FilterPy (x, vx, y, vy, z, vz) of ours
-    inv = np.argsort(perm)
     dt = float(t[1] - t[0])
-    f = np.kron(np.eye(3), [[1.0, dt], [0.0, 1.0]])
-    ang = np.array([False, True, True, False])
-
-    def residual(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        d = a - b
-        d[ang] = (d[ang] + np.pi) % (2 * np.pi) - np.pi
-        return d
+    perm, inv, f, q = _filterpy_radar_layout(dt)
 
     out = np.empty(z.shape[:-1] + (6,))
     x0 = _radar_prior(z[:, 0])
@@ -416,12 +413,12 @@ def filterpy_radar_ukf(t: np.ndarray, z: np.ndarray) -> np.ndarray:
     for i in range(z.shape[0]):
         ukf = UnscentedKalmanFilter(
             6, 4, dt, hx=lambda x: RADAR.predict(x[inv]), fx=lambda x, dt: f @ x, points=points,
-            residual_z=residual,
+            residual_z=_radar_residual,
         )  # fmt: skip
         ukf.x, ukf.P, ukf.R = x0[i][perm], RADAR_P0[np.ix_(perm, perm)], RADAR.noise_cov
         ukf.Q = np.zeros((6, 6))  # FilterPy draws its sigma points in predict: the prior's own
         ukf.predict(fx=lambda x, dt: x)
-        ukf.Q = Q_continuous_white_noise(2, dt, RADAR_Q, block_size=3)
+        ukf.Q = q
         for k in range(z.shape[1]):
             if k:
                 ukf.predict()
@@ -455,12 +452,6 @@ def filterpy_radar_imm(t: np.ndarray, z: np.ndarray) -> np.ndarray:
     perm = np.array([0, 3, 1, 4, 2, 5])  # FilterPy (x, vx, y, vy, z, vz) of ours
     inv = np.argsort(perm)
     dt = float(t[1] - t[0])
-    ang = np.array([False, True, True, False])
-
-    def residual(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        d = a - b
-        d[ang] = (d[ang] + np.pi) % (2 * np.pi) - np.pi
-        return d
 
     class RadarEKF(ExtendedKalmanFilter):
         def predict(self, u: object = None) -> None:  # IMMEstimator passes u=None
@@ -468,7 +459,7 @@ def filterpy_radar_imm(t: np.ndarray, z: np.ndarray) -> np.ndarray:
 
         def update(self, zk: np.ndarray) -> None:
             super().update(zk, lambda x: RADAR.jacobian(x[inv])[:, perm],
-                           lambda x: RADAR.predict(x[inv]), residual=residual)  # fmt: skip
+                           lambda x: RADAR.predict(x[inv]), residual=_radar_residual)  # fmt: skip
 
     out = np.empty(z.shape[:-1] + (6,))
     x0 = _radar_prior(z[:, 0])
