@@ -302,15 +302,8 @@ def test_square_root_ekf_matches_a_50_digit_reference_on_an_ill_conditioned_prob
     ``"joseph"`` is not (it is measured here, to show the problem is one)."""
     from adaptrack.filters.ekf import scaled_joseph_ratio
     from adaptrack.filters.run import JOSEPH_MAX_RATIO
-    from tests.filters.test_square_root import ill_conditioned_problem
-    from tests.oracles.reference import kalman_mp
 
-    t, z, model, h, r, prior = ill_conditioned_problem()
-    measure = PositionMeasurement(r, ("x", "vx"))
-    kf = at.kalman_filter(t, z, model, h, r, prior, form="sqrt", backend="numpy")
-    mean, cov = kalman_mp(kf.transition, kf.process_cov, h, r, z, prior.mean, prior.cov)
-    sigma = np.sqrt(np.diagonal(cov, axis1=-2, axis2=-1))
-    scale = sigma[..., :, None] * sigma[..., None, :]
+    t, z, model, measure, prior, mean, cov, sigma, scale = _fifty_digit_filter()
     for form in ("sqrt", "auto"):
         res = at.ekf_filter(t, z, model, measure, prior, form=form, backend=backend)
         assert np.max(np.abs(res.filtered.mean - mean) / sigma) < 1e-2
@@ -326,23 +319,7 @@ def test_square_root_ekf_equals_the_joseph_ekf_on_a_well_conditioned_radar(motio
     """A 3-D radar with range-rate (metres and radians: the scaled ratio stays small), linear
     and coordinated-turn motion: ``form="sqrt"`` gives the Joseph form's result to rounding,
     with the factor of its covariance; ``"auto"`` keeps the Joseph form (no factor)."""
-    rng = np.random.default_rng(31)
-    radar = RadarMeasurement(np.diag([25.0, 1e-6, 1e-6, 0.25]),
-                             ("range", "azimuth", "elevation", "range_rate"), n_axes=3,
-                             sensor_position=[0.0, 0.0, 10.0])  # fmt: skip
-    t, states, z = simulate_radar_runs(
-        rng, 4, 60, radar, 0.5, [[8000.0, -60.0], [9000.0, 40.0], [3000.0, 0.0]]
-    )
-    p0 = np.diag([900.0, 900, 900, 400, 400, 25])
-    mean0 = states[:, 0] + rng.normal(0, 1, (4, 6)) * 20
-    if motion == "cv":
-        model = ConstantVelocity(0.5, n_axes=3)
-    else:
-        model = CoordinatedTurn(0.5, 1e-4, 0.5, n_axes=3)
-        p0 = np.pad(p0, ((0, 1), (0, 1)))
-        p0[-1, -1] = 1e-4
-        mean0 = np.c_[mean0, np.zeros(4)]
-    prior = GaussianState(mean0, np.broadcast_to(p0, (4,) + p0.shape), t[:, 0])
+    t, z, model, radar, prior = _radar_runs(31, motion)
     joseph = at.ekf_filter(t, z, model, radar, prior, form="joseph")
     root = at.ekf_filter(t, z, model, radar, prior, form="sqrt")
     auto = at.ekf_filter(t, z, model, radar, prior)
@@ -363,15 +340,7 @@ def test_square_root_ukf_matches_a_50_digit_reference_on_an_ill_conditioned_prob
     """The same hard problem through ``ukf_filter``: ``form="sqrt"`` (sigma points from the
     carried factor, ``S`` and the posterior factor triangularised) and the default ``"auto"``
     are within 1e-2 posterior sigma of the 50-digit filter; the plain form is not."""
-    from tests.filters.test_square_root import ill_conditioned_problem
-    from tests.oracles.reference import kalman_mp
-
-    t, z, model, h, r, prior = ill_conditioned_problem()
-    measure = PositionMeasurement(r, ("x", "vx"))
-    kf = at.kalman_filter(t, z, model, h, r, prior, form="sqrt", backend="numpy")
-    mean, cov = kalman_mp(kf.transition, kf.process_cov, h, r, z, prior.mean, prior.cov)
-    sigma = np.sqrt(np.diagonal(cov, axis1=-2, axis2=-1))
-    scale = sigma[..., :, None] * sigma[..., None, :]
+    t, z, model, measure, prior, mean, cov, sigma, scale = _fifty_digit_filter()
     for form in ("sqrt", "auto"):
         res = at.ukf_filter(t, z, model, measure, prior, form=form)
         assert res.filtered.factor is not None
@@ -388,22 +357,7 @@ def test_square_root_ukf_is_the_ukf_on_a_well_conditioned_radar(motion):
     plain UKF by the unscented transform's own approximation, here (targets 8-15 km out, 1 mrad)
     below 1e-8 posterior sigma (measured: 2.4e-12); ``"auto"`` keeps the plain form. Negative
     covariance weights (``alpha`` < 1 with ``kappa`` 0) are refused by the square-root form."""
-    rng = np.random.default_rng(32)
-    radar = RadarMeasurement(np.diag([25.0, 1e-6, 1e-6, 0.25]),
-                             ("range", "azimuth", "elevation", "range_rate"), n_axes=3,
-                             sensor_position=[0.0, 0.0, 10.0])  # fmt: skip
-    t, states, z = simulate_radar_runs(
-        rng, 4, 60, radar, 0.5, [[8000.0, -60.0], [9000.0, 40.0], [3000.0, 0.0]]
-    )
-    p0 = np.diag([900.0, 900, 900, 400, 400, 25])
-    mean0 = states[:, 0] + rng.normal(0, 1, (4, 6)) * 20
-    model = ConstantVelocity(0.5, n_axes=3)
-    if motion == "ct":
-        model = CoordinatedTurn(0.5, 1e-4, 0.5, n_axes=3)
-        p0 = np.pad(p0, ((0, 1), (0, 1)))
-        p0[-1, -1] = 1e-4
-        mean0 = np.c_[mean0, np.zeros(4)]
-    prior = GaussianState(mean0, np.broadcast_to(p0, (4,) + p0.shape), t[:, 0])
+    t, z, model, radar, prior = _radar_runs(32, motion)
     plain = at.ukf_filter(t, z, model, radar, prior, form="joseph")
     root = at.ukf_filter(t, z, model, radar, prior, form="sqrt")
     auto = at.ukf_filter(t, z, model, radar, prior)
@@ -440,3 +394,39 @@ def test_the_auto_rule_does_not_count_units_as_ill_conditioning():
     s = metres.info.innovation_cov
     expected = np.max(s[..., 0, 0] / 9.0 + s[..., 1, 1] / 4.0)
     assert scaled_joseph_ratio(metres) == pytest.approx(expected, rel=1e-12)
+
+
+def _radar_runs(seed, motion):
+    """Four runs of a 3-D radar with range-rate (8-15 km out, 1 mrad), CV or coordinated-turn
+    motion (``motion`` "cv" or "ct") and priors near the truth: times, plots, model, radar,
+    prior."""
+    rng = np.random.default_rng(seed)
+    radar = RadarMeasurement(np.diag([25.0, 1e-6, 1e-6, 0.25]),
+                             ("range", "azimuth", "elevation", "range_rate"), n_axes=3,
+                             sensor_position=[0.0, 0.0, 10.0])  # fmt: skip
+    t, states, z = simulate_radar_runs(
+        rng, 4, 60, radar, 0.5, [[8000.0, -60.0], [9000.0, 40.0], [3000.0, 0.0]]
+    )
+    p0 = np.diag([900.0, 900, 900, 400, 400, 25])
+    mean0 = states[:, 0] + rng.normal(0, 1, (4, 6)) * 20
+    model = ConstantVelocity(0.5, n_axes=3)
+    if motion == "ct":
+        model = CoordinatedTurn(0.5, 1e-4, 0.5, n_axes=3)
+        p0 = np.pad(p0, ((0, 1), (0, 1)))
+        p0[-1, -1] = 1e-4
+        mean0 = np.c_[mean0, np.zeros(4)]
+    return t, z, model, radar, GaussianState(mean0, np.broadcast_to(p0, (4,) + p0.shape), t[:, 0])
+
+
+def _fifty_digit_filter():
+    """The square-root filter's hard problem (``ill_conditioned_problem``) with a position
+    measurement model, and its 50-digit filtered means, sigmas and sigma products."""
+    from tests.filters.test_square_root import ill_conditioned_problem
+    from tests.oracles.reference import kalman_mp
+
+    t, z, model, h, r, prior = ill_conditioned_problem()
+    kf = at.kalman_filter(t, z, model, h, r, prior, form="sqrt", backend="numpy")
+    mean, cov = kalman_mp(kf.transition, kf.process_cov, h, r, z, prior.mean, prior.cov)
+    sigma = np.sqrt(np.diagonal(cov, axis1=-2, axis2=-1))
+    measure = PositionMeasurement(r, ("x", "vx"))
+    return t, z, model, measure, prior, mean, cov, sigma, sigma[..., :, None] * sigma[..., None, :]
