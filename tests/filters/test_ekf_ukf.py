@@ -187,6 +187,12 @@ def test_bad_input_is_named():
         at.ekf_filter(t, z, model, radar, prior, measurement_cov=-np.eye(2))
     with pytest.raises(ValueError, match="form must be"):
         at.ekf_filter(t, z, model, radar, prior, form="cholesky")
+    with pytest.raises(ValueError, match="form must be 'auto', 'joseph' or 'sqrt'"):
+        at.ukf_filter(t, z, model, radar, prior, form="standard")
+    with pytest.raises(ValueError, match="backend must be"):
+        at.ekf_filter(t, z, model, radar, prior, backend="gpu")
+    with pytest.raises(ValueError, match="NaN at step 1, component 1"):
+        at.ekf_filter(t, bad, model, radar, prior, backend="numba")
 
 
 def test_a_known_state_component_is_kept_by_both_filters():
