@@ -22,6 +22,7 @@ from .tuning.position_log import (
     MODELS,
     MotionFit,
     PositionLog,
+    compiled_kernel,
     estimates_table,
     fit_from_toml,
     fit_motion,
@@ -47,7 +48,11 @@ def _read(path: Path, measurement: str) -> PositionLog | RadarLog:
     return log
 
 
-IMM_COMPILE_TIME = "2 min"  # measured: the car's CT fit 108 s on an empty cache, then 7 s
+# a first fit compiles its kernel; measured on an empty cache (then warm) on 2 cores:
+COMPILE_TIMES = {
+    "_imm_kernel.imm_kernel": "2 min",  # the car's CV + CT fit 108 s (then 7 s)
+    "_ekf_kernel.ekf_kernel": "1 min",  # a 600-fix CT fit 44 s (then 3 s)
+}
 UNDETERMINED_SPAN = 100.0  # a 95 % interval wider than this factor: the data say little
 
 
@@ -112,8 +117,9 @@ def fit(
     if model not in MODELS:
         raise typer.BadParameter(f"--model must be one of {', '.join(MODELS)}")
     log = _read(log_file, measurement)
-    if model not in ("cv", "ca") or isinstance(log, RadarLog):  # an EKF or an IMM
-        announce_compilation(IMM_COMPILE_TIME, "_imm_kernel.imm_kernel", "filters")
+    kernel = compiled_kernel(log, model)
+    if kernel is not None:
+        announce_compilation(COMPILE_TIMES[kernel], kernel, "filters")
     try:
         with progress(Console(), f"{model.upper()} fit (likelihood evaluations)") as bar:
             result = fit_motion(log, model, clock_offset, bar.advance)  # type: ignore[arg-type]

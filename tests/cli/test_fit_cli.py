@@ -4,6 +4,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from adaptrack._progress import FIRST_RUN_NOTE
 from tests.cv_truth import cv_states
 from tests.tuning.test_position_log import N, gnss_log
 
@@ -217,7 +218,35 @@ def test_parameters_the_log_does_not_determine_are_pointed_out(tmp_path, cli):
     )  # fmt: skip
     assert code == 0, err
     notes = [line for line in err.splitlines() if line.startswith("note:")]
+    notes = [line for line in notes if not line.startswith(FIRST_RUN_NOTE[:30])]  # cold cache
     assert len(notes) == 1 and notes[0].startswith("note: q_turn"), err
+
+
+@pytest.mark.parametrize(
+    ("model", "announced"), [("cv", None), ("ct", "about 1 min"), ("cv+ct", "about 2 min")]
+)
+def test_a_first_fit_says_it_compiles_only_the_kernel_its_model_runs(
+    tmp_path, cli, monkeypatch, model, announced
+):
+    """Only the kernel the model runs is missing from the cache: the EKF's and the IMM's are
+    announced with their own compile times; the Kalman filter's (seconds) is not."""
+    from adaptrack import _progress, cli_fit
+    from adaptrack.tuning.position_log import compiled_kernel
+
+    gnss_log(tmp_path / "log.csv")
+    log = cli_fit._read(tmp_path / "log.csv", "gnss")
+    missing = compiled_kernel(log, model)
+    monkeypatch.setattr(_progress, "kernels_cached", lambda kernel, package: kernel != missing)
+
+    def no_fit(*args):
+        raise ValueError("not fitted in this test")
+
+    monkeypatch.setattr(cli_fit, "fit_motion", no_fit)
+    code, _, err = cli("fit", tmp_path / "log.csv", "--measurement", "gnss", "--model", model,
+                       "--out", tmp_path / "fit.toml")  # fmt: skip
+    assert code != 0 and "not fitted in this test" in err
+    notes = [line for line in err.splitlines() if line.startswith(FIRST_RUN_NOTE[:30])]
+    assert [announced in n for n in notes] == ([] if announced is None else [True]), err
 
 
 def test_a_rough_likelihood_is_one_note_naming_its_parameters():

@@ -202,3 +202,28 @@ def test_an_imm_fit_starts_from_the_cv_fit_and_finds_the_noise(tmp_path):
     assert imm.fit.log_likelihood > cv.fit.log_likelihood - 2.0
     assert imm.fit.value("r_horizontal") == pytest.approx(400.0, rel=0.15)
     assert imm.fit.rough == ()
+
+
+@pytest.mark.parametrize("model", ["cv", "ct", "cv+ct"])
+def test_compiled_kernel_names_the_kernel_the_fit_runs(tmp_path, monkeypatch, model):
+    """Each compiled kernel is replaced by one that raises its own name: the fit's first
+    evaluation raises the name `compiled_kernel` gives (none: the Kalman filter's)."""
+    from adaptrack.filters import _ekf_kernel, _imm_kernel
+    from adaptrack.tuning.position_log import compiled_kernel
+
+    for module, name in ((_ekf_kernel, "ekf_kernel"), (_imm_kernel, "imm_kernel")):
+        label = f"{module.__name__.rsplit('.', 1)[1]}.{name}"
+
+        def named(*args, label=label):
+            raise RuntimeError(label)
+
+        monkeypatch.setattr(module, name, named)
+    gnss_log(tmp_path / "log.csv")
+    log = read_position_log(tmp_path / "log.csv", "gnss")
+    expected = compiled_kernel(log, model)
+    if expected is None:
+        assert fit_motion(log, model).fit.converged
+    else:
+        with pytest.raises(RuntimeError) as info:
+            fit_motion(log, model)
+        assert str(info.value) == expected

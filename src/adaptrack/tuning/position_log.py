@@ -319,6 +319,18 @@ def _imm(
                       backend="numba")  # fmt: skip
 
 
+def compiled_kernel(log: PositionLog | RadarLog, model: str) -> str | None:
+    """Name (``module.function`` in :mod:`adaptrack.filters`) of the kernel :func:`_run` uses.
+
+    None for the linear Kalman filter (its kernels compile in seconds).
+    """
+    if model in IMM_MODELS:
+        return "_imm_kernel.imm_kernel"
+    if isinstance(log, RadarLog) or model not in ("cv", "ca"):
+        return "_ekf_kernel.ekf_kernel"
+    return None
+
+
 def _run(
     log: PositionLog | RadarLog, model: str, values: dict[str, float]
 ) -> FilterResult | IMMResult:
