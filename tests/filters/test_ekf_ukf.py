@@ -306,8 +306,7 @@ def test_square_root_ekf_matches_a_50_digit_reference_on_an_ill_conditioned_prob
     default ``"auto"`` (which takes the square root here, the Joseph form's scaled ratio being
     far past the limit) are within 1e-2 posterior sigma of the 50-digit textbook filter;
     ``"joseph"`` is not (it is measured here, to show the problem is one)."""
-    from adaptrack.filters.ekf import scaled_joseph_ratio
-    from adaptrack.filters.run import JOSEPH_MAX_RATIO
+    from adaptrack.filters.run import JOSEPH_MAX_RATIO, worst_joseph_ratio
 
     t, z, model, measure, prior, mean, cov, sigma, scale = _fifty_digit_filter()
     for form in ("sqrt", "auto"):
@@ -316,7 +315,7 @@ def test_square_root_ekf_matches_a_50_digit_reference_on_an_ill_conditioned_prob
         assert np.max(np.abs(res.filtered.cov - cov) / scale) < 1e-6
         assert res.filtered.factor is not None  # the square root ran
     joseph = at.ekf_filter(t, z, model, measure, prior, form="joseph", backend=backend)
-    assert scaled_joseph_ratio(joseph) > JOSEPH_MAX_RATIO
+    assert worst_joseph_ratio(joseph) > JOSEPH_MAX_RATIO
     assert np.max(np.abs(joseph.filtered.mean - mean) / sigma) > 1e-2
 
 
@@ -379,12 +378,15 @@ def test_square_root_ukf_is_the_ukf_on_a_well_conditioned_radar(motion):
 
 
 def test_the_auto_rule_does_not_count_units_as_ill_conditioning():
-    """``scaled_joseph_ratio`` is the same whether a component is measured in metres or in
+    """``worst_joseph_ratio`` is the same whether a component is measured in metres or in
     kilometres (its R and S entries scale by 1e-6), while the unscaled ``trace(S) /
     lambda_min(R)`` changes by orders of magnitude; with every component present it is
     ``trace(S R^-1)`` for a diagonal R."""
-    from adaptrack.filters.ekf import scaled_joseph_ratio
     from adaptrack.filters.run import worst_joseph_ratio
+
+    def unscaled(res):
+        s_trace = np.trace(res.info.innovation_cov, axis1=-2, axis2=-1)
+        return np.max(s_trace / np.linalg.eigvalsh(res.measurement_cov)[0])
 
     rng = np.random.default_rng(3)
     t = np.cumsum(rng.uniform(0.5, 1.5, 30))
@@ -395,11 +397,85 @@ def test_the_auto_rule_does_not_count_units_as_ill_conditioning():
     km = FunctionMeasurement(lambda s: s * [1.0, 1e-3], ("x", "y"), ("x_m", "y_km"),
                              [9.0, 4e-6])  # fmt: skip
     kilo = at.ekf_filter(t, xy * [1.0, 1e-3], model, km, prior, form="joseph")
-    assert scaled_joseph_ratio(kilo) == pytest.approx(scaled_joseph_ratio(metres), rel=1e-6)
-    assert worst_joseph_ratio(kilo) > 1e5 * worst_joseph_ratio(metres)
+    assert worst_joseph_ratio(kilo) == pytest.approx(worst_joseph_ratio(metres), rel=1e-6)
+    assert unscaled(kilo) > 1e5 * unscaled(metres)
     s = metres.info.innovation_cov
     expected = np.max(s[..., 0, 0] / 9.0 + s[..., 1, 1] / 4.0)
-    assert scaled_joseph_ratio(metres) == pytest.approx(expected, rel=1e-12)
+    assert worst_joseph_ratio(metres) == pytest.approx(expected, rel=1e-12)
+
+
+@pytest.mark.parametrize("how", ["ekf", "ukf"])
+@pytest.mark.parametrize("motion", ["cv", "ct"])
+def test_a_one_model_imm_in_square_root_form_is_the_square_root_filter(motion, how):
+    """A 3-D radar with range-rate, linear or coordinated-turn motion: the one-model IMM's
+    square-root form (its factor mixed with itself, then the EKF's or UKF's square-root
+    predict and update) gives ``ekf_filter`` / ``ukf_filter(form="sqrt")`` to rounding."""
+    from adaptrack.filters.imm import imm_filter
+
+    t, z, model, radar, prior = _radar_runs(33, motion)
+    imm = imm_filter(t, z, [model], radar, None, [prior], initial_probs=[1.0],
+                     switching_rates=[[0.0]], nonlinear=how, form="sqrt")  # fmt: skip
+    single = (at.ekf_filter if how == "ekf" else at.ukf_filter)(
+        t, z, model, radar, prior, form="sqrt"
+    )
+    sigma = np.sqrt(np.diagonal(single.filtered.cov, axis1=-2, axis2=-1))
+    assert np.max(np.abs(imm.filtered.mean - single.filtered.mean) / sigma) < 1e-8
+    scale = sigma[..., :, None] * sigma[..., None, :]
+    assert np.max(np.abs(imm.filtered.cov - single.filtered.cov) / scale) < 1e-8
+    np.testing.assert_allclose(imm.log_likelihood, single.info.log_likelihood, rtol=1e-9)
+
+
+@pytest.mark.parametrize("how", ["ekf", "ukf"])
+def test_square_root_imm_of_a_measurement_model_matches_a_50_digit_reference(how):
+    """The hard problem (R of condition 1e11, gaps 1e-6 to 100 s) through an IMM of two copies
+    of its model (so the IMM is that model's filter) with a user's measurement function:
+    ``form="sqrt"`` and the default ``"auto"`` (whose scaled ratio is past the limit here) are
+    within 1e-2 posterior sigma of the 50-digit textbook filter; the Joseph form is not."""
+    from adaptrack.filters.imm import imm_filter
+
+    t, z, model, position, prior, mean, cov, sigma, scale = _fifty_digit_filter()
+
+    def unit(s):
+        return np.broadcast_to(np.eye(2), s.shape[:-1] + (2, 2))
+
+    ident = FunctionMeasurement(lambda s: s, ("x", "vx"), ("x", "vx"), position.noise_cov, unit)
+
+    def run(form):
+        return imm_filter(t, z, [model, model], ident, None, [prior, prior],
+                          initial_probs=[0.5, 0.5], switching_rates=[[-0.1, 0.1], [0.1, -0.1]],
+                          nonlinear=how, form=form)  # fmt: skip
+
+    for form in ("sqrt", "auto"):
+        res = run(form)
+        assert np.max(np.abs(res.filtered.mean - mean) / sigma) < 1e-2, form
+        assert np.max(np.abs(res.filtered.cov - cov) / scale) < 1e-6, form
+    assert np.max(np.abs(run("joseph").filtered.mean - mean) / sigma) > 1e-2
+
+
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+def test_radar_imm_auto_keeps_the_joseph_form_where_it_keeps_its_digits(backend):
+    """A CV + CT IMM-EKF on a 3-D radar with range-rate (well conditioned at unit diagonal,
+    though its unscaled ratio mixes metres and radians): ``"auto"`` is the Joseph run to the
+    bit, and the square-root form (NumPy) agrees with it to 1e-8 posterior sigma."""
+    from adaptrack.filters.imm import imm_filter
+
+    t, z, ct, radar, p_ct = _radar_runs(34, "ct")
+    cv = ConstantVelocity(0.5, n_axes=3)
+    p_cv = GaussianState(p_ct.mean[:, :6], p_ct.cov[:, :6, :6], p_ct.time)
+
+    def run(form):
+        return imm_filter(t, z, [cv, ct], radar, None, [p_cv, p_ct], initial_probs=[0.5, 0.5],
+                          switching_rates=[[-0.05, 0.05], [0.05, -0.05]], form=form,
+                          backend=backend)  # fmt: skip
+
+    joseph, auto, root = run("joseph"), run("auto"), run("sqrt")
+    np.testing.assert_array_equal(auto.filtered.mean, joseph.filtered.mean)
+    np.testing.assert_array_equal(auto.filtered.cov, joseph.filtered.cov)
+    sigma = np.sqrt(np.diagonal(joseph.filtered.cov, axis1=-2, axis2=-1))
+    assert np.max(np.abs(root.filtered.mean - joseph.filtered.mean) / sigma) < 1e-8
+    scale = sigma[..., :, None] * sigma[..., None, :]
+    assert np.max(np.abs(root.filtered.cov - joseph.filtered.cov) / scale) < 1e-8
+    np.testing.assert_allclose(root.mode_probabilities, joseph.mode_probabilities, atol=1e-8)
 
 
 def _radar_runs(seed, motion):

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 import adaptrack as at
+from adaptrack.filters.online import OnlineFilter
 from adaptrack.filters.square_root import covariance, lower_factor
 from adaptrack.models import ConstantAcceleration, ConstantVelocity, Singer
 from tests.oracles.reference import kalman_mp
@@ -89,6 +90,49 @@ def test_auto_form_uses_the_square_root_filter_where_joseph_would_lose_digits(ba
     auto = at.kalman_filter(t, z, model, h, easy, prior, backend=backend)
     joseph = at.kalman_filter(t, z, model, h, easy, prior, form="joseph", backend=backend)
     np.testing.assert_array_equal(auto.filtered.mean, joseph.filtered.mean)
+
+
+def units_problem():
+    """A position of 100 m and a speed of 1 mm/s measured together (R = diag(1e4, 1e-6)):
+    in its own units ``trace(S) / lambda_min(R)`` passes 1e12, at unit diagonal 1.1e6."""
+    rng = np.random.default_rng(5)
+    t = np.cumsum(rng.uniform(0.05, 0.2, 200))
+    v = 12.0 + np.cumsum(rng.normal(0.0, 0.1, 200))
+    z = np.c_[np.cumsum(0.1 * v) + rng.normal(0, 100.0, 200), v + rng.normal(0, 1e-3, 200)]
+    prior = at.GaussianState([0.0, 10.0], np.diag([1e6, 1.0]), 0.0)
+    return t, z, ConstantVelocity(0.5), np.eye(2), np.diag([1e4, 1e-6]), prior
+
+
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+def test_the_auto_rule_does_not_take_units_for_ill_conditioning(backend):
+    """Rescaling a measured component by a power of 2 changes no bit of the Joseph filter, so
+    its accuracy cannot depend on units, and neither does the ``"auto"`` rule: on a position
+    and a speed in metres (unscaled ratio 1e12) it keeps the Joseph form, which is within
+    1e-8 posterior sigma of the 50-digit filter; so does the online filter (it never leaves
+    its Joseph kernel: the same numbers as the batch Joseph run to rounding)."""
+    from adaptrack.filters.run import worst_joseph_ratio
+
+    t, z, model, h, r, prior = units_problem()
+    joseph = at.kalman_filter(t, z, model, h, r, prior, form="joseph", backend=backend)
+    d = np.array([1.0, 2.0**-20])
+    rescaled = at.kalman_filter(t, z * d, model, h * d[:, None], r * np.outer(d, d), prior,
+                                form="joseph", backend=backend)  # fmt: skip
+    np.testing.assert_array_equal(rescaled.filtered.mean, joseph.filtered.mean)
+    np.testing.assert_array_equal(rescaled.filtered.cov, joseph.filtered.cov)
+    s_trace = np.trace(joseph.info.innovation_cov, axis1=-2, axis2=-1)
+    assert np.max(s_trace) / 1e-6 > 1e12 and worst_joseph_ratio(joseph) < 2e6
+    auto = at.kalman_filter(t, z, model, h, r, prior, backend=backend)
+    assert auto.filtered.factor is None
+    np.testing.assert_array_equal(auto.filtered.mean, joseph.filtered.mean)
+    mean, cov = kalman_mp(joseph.transition, joseph.process_cov, h, r, z, prior.mean, prior.cov)
+    sigma = np.sqrt(np.diagonal(cov, axis1=-2, axis2=-1))
+    assert np.max(np.abs(joseph.filtered.mean - mean) / sigma) < 1e-8
+    online = OnlineFilter(model, h, r, prior)
+    for k in range(t.size):
+        online.update(t[k], z[k])
+    assert not online._sqrt
+    np.testing.assert_allclose(online.mean, joseph.filtered.mean[-1], rtol=0,
+                               atol=1e-8 * sigma[-1].min())  # fmt: skip
 
 
 @pytest.mark.parametrize(

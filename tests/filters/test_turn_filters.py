@@ -131,12 +131,20 @@ def test_imm_of_straight_and_turning_models_finds_the_turn():
     assert e_imm < 0.5 * e_cv, (e_imm, e_cv)
 
 
-def test_imm_with_a_turn_model_refuses_the_square_root_form():
-    ct, t, _x, z, prior = turning_problem(81, n_steps=5)
+def test_a_turn_model_imm_in_square_root_form_is_the_square_root_ekf():
+    """A one-model IMM of the coordinated turn with a linear measurement (the IMM's own
+    linear update, in factor form after the EKF's factor-form prediction) gives
+    ``ekf_filter(form="sqrt")`` to rounding; a prior of the wrong batch shape is refused."""
+    ct, t, _x, z, prior = turning_problem(81, n_steps=40)
     one = GaussianState(prior.mean[0], prior.cov[0], 0.0)
-    with pytest.raises(ValueError, match="Joseph form"):
-        imm_filter(t[0], z[0, :, :1], [ct], ["x"], [[25.0]], [one], initial_probs=[1.0],
-                   switching_rates=[[0.0]], form="sqrt")  # fmt: skip
+    xs = np.cumsum(np.random.default_rng(81).normal(10.0, 1.0, 40))[:, None]
+    imm = imm_filter(t[0], xs, [ct], ["x"], [[25.0]], [one], initial_probs=[1.0],
+                     switching_rates=[[0.0]], form="sqrt")  # fmt: skip
+    ekf = at.ekf_filter(t[0], xs, ct, PositionMeasurement([[25.0]], ("x",)), one, form="sqrt")
+    sigma = np.sqrt(np.diagonal(ekf.filtered.cov, axis1=-2, axis2=-1))
+    assert np.max(np.abs(imm.filtered.mean - ekf.filtered.mean) / sigma) < 1e-8
+    scale = sigma[..., :, None] * sigma[..., None, :]
+    assert np.max(np.abs(imm.filtered.cov - ekf.filtered.cov) / scale) < 1e-8
     with pytest.raises(ValueError, match=r"initial\[0\] must have batch shape \(\) or \(\)"):
         imm_filter(t[0], z[0, :, :1], [ct], ["x"], [[25.0]], [prior], initial_probs=[1.0],
                    switching_rates=[[0.0]])  # fmt: skip

@@ -52,6 +52,7 @@ from adaptrack.models import (
     ConstantAcceleration,
     ConstantVelocity,
     CoordinatedTurn,
+    FunctionMeasurement,
     PositionMeasurement,
     Singer,
 )
@@ -622,7 +623,9 @@ def imm_case(src: Source) -> Case:
 def nonlinear_case(src: Source) -> Case:
     """``ekf_filter`` with a linear measurement model equals ``kalman_filter`` (both ``auto``:
     Joseph, or the square root where Joseph would lose digits), and its compiled kernel its
-    NumPy steps; spoiled times, measurements, noise or prior are rejected by name.
+    NumPy steps; so does the IMM-EKF of two copies of the model (a user's measurement
+    function: the IMM's EKF path, square root where needed); spoiled times, measurements,
+    noise or prior are rejected by name.
 
     The UKF is not compared here: its sigma points' measurement differences cancel digits
     where a sigma is 1e-7 to 1e-11 of the mean, and on 1,500 of these random problems its
@@ -647,6 +650,10 @@ def nonlinear_case(src: Source) -> Case:
             ref = at.kalman_filter(p.times, z, p.model, p.h, p.r, p.prior, mask=p.mask,
                                    backend="numpy")  # fmt: skip
             out.compare(f"{run.__name__}/kalman_filter", res.filtered, ref.filtered)
+            imm = imm_filter(p.times, z, [p.model, p.model], _identity(names), p.r,
+                             [p.prior, p.prior], initial_probs=[0.5, 0.5],
+                             transition_probs=[[0.9, 0.1], [0.1, 0.9]], mask=p.mask)  # fmt: skip
+            out.compare("imm_filter(EKF)/kalman_filter", imm.filtered, ref.filtered)
             compiled_agrees(out, "ekf_filter numpy/numba", run, args, lambda q: dict(
                 times=q.times, measurements=q.z, measurement_model=PositionMeasurement(q.r, names),
                 initial=q.prior), replace(p, z=z))  # fmt: skip
@@ -673,6 +680,17 @@ def nonlinear_case(src: Source) -> Case:
             bad = p.z.copy()
             bad[tuple(idx[src.integer(0, len(idx) - 1)])] = np.nan
     return Case(run.__name__, lambda: call(**{arg: bad}), arg, how)
+
+
+def _identity(names: tuple[str, ...]) -> FunctionMeasurement:
+    """The states ``names`` measured directly, as a user's measurement function (the EKF
+    path, not the Kalman one a :class:`PositionMeasurement` takes in ``imm_filter``)."""
+    m = len(names)
+
+    def unit(s: np.ndarray) -> np.ndarray:
+        return np.broadcast_to(np.eye(m), s.shape[:-1] + (m, m))
+
+    return FunctionMeasurement(lambda s: s, names, names, np.eye(m), unit)
 
 
 def compiled_agrees(

@@ -37,8 +37,8 @@ _VERSION = 3
 # 0.15 - 0.1 != 0.05). A fixed tolerance (1 ns) was 0.07 % of a 1.4 us step (0.017 sigma).
 STEP_MATCH_ULPS = 4.0
 STEP_MATCH_REL = STEP_MATCH_ULPS * sys.float_info.epsilon  # times |t|: the tolerance [s]
-# OnlineFilter work-buffer header: next bank row, series table h_max, the largest trace(S) the
-# Joseph step takes (beyond it the filter continues in square-root form)
+# OnlineFilter work-buffer header: next bank row, series table h_max, the largest
+# sum_a S_aa / R_aa the Joseph step takes (beyond it the filter continues in square-root form)
 WS_NEXT_ROW, WS_H_MAX, WS_TRACE_LIMIT = 7, 8, 9
 _FILL = ("from adaptrack.filters._kernels import series_bank_row as fill",)
 
@@ -194,7 +194,8 @@ def kf_step_lines(n: int, m: int, trace_limit: str | None = None) -> list[str]:
     ``R{a}_{b}``, ``o{a}`` (noise mean) and ``z{a}``; leaves the predicted moments in
     ``xp{i}``, ``pp{i}_{j}``, the filtered ones back in ``x{i}``, ``P{i}_{j}``, the innovation in
     ``nu{a}``, ``S{a}_{b}``, the transposed gain in ``kt{a}_{i}`` and ``nis``, ``logdet``.
-    A non-positive pivot of ``S`` executes ``return 2``, a ``trace(S)`` above the expression
+    A non-positive pivot of ``S`` executes ``return 2``, a ``sum_a S_aa / R_aa`` (the
+    numerator of :func:`~adaptrack.filters.kalman.joseph_ratio`) above the expression
     ``trace_limit`` (if given) ``return 6`` (in both cases the inputs are unchanged).
     """
 
@@ -243,7 +244,8 @@ def kf_step_lines(n: int, m: int, trace_limit: str | None = None) -> list[str]:
     out += product("hp", m, n, n, lambda a, j, k: f"H{a}_{k} * {pp(k, j)}")
     out += symmetric("S", m, n, lambda a, b, k: f"hp{a}_{k} * H{b}_{k}", lambda a, b: f"R{a}_{b}")
     if trace_limit is not None:
-        out += [f"if {dot([s_(a, a) for a in range(m)])} > {trace_limit}:", "    return 6"]
+        scaled = dot([f"{s_(a, a)} / R{a}_{a}" for a in range(m)])
+        out += [f"if {scaled} > {trace_limit}:", "    return 6"]
     if m == 1:  # S is a scalar: one reciprocal instead of a square root and two divisions
         out += ["d0 = S0_0", "if not d0 > 0.0:", "    return 2", "iS = 1.0 / d0"]
         out += [f"kt0_{j} = hp0_{j} * iS" for j in range(n)]
@@ -352,7 +354,7 @@ def _online_source(
 
     A failed step returns ``-status`` and changes nothing: 1 non-finite measurement, 2 ``S``
     not positive definite, 3 a step length not in the bank (no series table), 4 wrong shape,
-    5 a time before the filter's, 6 ``trace(S)`` above the Joseph limit.
+    5 a time before the filter's, 6 ``sum_a S_aa / R_aa`` above the Joseph limit.
     """
     hdr_time = layout[0]
     body = [
@@ -408,8 +410,8 @@ def _online_run_source(
 
     The steps of ``online_step`` for rows ``k, k + 1, ...`` of validated ``times`` (T,) and
     ``z`` (T, m), the state in locals between steps; stops at the end (status 0), at a step
-    length not in the bank (3), a non-positive-definite ``S`` (2) or a ``trace(S)`` above the
-    Joseph limit (6), with the state of the rows before ``k`` written back to ``ws``.
+    length not in the bank (3), a non-positive-definite ``S`` (2) or a ``sum_a S_aa / R_aa``
+    above the Joseph limit (6), with the state of the rows before ``k`` written back to ``ws``.
     """
     hdr_time = layout[0]
     body = [_bank_view(n, bank), *_load_state(n, m, layout)]

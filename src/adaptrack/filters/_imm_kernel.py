@@ -206,6 +206,7 @@ def imm_kernel(  # type: ignore[no-untyped-def]
     turn_par,
     dts,
     r,
+    r_scale,
     r_min,
     log_mu0,
     log_pi,
@@ -239,9 +240,11 @@ def imm_kernel(  # type: ignore[no-untyped-def]
     a linear one. ``emb_*`` the
     (dst, src, count) of the states model i shares with model j, ``out_idx`` (M, n_out).
     ``status[i]`` becomes ``k + 1`` if track ``i`` stops at step ``k`` (S not positive
-    definite). ``r_min`` (N|1, T|1) is the smallest eigenvalue of each ``R``; in the Joseph and
-    standard forms ``worst[i]`` becomes the largest ``trace(S) / r_min`` of track ``i`` over
-    its steps and models (the ``"auto"`` form's criterion, over observed components).
+    definite). ``r_scale`` (N|1, T|1, m) is ``1 / diag(R)`` and ``r_min`` (N|1, T|1) the
+    smallest eigenvalue of each ``R`` scaled to unit diagonal; in the Joseph and standard forms
+    ``worst[i]`` becomes the largest ``sum_a S_aa r_scale_a / r_min`` of track ``i`` over its
+    steps and models (:func:`adaptrack.filters.kalman.joseph_ratio`, the ``"auto"`` form's
+    criterion, over observed components).
     """
     n_models, _, nmax = x0.shape
     n_tracks, n_steps, m = z.shape
@@ -347,7 +350,7 @@ def imm_kernel(  # type: ignore[no-untyped-def]
                     if radar:
                         ok, nis, logdet, nobs = radar_update_into(
                             xp[:nj], pp[:nj, :nj], z[i, k], mask[i, k], codes, pose, reads[j],
-                            r[ir, kr], True, xs[j, :nj], ps[j, :nj, :nj], tmp[:nj, :nj],
+                            r[ir, kr], form == 1, xs[j, :nj], ps[j, :nj, :nj], tmp[:nj, :nj],
                             hm[:, :nj], rm, hp[:, :nj], s, lo, kt[:, :nj], nu, wv, ikh[:nj, :nj],
                             zp, jac, sread,
                         )  # fmt: skip
@@ -357,12 +360,12 @@ def imm_kernel(  # type: ignore[no-untyped-def]
                             off, form == 1, xs[j, :nj], ps[j, :nj, :nj], tmp[:nj, :nj],
                             hm[:, :nj], rm, hp[:, :nj], s, lo, kt[:, :nj], nu, wv, ikh[:nj, :nj],
                         )  # fmt: skip
-                        if ok:
-                            tr = 0.0
-                            for a in range(m):
-                                if mask[i, k, a]:
-                                    tr += s[a, a]
-                            worst[i] = max(worst[i], tr / r_min[ir, kr])
+                    if ok:
+                        tr = 0.0
+                        for a in range(m):
+                            if mask[i, k, a]:
+                                tr += s[a, a] * r_scale[ir, kr, a]
+                        worst[i] = max(worst[i], tr / r_min[ir, kr])
                 if not ok:
                     status[i] = k + 1
                     break

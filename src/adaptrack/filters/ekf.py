@@ -26,7 +26,7 @@ from ..types import FilterResult, GaussianState, StepInfo, _trusted
 from ._measurement import masked_model
 from ._nonlinear_run import NonlinearRun, full_jacobian, observed, run_nonlinear
 from .kalman import CovarianceError, _covariance_update, _gain, _innovation_stats
-from .run import JOSEPH_MAX_RATIO, NanPolicy, _result
+from .run import JOSEPH_MAX_RATIO, NanPolicy, _result, worst_joseph_ratio
 from .square_root import covariance, lower_factor, sqrt_update, tria
 
 EKFForm = Literal["auto", "joseph", "standard", "sqrt"]
@@ -217,34 +217,15 @@ def auto_square_root(
     """Apply the ``form="auto"`` rule of the EKF and UKF.
 
     The ``joseph()`` run, unless it raised :class:`CovarianceError` or its
-    :func:`scaled_joseph_ratio` passes :data:`~adaptrack.filters.run.JOSEPH_MAX_RATIO`; then
+    :func:`~adaptrack.filters.run.worst_joseph_ratio` passes
+    :data:`~adaptrack.filters.run.JOSEPH_MAX_RATIO`; then
     the ``square_root()`` run.
     """
     try:
         result = joseph()
     except CovarianceError:
         return square_root()
-    return result if scaled_joseph_ratio(result) <= JOSEPH_MAX_RATIO else square_root()
-
-
-def scaled_joseph_ratio(result: FilterResult) -> float:
-    """Return the largest ``trace(S) / lambda_min(R)`` over a run's steps, scaled.
-
-    Both matrices are scaled to ``R``'s unit diagonal: measurement components in different
-    units (a radar's metres and radians) are no ill-conditioning. A missing component counts 1.
-    """
-    s = result.info.innovation_cov
-    r = result.measurement_cov
-    if 2 < r.ndim < s.ndim:  # one R per track: the same at every step
-        r = r[..., None, :, :]
-    if not bool(result.mask.all()):  # missing components: unit variances, per step
-        r = masked_model(np.zeros(s.shape[:-1] + (1,)), np.broadcast_to(r, s.shape),
-                         result.mask)[1]  # fmt: skip
-    d = 1.0 / np.sqrt(np.diagonal(r, axis1=-2, axis2=-1))
-    scale = d[..., :, None] * d[..., None, :]
-    r_min = np.linalg.eigvalsh(r * scale)[..., 0]  # once per distinct R when all are present
-    s_trace = np.trace(s * scale, axis1=-2, axis2=-1)
-    return float(np.max(s_trace / r_min, initial=0.0))
+    return result if worst_joseph_ratio(result) <= JOSEPH_MAX_RATIO else square_root()
 
 
 def _compiled_run(run: NonlinearRun, joseph: bool) -> FilterResult | None:

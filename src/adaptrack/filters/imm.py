@@ -18,7 +18,7 @@ radar's: then every model updates as an EKF linearised at its own prediction, or
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import partial
 from typing import Literal, cast
@@ -39,17 +39,24 @@ from ..models.measurement import (
     state_indices,
 )
 from ..models.turn import CoordinatedTurn, NonlinearMotionModel
-from ..types import GaussianState, _trusted
-from .ekf import ekf_predict_step, ekf_update_step
+from ..types import GaussianState, StepInfo, _trusted
+from .ekf import ekf_predict_step, ekf_sqrt_update_step, ekf_update_step
 from .kalman import (
     CovarianceError,
     _component_mask,
     _update,
+    joseph_scaling,
     predict,
 )
 from .run import auto_form, step_transitions
 from .square_root import covariance, lower_factor, sqrt_predict, sqrt_update, triangularize
-from .ukf import SigmaPoints, ukf_predict_step, ukf_update_step
+from .ukf import (
+    SigmaPoints,
+    ukf_predict_step,
+    ukf_sqrt_predict_step,
+    ukf_sqrt_update_step,
+    ukf_update_step,
+)
 
 IMMForm = Literal["auto", "joseph", "standard", "sqrt"]
 NonlinearUpdate = Literal["ekf", "ukf"]
@@ -132,7 +139,7 @@ def imm_filter(
     models : sequence of MotionModel or NonlinearMotionModel, length M
         Each must have every state in ``measured_states``. A nonlinear one (e.g.
         :class:`~adaptrack.models.CoordinatedTurn`) is predicted as ``nonlinear`` says
-        (linearised, or by sigma points); the run is then in Joseph form.
+        (linearised, or by sigma points).
     measured_states : sequence of str, length m, or MeasurementModel
         Names of the measured states, e.g. ``("x", "y")``; or a nonlinear measurement model
         (e.g. :class:`~adaptrack.models.RadarMeasurement`), which every model's update
@@ -163,12 +170,15 @@ def imm_filter(
     form : {"auto", "sqrt", "joseph", "standard"}
         Covariance update of every model: ``"sqrt"`` carries each model's predict and update
         in square-root form (the models' factors mixed in factor form, QR of the pre-arrays,
-        as :func:`~adaptrack.kalman_filter` with ``form="sqrt"``): PSD by construction and
+        as :func:`~adaptrack.kalman_filter` with ``form="sqrt"``; a measurement model or a
+        nonlinear motion model as :func:`~adaptrack.ekf_filter` or
+        :func:`~adaptrack.ukf_filter` with ``form="sqrt"``, in NumPy): PSD by construction and
         accurate on ill-conditioned problems (measurement covariances of condition 1e12, long
         gaps), where the Joseph form ends sigmas off. ``"auto"`` (default) runs the Joseph
         form and takes the square root instead when an innovation covariance is not positive
-        definite or some ``trace(S)`` exceeds :data:`~adaptrack.filters.kalman.JOSEPH_MAX_RATIO`
-        times the smallest eigenvalue of ``R`` (the criterion of ``kalman_filter``).
+        definite or some step's :func:`~adaptrack.filters.kalman.joseph_ratio` exceeds
+        :data:`~adaptrack.filters.kalman.JOSEPH_MAX_RATIO` (the criterion of every filter).
+        With ``nonlinear="ukf"`` the Joseph and standard forms are the plain UKF update.
     backend : {"auto", "numpy", "numba"}
         The NumPy reference or the compiled kernel (same numbers to rounding); ``"auto"``
         compiles from 20,000 track-steps on. The kernel runs linear measurements (a
@@ -282,16 +292,11 @@ def imm_filter(
         tb, dt, z, mk, models, measured, r, initial, pis, step_pi, mu0, method, noise,
         None if mm is None else (mm, nonlinear), nonlinear,
     )  # fmt: skip
-    if mm is not None or turning:
-        if form not in ("auto", "joseph"):
-            raise ValueError(
-                "with a measurement model or a nonlinear motion model the IMM updates in "
-                "Joseph form"
-            )
-        return run(problem, "joseph")[0]
+    # the kernel's square root is the linear one: nonlinear models take it in NumPy
+    root = _imm_numpy if mm is not None or turning else run
     if form != "auto":
-        return run(problem, form)[0]
-    return auto_form(lambda: run(problem, "joseph"), lambda: run(problem, "sqrt")[0], r)
+        return (root if form == "sqrt" else run)(problem, form)[0]
+    return auto_form(lambda: run(problem, "joseph"), lambda: root(problem, "sqrt")[0], r)
 
 
 def _check_rates(switching_rates: ArrayLike, n_models: int) -> FloatArray:
@@ -351,8 +356,8 @@ class _Problem:
 def _imm_numpy(problem: _Problem, form: str) -> tuple[IMMResult, float]:
     """Run :func:`imm_filter` in NumPy.
 
-    Also returns the largest ``trace(S) / lambda_min(R)`` of the Joseph and standard forms (0
-    in square-root form).
+    Also returns the largest :func:`~adaptrack.filters.kalman.joseph_ratio` of the Joseph and
+    standard forms (0 in square-root form).
     """
     tb, dt, z, mk, models, measured = (
         problem.tb, problem.dt, problem.z, problem.mask, problem.models, problem.measured
@@ -361,19 +366,24 @@ def _imm_numpy(problem: _Problem, form: str) -> tuple[IMMResult, float]:
     method, noise = problem.method, problem.noise
     batch, n_steps, n_models = z.shape[:-2], z.shape[-2], len(models)
     names = [m.state_names for m in models]
-    r_min = np.linalg.eigvalsh(r)[..., 0]
+    r_scale, r_min = joseph_scaling(r)
     worst = 0.0
     disc = [
         None if isinstance(mdl, NonlinearMotionModel) else step_transitions(mdl, dt, method, noise)
         for mdl in models
     ]
     noise_factors = [lower_factor(d[1]) if form == "sqrt" and d else None for d in disc]
-    predict_nonlinear = (
-        ekf_predict_step
-        if problem.predict_mode == "ekf"
-        else partial(ukf_predict_step, sigma=SigmaPoints())
-    )
+    root = form == "sqrt"
+    if problem.predict_mode == "ekf":  # a state with a factor is predicted in factor form
+        predict_nonlinear: Callable[..., tuple[GaussianState, FloatArray, FloatArray]] = (
+            ekf_predict_step
+        )
+    else:
+        predict_nonlinear = partial(
+            ukf_sqrt_predict_step if root else ukf_predict_step, sigma=SigmaPoints()
+        )
     nonlinear = problem.nonlinear
+    update_nonlinear = None if nonlinear is None else _nonlinear_update(*nonlinear, form)
     if nonlinear is None:
         hs = [
             np.eye(mdl.state_dim)[[nm.index(s) for s in measured]]
@@ -417,36 +427,39 @@ def _imm_numpy(problem: _Problem, form: str) -> tuple[IMMResult, float]:
                 )
             rk = r if r.ndim == 2 else r[..., k, :, :]
             zk, mask_k = z[..., k, :], mk[..., k, :]
-            if form == "sqrt":
+            start = mixed[j]
+            if root and k == 0:  # the priors' factors; later the mixed ones
+                first = lower_factor(np.asarray(start.cov))
+                start = _trusted(GaussianState, mean=start.mean, cov=start.cov,
+                                 time=start.time, factor=first)  # fmt: skip
+            if d_j is None:
+                moving = cast(NonlinearMotionModel, models[j])
+                prior = predict_nonlinear(start, moving, dt[..., k], tb[..., k])[0]
+            elif root:
                 sq = noise_factors[j][..., k, :, :]  # type: ignore[index]
-                start = mixed[j].factor if k else lower_factor(mixed[j].cov)
-                xp, sp = sqrt_predict(mixed[j].mean, start, phi, sq, u)
-                mean, factor, info = sqrt_update(xp, sp, zk, hs[j], rk, mask_k, None)
-                states[j] = _trusted(
-                    GaussianState, mean=mean, cov=covariance(factor), time=tb[..., k],
-                    factor=factor,
-                )  # fmt: skip
+                xp, sp = sqrt_predict(start.mean, start.factor, phi, sq, u)
+                prior = _trusted(GaussianState, mean=xp, cov=covariance(sp), time=tb[..., k],
+                                 factor=sp)  # fmt: skip
             else:
-                if d_j is None:
-                    moving = cast(NonlinearMotionModel, models[j])
-                    prior = predict_nonlinear(mixed[j], moving, dt[..., k], tb[..., k])[0]
+                prior = predict(start, phi, qd, time=tb[..., k], control=u)
+            try:
+                if update_nonlinear is not None:
+                    states[j], info, _ = update_nonlinear(prior, zk, reads[j], rk, mask_k)
+                elif root:
+                    mean, factor, info = sqrt_update(
+                        prior.mean, cast(FloatArray, prior.factor), zk, hs[j], rk, mask_k, None
+                    )
+                    states[j] = _trusted(GaussianState, mean=mean, cov=covariance(factor),
+                                         time=tb[..., k], factor=factor)  # fmt: skip
                 else:
-                    prior = predict(mixed[j], phi, qd, time=tb[..., k], control=u)
-                try:
-                    if nonlinear is None:
-                        states[j], info = _update(prior, zk, hs[j], rk, mask_k, form)
-                    elif nonlinear[1] == "ekf":
-                        states[j], info, _ = ekf_update_step(
-                            prior, zk, nonlinear[0], reads[j], rk, mask_k
-                        )
-                    else:
-                        states[j], info, _ = ukf_update_step(
-                            prior, zk, nonlinear[0], reads[j], rk, mask_k, SigmaPoints()
-                        )
-                except np.linalg.LinAlgError:
-                    raise _indefinite(k) from None
-                s_obs = np.einsum("...aa,...a->...", info.innovation_cov, mask_k)
-                worst = max(worst, float(np.max(s_obs / (r_min if r.ndim == 2 else r_min[..., k]))))
+                    states[j], info = _update(prior, zk, hs[j], rk, mask_k, form)
+            except np.linalg.LinAlgError:
+                raise _indefinite(k) from None
+            if not root:
+                scale_k, r_min_k = (r_scale, r_min) if r.ndim == 2 else (r_scale[..., k, :],
+                                                                        r_min[..., k])  # fmt: skip
+                s_obs = np.einsum("...aa,...a->...", info.innovation_cov, mask_k * scale_k)
+                worst = max(worst, float(np.max(s_obs / r_min_k)))
             lls.append(info.log_likelihood)
             comp_mean[j][..., k, :], comp_cov[j][..., k, :, :] = states[j].mean, states[j].cov
         ll = np.stack(lls, axis=-1)
@@ -475,6 +488,30 @@ def _imm_numpy(problem: _Problem, form: str) -> tuple[IMMResult, float]:
     return IMMResult(filtered, out_names, probs, comps, ll_mix), worst
 
 
+def _nonlinear_update(
+    measurement: MeasurementModel, how: NonlinearUpdate, form: str
+) -> Callable[..., tuple[GaussianState, StepInfo, FloatArray]]:
+    """Return the update ``(prior, z, reads, R, mask) -> (posterior, StepInfo, H)`` of one model.
+
+    The EKF or UKF (``how``) in ``form``: square root, or Joseph / standard (the UKF has one).
+    """
+    if how == "ekf" and form == "sqrt":
+        step: Callable[..., tuple[GaussianState, StepInfo, FloatArray]] = ekf_sqrt_update_step
+    elif how == "ekf":
+        step = partial(ekf_update_step, form=cast(Literal["joseph", "standard"], form))
+    else:
+        step = partial(
+            ukf_sqrt_update_step if form == "sqrt" else ukf_update_step, sigma=SigmaPoints()
+        )
+
+    def update(
+        prior: GaussianState, z: FloatArray, reads: np.ndarray, r: FloatArray, mask: np.ndarray
+    ) -> tuple[GaussianState, StepInfo, FloatArray]:
+        return step(prior, z, measurement, reads, r, mask)
+
+    return update
+
+
 def _indefinite(step: int, track: int | None = None) -> CovarianceError:
     """Name the step (and track) whose innovation covariance is not positive definite."""
     where = f"step {step}" if track is None else f"step {step}, track {track}"
@@ -487,7 +524,8 @@ def _indefinite(step: int, track: int | None = None) -> CovarianceError:
 def _imm_compiled(problem: _Problem, form: str) -> tuple[IMMResult, float]:
     """Run :func:`imm_filter` in the compiled kernel (:mod:`adaptrack.filters._imm_kernel`).
 
-    Also returns the largest ``trace(S) / lambda_min(R)`` (0 in square-root form).
+    Also returns the largest :func:`~adaptrack.filters.kalman.joseph_ratio` (0 in square-root
+    form).
     """
     dt, z, mask, models, measured = (
         problem.dt, problem.z, problem.mask, problem.models, problem.measured
@@ -543,6 +581,7 @@ def _imm_compiled(problem: _Problem, form: str) -> tuple[IMMResult, float]:
             emb_cnt[i, j] = dst.size
             emb_dst[i, j, : dst.size], emb_src[i, j, : dst.size] = dst, src
     r4 = r[None, None] if r.ndim == 2 else r.reshape(n_tr, n_steps, m, m)
+    r_scale, r_min = joseph_scaling(r4)
     with np.errstate(divide="ignore"):
         log_pis = np.log(problem.pis)
     n_out = len(out_names)
@@ -573,7 +612,8 @@ def _imm_compiled(problem: _Problem, form: str) -> tuple[IMMResult, float]:
         turn_par,
         uniq,
         c(r4),
-        c(np.linalg.eigvalsh(r4)[..., 0]),
+        c(r_scale),
+        c(r_min),
         np.log(np.where(mu0 > 0, mu0, 1e-300)),
         log_pis,
         c(problem.step_pi.reshape(-1, n_steps)),

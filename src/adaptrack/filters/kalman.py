@@ -28,7 +28,7 @@ from .square_root import covariance, lower_factor, sqrt_predict, sqrt_update
 UpdateForm = Literal["auto", "joseph", "standard", "sqrt"]
 
 JOSEPH_MAX_RATIO = 1e8
-"""Beyond this ``trace(S) / lambda_min(R)`` the ``"auto"`` forms take the square root.
+"""Beyond this :func:`joseph_ratio` the ``"auto"`` forms take the square root.
 
 The Joseph form builds ``I - K H`` by cancellation and loses about ``log10`` of that ratio in
 digits (means about its 3/2 power in posterior sigmas): at 1e8, half of double precision.
@@ -139,14 +139,43 @@ def covariance_recursion(
     return pc, fc, s_a, k_a, logdet, hm_a
 
 
+def joseph_ratio(
+    innovation_cov: FloatArray, r: FloatArray, mask: BoolArray | None = None
+) -> FloatArray:
+    """Return ``trace(S) / lambda_min(R)`` with both scaled to ``R``'s unit diagonal.
+
+    The measure of the Joseph update's lost digits (:data:`JOSEPH_MAX_RATIO`). Rescaling
+    the measured components by powers of 2 changes no bit of a Kalman update, so the measure
+    must not depend on their units either: a radar's metres and radians, or positions and
+    speeds, are no ill-conditioning; only ``S`` large against ``R`` or ``R`` nearly singular
+    as a correlation is. ``innovation_cov`` (..., m, m) and ``r`` (..., m, m) broadcast
+    (``R``'s eigenvalues are computed on ``r`` as given: once when it is shared); components
+    where ``mask`` (..., m) is False are left out of the trace (the eigenvalue over all
+    components is the smaller one: conservative).
+    """
+    scale, r_min = joseph_scaling(r)
+    s_scaled = np.diagonal(innovation_cov, axis1=-2, axis2=-1) * scale
+    if mask is not None:
+        s_scaled = np.where(mask, s_scaled, 0.0)
+    return np.asarray(s_scaled.sum(axis=-1) / r_min)
+
+
+def joseph_scaling(r: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Return ``1 / diag(R)`` (..., m) and ``R``'s smallest eigenvalue at unit diagonal (...).
+
+    :func:`joseph_ratio` is ``sum_a S_aa / R_aa`` over the latter.
+    """
+    scale = 1.0 / np.diagonal(r, axis1=-2, axis2=-1)
+    root = np.sqrt(scale)
+    return scale, np.linalg.eigvalsh(r * root[..., :, None] * root[..., None, :])[..., 0]
+
+
 def exceeds_joseph_limit(innovation_cov: FloatArray, r: FloatArray) -> bool:
-    """Whether some ``trace(S)`` exceeds :data:`JOSEPH_MAX_RATIO` times ``lambda_min(R)``.
+    """Whether some :func:`joseph_ratio` exceeds :data:`JOSEPH_MAX_RATIO`.
 
     ``innovation_cov`` (..., m, m) and ``r`` (..., m, m) broadcast over their batch axes.
     """
-    r_min = np.linalg.eigvalsh(r)[..., 0]
-    s_trace = np.trace(innovation_cov, axis1=-2, axis2=-1)
-    return bool(np.any(s_trace > JOSEPH_MAX_RATIO * r_min))
+    return bool(np.any(joseph_ratio(innovation_cov, r) > JOSEPH_MAX_RATIO))
 
 
 def _innovation_stats(
@@ -446,6 +475,8 @@ __all__ = [
     "JOSEPH_MAX_RATIO",
     "CovarianceError",
     "exceeds_joseph_limit",
+    "joseph_ratio",
+    "joseph_scaling",
     "kalman_step",
     "predict",
     "update",

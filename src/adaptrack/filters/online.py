@@ -38,12 +38,12 @@ from ._codegen import (
 )
 from ._kernels import _LOG_2PI, kf_step, series_bank_row
 from ._sqrt_kernel import lower_factor_into, outer_into, sqrt_step
-from .kalman import JOSEPH_MAX_RATIO, CovarianceError
+from .kalman import JOSEPH_MAX_RATIO, CovarianceError, exceeds_joseph_limit, joseph_scaling
 from .run import FilterForm
 from .square_root import lower_factor
 
 # header: n, m, Joseph form (0/1), nis, log-likelihood, observed components, time, next bank
-# row, series table h_max, Joseph trace(S) limit
+# row, series table h_max, Joseph limit of sum_a S_aa / R_aa
 _HEADER = 10
 _TIME = 6
 _SERIES_BLOCKS = ("series_phi", "series_qd", "series_off")
@@ -126,9 +126,9 @@ class OnlineFilter:
     (n, m) at hand (under a microsecond per call from Python); a ``mask``,
     ``form="standard"`` or larger states use the generic compiled step (a few microseconds).
     Both give the numbers of :func:`adaptrack.kalman_filter` to rounding. The square-root form
-    (``form="sqrt"``, and ``"auto"`` from the first step whose ``trace(S)`` exceeds
-    ``JOSEPH_MAX_RATIO`` times the smallest eigenvalue of ``R``: a long gap, a vast prior, an
-    ill-conditioned ``R``) runs a compiled step from Python (several microseconds).
+    (``form="sqrt"``, and ``"auto"`` from the first step whose
+    :func:`~adaptrack.filters.kalman.joseph_ratio` exceeds ``JOSEPH_MAX_RATIO``: a long gap, a
+    vast prior, an ill-conditioned ``R``) runs a compiled step from Python (several microseconds).
 
     Parameters
     ----------
@@ -207,8 +207,8 @@ class OnlineFilter:
             for block, coef in zip(self._series, series[:3], strict=True):
                 block[:] = coef
         self._ws[0], self._ws[1], self._ws[2] = n, m, 1.0 if joseph else 0.0
-        # auto: Joseph while trace(S) <= JOSEPH_MAX_RATIO * lambda_min(R), then square root
-        limit = JOSEPH_MAX_RATIO * np.linalg.eigvalsh(r)[0] if form == "auto" else np.inf
+        # auto: Joseph while joseph_ratio(S, R) <= JOSEPH_MAX_RATIO, then square root
+        limit = JOSEPH_MAX_RATIO * joseph_scaling(r)[1] if form == "auto" else np.inf
         self._ws[WS_TRACE_LIMIT] = limit
         self._ws[_TIME] = float(initial.time)
         self._block("x")[:] = initial.mean
@@ -221,7 +221,7 @@ class OnlineFilter:
         self._blocks = {name: self._block(name) for name in self._layout if name != "end"}
         self._fast = self._fast_run = None
         self._sqrt, self._auto = False, form == "auto"
-        if form == "sqrt" or np.trace(r) > limit:
+        if form == "sqrt" or (form == "auto" and exceeds_joseph_limit(r, r)):
             self._to_sqrt()
         elif joseph and n <= GENERATED_MAX_STATES:
             at = self._layout
@@ -363,7 +363,8 @@ class OnlineFilter:
                 self._ws[2] != 0.0, blk["xp"], blk["pp"], blk["tmp"], blk["hm"], blk["rm"],
                 blk["hp"], blk["s"], blk["lo"], blk["kt"], blk["nu"], blk["w"], blk["ikh"],
             )  # fmt: skip
-            if saved and (not ok or np.trace(blk["s"]) > self._ws[WS_TRACE_LIMIT]):
+            limit = self._ws[WS_TRACE_LIMIT]
+            if saved and (not ok or _scaled_trace(blk["s"], blk["r"], present) > limit):
                 blk["x"][:], blk["p"][:] = saved
                 self._to_sqrt()
                 nis, logdet, nobs = self._sqrt_step(phi, qd, u, z, present)
@@ -429,3 +430,8 @@ class OnlineFilter:
 
 
 __all__ = ["OnlineFilter", "StreamEstimates"]
+
+
+def _scaled_trace(s: FloatArray, r: FloatArray, present: np.ndarray) -> float:
+    """``sum_a S_aa / R_aa`` over the present components (``joseph_ratio``'s numerator)."""
+    return float(np.sum(np.diagonal(s)[present] / np.diagonal(r)[present]))

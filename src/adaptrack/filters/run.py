@@ -36,6 +36,7 @@ from .kalman import (
     _update,
     covariance_recursion,
     exceeds_joseph_limit,
+    joseph_ratio,
     predict,
 )
 from .square_root import covariance, lower_factor, sqrt_predict, sqrt_update
@@ -275,8 +276,9 @@ def auto_form(
 ) -> _Result:
     """Apply the ``form="auto"`` rule of every batch path: Joseph unless the root is needed.
 
-    ``joseph()`` runs the Joseph form and returns its result and worst ``trace(S) /
-    lambda_min(R)``; ``sqrt()`` runs the square-root form. The square root is taken where
+    ``joseph()`` runs the Joseph form and returns its result and worst
+    :func:`~adaptrack.filters.kalman.joseph_ratio`; ``sqrt()`` runs the square-root form.
+    The square root is taken where
     ``R`` alone already exceeds the limit (then every step would), where Joseph loses
     definiteness (``CovarianceError``), or where its worst ratio exceeds
     :data:`JOSEPH_MAX_RATIO`.
@@ -305,17 +307,16 @@ def measurement_matrix_for(measurement_matrix: ArrayLike, m: int, n: int) -> Flo
     return h
 
 
-def _min_eig(r: FloatArray) -> FloatArray:
-    """Smallest eigenvalue of each symmetric ``R`` (..., m, m)."""
-    return np.linalg.eigvalsh(r)[..., 0]
-
-
 def worst_joseph_ratio(result: FilterResult) -> float:
-    """Return the largest ``trace(S) / lambda_min(R)`` over the steps of a filter run."""
-    r_min = _min_eig(result.measurement_cov)
-    s_trace = np.trace(result.info.innovation_cov, axis1=-2, axis2=-1)
-    r_min = r_min if r_min.ndim == s_trace.ndim else r_min[..., None]
-    return float(np.max(s_trace / r_min, initial=0.0))
+    """Return the largest :func:`~adaptrack.filters.kalman.joseph_ratio` of a run's steps.
+
+    Over the observed components of each step (any filter's :class:`FilterResult`).
+    """
+    r = result.measurement_cov
+    s = result.info.innovation_cov
+    if 2 < r.ndim < s.ndim:  # one R per track: the same at every step
+        r = r[..., None, :, :]
+    return float(np.max(joseph_ratio(s, r, result.mask), initial=0.0))
 
 
 def _solve(problem: _Problem, compiled: bool) -> FilterResult:
