@@ -515,11 +515,12 @@ def test_jittered_per_track_times_take_the_series_tables_with_the_same_result(rn
                                    atol=1e-10)  # fmt: skip
 
 
+@pytest.mark.parametrize("form", ["joseph", "standard"])
 @pytest.mark.parametrize("n_axes", [2, 3])
-def test_compiled_imm_ekf_of_a_radar_equals_the_numpy_reference(rng, n_axes):
-    """The kernel's radar geometry, Jacobian and wrapped innovation against the NumPy IMM-EKF:
-    a moving radar, range-rate, missing components, per-track irregular times, a pass
-    across the azimuth cut (due south of the radar)."""
+def test_compiled_imm_ekf_of_a_radar_equals_the_numpy_reference(rng, n_axes, form):
+    """The kernel's radar geometry, Jacobian and wrapped innovation against the NumPy IMM-EKF,
+    in both covariance forms: a moving radar, range-rate, missing components, per-track
+    irregular times, a pass across the azimuth cut (due south of the radar)."""
     from adaptrack.models import RadarMeasurement
 
     comps = ("range", "azimuth") + (("elevation",) if n_axes == 3 else ()) + ("range_rate",)
@@ -541,7 +542,8 @@ def test_compiled_imm_ekf_of_a_radar_equals_the_numpy_reference(rng, n_axes):
     priors = [at.GaussianState(np.r_[x0, v] + 10, np.diag([400.0] * k + [100.0] * k), 0.0),
               at.GaussianState(np.r_[x0, v, np.zeros(k)] + 10,
                                np.diag([400.0] * k + [100.0] * k + [4.0] * k), 0.0)]  # fmt: skip
-    kw = dict(initial_probs=[0.5, 0.5], switching_rates=[[-0.1, 0.1], [0.2, -0.2]], mask=mask)
+    kw = dict(initial_probs=[0.5, 0.5], switching_rates=[[-0.1, 0.1], [0.2, -0.2]], mask=mask,
+              form=form)  # fmt: skip
     ref = imm_filter(t, z, models, radar, None, priors, backend="numpy", **kw)
     got = imm_filter(t, z, models, radar, None, priors, backend="numba", **kw)
     assert np.abs(np.diff(np.sign(ref.filtered.mean[..., 0]))).max() > 0  # crossed the cut
