@@ -649,11 +649,17 @@ def nonlinear_case(src: Source) -> Case:
         if not kw:
             ref = at.kalman_filter(p.times, z, p.model, p.h, p.r, p.prior, mask=p.mask,
                                    backend="numpy")  # fmt: skip
-            out.compare(f"{run.__name__}/kalman_filter", res.filtered, ref.filtered)
             imm = imm_filter(p.times, z, [p.model, p.model], _identity(names), p.r,
                              [p.prior, p.prior], initial_probs=[0.5, 0.5],
                              transition_probs=[[0.9, 0.1], [0.1, 0.9]], mask=p.mask)  # fmt: skip
-            out.compare("imm_filter(EKF)/kalman_filter", imm.filtered, ref.filtered)
+            labels = (f"{run.__name__}/kalman_filter", "imm_filter(EKF)/kalman_filter")
+            for label, got in zip(labels, (res, imm), strict=True):
+                out.compare(label, got.filtered, ref.filtered)
+            for q in perturbed(replace(p, z=z)):  # the reference's rounding sensitivity
+                moved = at.kalman_filter(q.times, q.z, q.model, q.h, q.r, q.prior, mask=q.mask,
+                                         backend="numpy")  # fmt: skip
+                for label in labels:
+                    out.sensitivity(label, moved.filtered, ref.filtered)
             compiled_agrees(out, "ekf_filter numpy/numba", run, args, lambda q: dict(
                 times=q.times, measurements=q.z, measurement_model=PositionMeasurement(q.r, names),
                 initial=q.prior), replace(p, z=z))  # fmt: skip

@@ -74,8 +74,12 @@ def sqrt_predict(
     noise_factor: FloatArray,
     control: FloatArray,
 ) -> tuple[FloatArray, FloatArray]:
-    """Predicted mean and covariance factor: ``Phi x + u`` and ``tria([Phi S, Sq])``."""
-    pre = np.concatenate([transition @ factor, np.broadcast_to(noise_factor, factor.shape)], -1)
+    """Predicted mean and covariance factor: ``Phi x + u`` and ``tria([Phi S, Sq])``.
+
+    ``factor`` (..., n, c): any ``S`` with ``S S^T = P`` (a wide one from the IMM's mixing).
+    """
+    noise = np.broadcast_to(noise_factor, factor.shape[:-1] + noise_factor.shape[-1:])
+    pre = np.concatenate([transition @ factor, noise], -1)
     return matvec(transition, mean) + control, triangularize(pre)
 
 
