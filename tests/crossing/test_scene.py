@@ -950,8 +950,8 @@ def test_a_ghost_behind_a_car_is_not_confirmed_but_a_car_in_a_trucks_shadow_is(s
 def _track_left_behind(config, spread, scans):
     """A static object (stopped, never moved; learnt ``spread`` [m]) stands in radar_A's
     lane 50 m before the crossing, detected in every scan. One scan also holds a false
-    alarm 20 m further along the lane, behind it on radar_A's line of sight, which opens a
-    tentative track. Returns whether that track is still there after ``scans`` more scans
+    alarm 20 m behind it on radar_A's line of sight through it, which opens a tentative
+    track. Returns whether that track is still there after ``scans`` more scans
     (the object's reflection alone)."""
     from adaptrack.crossing.scene_tracker import _Tracks
 
@@ -964,8 +964,10 @@ def _track_left_behind(config, spread, scans):
     tracker.tracks = _Tracks.opened(np.zeros(1, int), x, p, 0.0, spread, len(SITE.radars))
     tracker.tracks.stopped[:] = True  # never moved: static
     rng = np.random.default_rng(3)
-    behind = cor.path.lane_geometry(np.array([u - 20.0]), np.array([d]))[0]
-    alarm = np.stack([*radar.polar(behind), np.zeros(1)], -1)
+    body = cor.path.lane_geometry(np.array([u]), np.array([d]))[0][0]
+    sight = body - np.asarray(radar.position_m)
+    behind = body + 20.0 * sight / np.linalg.norm(sight)
+    alarm = np.stack([*radar.polar(behind[None]), np.zeros(1)], -1)
     for k in range(1, scans + 2):
         z = _body_scan(rng, radar, cor, u, d, 0.2, 0.2, 1)
         tracker.step(radar.name, k * radar.period_s, np.vstack([z, alarm]) if k == 1 else z)

@@ -147,10 +147,32 @@ def test_a_nearer_body_on_the_line_of_sight_hides_what_is_behind_it():
     # a track that may not hide (e.g. not a road user) hides nothing
     none = occluders(rows, x, spread, corridor, roads, bounds, radar, np.array([0, 1, 1], bool))
     assert none.tolist() == [-1, -1, -1]
-    # apparent half width of the truck seen end on: 1 m across -> atan(1 / 20) = 2.9 deg;
-    # the aside track is atan(5 / 40) = 7.1 deg off the line of sight
-    assert math.degrees(math.atan2(5.0, 40.0)) > math.degrees(math.atan2(1.0, 20.0))
+    # apparent half width of the truck seen end on: half of 2.55 m across -> atan(1.275 / 20)
+    # = 3.6 deg; the aside track is atan(5 / 40) = 7.1 deg off the line of sight
+    assert math.degrees(math.atan2(5.0, 40.0)) > math.degrees(math.atan2(1.275, 20.0))
     assert out.tolist() == [-1, 0, -1]  # the truck (row 0) hides the track behind it
+
+
+@pytest.mark.parametrize(
+    ("spread", "width"), [(0.3, 0.5 + 0.7 / 1.7 * 0.3), (1.25, 1.8), (3.0, 2.55)]
+)
+def test_a_body_hides_what_lies_within_its_own_width(spread, width):
+    """A body of length 4 spreads (2 either side) is as wide as a road user of that length
+    (DOMAIN 3 classes: a pedestrian 0.5 m long and wide, a motorcycle 2.2 x 0.8 m, a car
+    5 x 1.8 m, a bus 12 x 2.55 m; linear between): seen end on from 20 m it hides a track at
+    40 m just inside its half width's angle, not one just outside."""
+    roads = _road()
+    radar = np.array([0.0, 0.0, 6.0, 0.0, 1.0, 0.1])
+    edge = 40.0 * (0.5 * width) / 20.0  # lateral offset at 40 m on the shadow's edge
+    x = np.zeros((3, 4))
+    x[:, 0] = [20.0, 40.0, 40.0]
+    x[1:, 3] = [0.97 * edge, 1.03 * edge]
+    spreads = np.array([spread, 1.0, 1.0])
+    corridor = np.array([0, 1, 1])  # the hidden tracks on a parallel corridor (same line)
+    bounds2 = np.array([[0, roads.shape[1]], [0, roads.shape[1]]])
+    out = occluders(np.array([1, 2]), x, spreads, corridor, roads, bounds2, radar,
+                    np.array([True, False, False]))  # fmt: skip
+    assert out.tolist() == [0, -1]
 
 
 def test_a_track_inside_a_nearer_body_is_its_duplicate_not_hidden_by_it():

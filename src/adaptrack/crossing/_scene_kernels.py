@@ -43,6 +43,10 @@ VISIBLE_SAMPLES = 17  # points over a body tested against a field of view
 CLUTTER_VIEW = 29  # a frozen track's stored view of one radar (_store_view)
 NEAREST_BLOCK = 32  # centreline samples searched as a block once it may hold the nearest
 NEAREST_GROUP = 32  # blocks tested as a group first
+# a road user's width [m] from its length [m]: pedestrian, motorcycle, car, truck, bus (the
+# classes of DOMAIN 3 / crossing.traffic), linear between them, the legal 2.55 m beyond
+BODY_LENGTHS_M = np.array([0.5, 2.2, 5.0, 7.1, 12.0])
+BODY_WIDTHS_M = np.array([0.5, 0.8, 1.8, 2.5, 2.55])
 
 
 @numba.njit(cache=True, inline="always")
@@ -1012,12 +1016,25 @@ def split_rows(stopped, moved, along_m2, along_m4, kurtosis_max, min_half_gap): 
 
 
 @numba.njit(cache=True)
+def body_width(length):  # type: ignore[no-untyped-def]
+    """Width [m] of a road user ``length`` [m] long (:data:`BODY_WIDTHS_M`, linear between)."""
+    if length <= BODY_LENGTHS_M[0]:
+        return BODY_WIDTHS_M[0]
+    for k in range(1, BODY_LENGTHS_M.size):
+        if length <= BODY_LENGTHS_M[k]:
+            t = (length - BODY_LENGTHS_M[k - 1]) / (BODY_LENGTHS_M[k] - BODY_LENGTHS_M[k - 1])
+            return BODY_WIDTHS_M[k - 1] + t * (BODY_WIDTHS_M[k] - BODY_WIDTHS_M[k - 1])
+    return BODY_WIDTHS_M[-1]
+
+
+@numba.njit(cache=True)
 def sight_lines(rows, x, spread, lanes, radar, sight):  # type: ignore[no-untyped-def]
     """Fill ``sight`` (T, 3) rows ``rows``: range, azimuth and apparent half width [m, rad].
 
     ``lanes`` (T, 5): the tracks' lane frames at their ``u`` (:func:`._ekf_kernels.lane_at`).
-    The half width is twice the body spread along the lane's heading and 1 m across, seen
-    from the radar (:func:`nearer_occluders`).
+    The half width is twice the body spread along the lane's heading and half the width of a
+    road user of that length (:data:`BODY_WIDTHS_M`) across, seen from the radar
+    (:func:`nearer_occluders`).
     """
     for i in rows:
         cx, cy, tx, ty = lanes[i, 0], lanes[i, 1], lanes[i, 3], lanes[i, 4]
@@ -1025,7 +1042,9 @@ def sight_lines(rows, x, spread, lanes, radar, sight):  # type: ignore[no-untype
         ex, ey = px - radar[0], py - radar[1]
         rng = math.sqrt(ex * ex + ey * ey)
         ux, uy = ex / max(rng, 1e-9), ey / max(rng, 1e-9)
-        across = abs(ux * ty - uy * tx) * 2.0 * spread[i] + abs(ux * tx + uy * ty) * 1.0
+        half_length = BODY_HALF_SPREADS * spread[i]
+        half_width = 0.5 * body_width(2.0 * half_length)
+        across = abs(ux * ty - uy * tx) * half_length + abs(ux * tx + uy * ty) * half_width
         sight[i, 0], sight[i, 1] = rng, math.atan2(ex, ey)
         sight[i, 2] = math.atan2(across, max(rng, 1e-9))
 
@@ -1036,11 +1055,11 @@ def nearer_occluders(rows, x, spread, corridor, sight, can_hide):  # type: ignor
 
     ``sight``: the tracks' lines of sight (:func:`sight_lines`). Only tracks with
     ``can_hide`` (bool per track) are taken as occluders. A track hides what lies behind it
-    within its apparent half width: twice its body spread along its heading and 1 m across,
-    seen from the radar. It does not hide a track on its corridor whose centre lies within
-    its own body (``BODY_HALF_SPREADS`` spreads along): no other road user can be there, so
-    that track is a duplicate of its body and its misses count. Of several, the nearest to
-    the radar is returned.
+    within its apparent half width: twice its body spread along its heading and half its
+    width across (:func:`sight_lines`), seen from the radar. It does not hide a track on its
+    corridor whose centre lies within its own body (``BODY_HALF_SPREADS`` spreads along): no
+    other road user can be there, so that track is a duplicate of its body and its misses
+    count. Of several, the nearest to the radar is returned.
     """
     n = x.shape[0]
     out = np.full(rows.size, -1, dtype=np.int64)
