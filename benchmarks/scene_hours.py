@@ -2,8 +2,9 @@
 
 ``python -m benchmarks.scene_hours --seeds 31 32 33 --duration 1200`` simulates each seed's
 scene on ``lx_default`` (2-minute closures every 10 minutes, a vehicle stalled on road B at
-58 % of the duration for 90 s: :func:`adaptrack.crossing.mixed_traffic.mixed_traffic_study`),
-tracks it and prints per seed: time per simulated second, mean GOSPA,
+58 % of the duration for 90 s:
+:func:`adaptrack.crossing.studies.mixed_traffic.mixed_traffic_study`), tracks it and prints
+per seed: time per simulated second, mean GOSPA,
 id switches, per-class position / speed RMS through association, the delay of every true
 hazard (a standstill between the barriers) and the false "stopped" events, and the lead of the
 "will not stop before the stop line" event for every user that ran the line (with the
@@ -12,7 +13,7 @@ per simulated hour over all seeds, and the per-class RMS pooled over every epoch
 seed. ``--workers N`` runs the seeds on N local processes (Dask). ``--fold-kmh`` makes every
 radar fold its radial speeds at that value; ``--object-list`` makes the radars label their
 detections with object ids (reissued, sometimes swapped) that the tracker takes as hints;
-``--set NAME=VALUE`` changes a :class:`~adaptrack.crossing.scene_tracker.SceneTrackerConfig`
+``--set NAME=VALUE`` changes a :class:`~adaptrack.crossing.scene.tracker.SceneTrackerConfig`
 setting (numbers, true/false).
 Not a timing benchmark (accuracy and events; the time is indicative).
 """
@@ -25,9 +26,9 @@ import dataclasses
 import numpy as np
 import pandas as pd
 
-from adaptrack.crossing.mixed_traffic import MixedTraffic, mixed_traffic_study
-from adaptrack.crossing.scene_tracker import SceneTrackerConfig
-from adaptrack.crossing.site import Site, load_site
+from adaptrack.crossing.scene.tracker import SceneTrackerConfig
+from adaptrack.crossing.site.model import Site, load_site
+from adaptrack.crossing.studies.mixed_traffic import MixedTraffic, mixed_traffic_study
 from adaptrack.parallel import task_pool
 
 

@@ -21,9 +21,9 @@ from datetime import datetime, timedelta
 import numpy as np
 import pandas as pd
 
-from adaptrack.crossing.corridor import nearest_corridor, site_corridors
-from adaptrack.crossing.scene_tracker import SceneTrackerConfig, iter_scans
-from adaptrack.crossing.site import Site
+from adaptrack.crossing.scene.tracker import SceneTrackerConfig, iter_scans
+from adaptrack.crossing.site.corridor import nearest_corridor, site_corridors
+from adaptrack.crossing.site.model import Site
 from adaptrack.tracking import cluster_points, gate_threshold
 
 MOVING_MPS = 0.3

@@ -377,9 +377,9 @@ def crossing(quick: bool, workers: int) -> list[Result]:
     estimator (road EKF with constant acceleration, the demo's best) on 1,000 runs; the
     demo's comparison table (6 estimators + the PCRLB) runs 100 and is extrapolated.
     """
-    from adaptrack.crossing.compliance import evaluate_site
-    from adaptrack.crossing.site import load_site
-    from adaptrack.crossing.trackers import RoadTracker
+    from adaptrack.crossing.site.model import load_site
+    from adaptrack.crossing.studies.compliance import evaluate_site
+    from adaptrack.crossing.studies.trackers import RoadTracker
     from adaptrack.models import ConstantAcceleration
     from adaptrack.parallel import task_pool
 
@@ -423,10 +423,10 @@ def scene(quick: bool) -> list[Result]:
     (c = 5 m, p = 2, every 0.5 s) before their times per scan are kept; a scene tracker
     that misses the vehicles (car coverage < 0.9) fails the workload.
     """
-    from adaptrack.crossing.scene import scene_spec, simulate_scene
-    from adaptrack.crossing.scene_metrics import score_scene
-    from adaptrack.crossing.scene_tracker import track_scene
-    from adaptrack.crossing.site import load_site
+    from adaptrack.crossing.scene.tracker import track_scene
+    from adaptrack.crossing.simulation.scene import scene_spec, simulate_scene
+    from adaptrack.crossing.site.model import load_site
+    from adaptrack.crossing.studies.scene_metrics import score_scene
 
     from .scene_peer import stonesoup_scene
 

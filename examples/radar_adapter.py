@@ -17,7 +17,7 @@ import math
 import socket
 from urllib.parse import urlsplit
 
-from adaptrack.crossing.site import load_site
+from adaptrack.crossing.site.model import load_site
 from adaptrack.service.engine import LiveTracker
 
 VENDOR_ROWS = """\

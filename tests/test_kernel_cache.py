@@ -1,14 +1,17 @@
 """The on-disk kernel cache is stamped with every package module a kernel's module imports."""
 
+import importlib
 import os
+import pkgutil
 import subprocess
 import sys
 import textwrap
+import types
 from pathlib import Path
 
 import adaptrack
 from adaptrack import _kernel_cache
-from adaptrack.crossing import _scene_loop
+from adaptrack.crossing.scene import scan_loop
 
 KERNEL = """\
 import numba
@@ -65,17 +68,59 @@ def test_a_kernel_recompiles_when_a_module_it_calls_changes(tmp_path):
 def test_the_scene_loop_is_stamped_with_the_kernels_it_compiles_in():
     root = Path(adaptrack.__file__).parent.resolve()
     package = _kernel_cache._Package(root, "adaptrack")
-    loop = Path(_scene_loop.__file__).resolve()
+    loop = Path(scan_loop.__file__).resolve()
     names = {str(f.relative_to(root)) for f in package.closure(loop)}
+    stages = ("rows", "body", "predict", "gate", "update", "spawn", "prune", "modes", "scan_loop")
     expected = {
-        "crossing/_scene_loop.py", "crossing/_scene_kernels.py", "crossing/_ekf_kernels.py",
-        "crossing/_radar_kernel.py", "filters/_kernels.py", "tracking/assignment.py",
+        *(f"crossing/scene/{stage}.py" for stage in stages), "crossing/estimators/kernels.py",
+        "crossing/site/geometry.py", "filters/_kernels.py", "tracking/assignment.py",
         "tracking/lifecycle.py",
     }  # fmt: skip
     assert expected <= names
-    assert "cli.py" not in names and "crossing/report.py" not in names
-    locator = _scene_loop.run_scans._cache._impl.locator
+    assert not {"cli.py", "crossing/studies/report.py", "crossing/simulation/scene.py"} & names
+    locator = scan_loop.run_scans._cache._impl.locator
     assert locator.get_source_stamp()[1] == package.digest(loop)
+
+
+def _package_kernels():
+    """Every compiled function defined in a module of adaptrack, with its module."""
+    from numba.core.registry import CPUDispatcher
+
+    for info in pkgutil.walk_packages(adaptrack.__path__, "adaptrack."):
+        module = importlib.import_module(info.name)
+        for obj in vars(module).values():
+            if isinstance(obj, CPUDispatcher) and obj.py_func.__module__ == module.__name__:
+                yield module, obj
+
+
+def _callees(kernel):
+    """The compiled functions ``kernel`` names: globals, and attributes of imported modules."""
+    from numba.core.registry import CPUDispatcher
+
+    names, scope = kernel.py_func.__code__.co_names, kernel.py_func.__globals__
+    for name in names:
+        obj = scope.get(name)
+        if isinstance(obj, types.ModuleType):
+            yield from (
+                a for a in (getattr(obj, n, None) for n in names) if isinstance(a, CPUDispatcher)
+            )
+        elif isinstance(obj, CPUDispatcher):
+            yield obj
+
+
+def test_every_kernel_is_stamped_with_the_files_of_the_kernels_it_compiles_in():
+    root = Path(adaptrack.__file__).parent.resolve()
+    package = _kernel_cache._Package(root, "adaptrack")
+    kernels = list(_package_kernels())
+    assert len(kernels) > 100  # every wing's kernels were found
+    unstamped = []
+    for module, kernel in kernels:
+        closure = set(package.closure(Path(module.__file__).resolve()))
+        for callee in _callees(kernel):
+            source = Path(callee.py_func.__code__.co_filename).resolve()
+            if package.holds(source) and source not in closure:
+                unstamped.append(f"{module.__name__}.{kernel.__name__} -> {source.name}")
+    assert not unstamped
 
 
 def test_relative_imports_resolve_to_the_package_files(tmp_path):

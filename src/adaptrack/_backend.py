@@ -27,7 +27,7 @@ def use_compiled(
 
 
 def kernels_cached(
-    kernel: str = "_radar_kernel.detections_kernel", package: str = "crossing"
+    kernel: str = "radar_kernel.detections_kernel", package: str = "crossing"
 ) -> bool:
     """Whether numba's on-disk cache holds ``kernel`` (else a first run compiles).
 

@@ -34,7 +34,7 @@ FIRST_RUN_NOTE = (
 
 
 def announce_compilation(
-    duration: str, kernel: str = "_radar_kernel.detections_kernel", package: str = "crossing"
+    duration: str, kernel: str = "radar_kernel.detections_kernel", package: str = "crossing"
 ) -> None:
     """Say so on stderr when this run will compile ``kernel`` (not in numba's cache)."""
     if not kernels_cached(kernel, package):

@@ -34,15 +34,6 @@ from .analysis.flights import (
 )
 from .cli_site import site_app
 from .coords.geodetic import enu_to_ecef, enu_to_ecef_rotation
-from .crossing.compliance import (
-    POSITION_LIMIT_M,
-    SPEED_LIMIT_KMH,
-    ComplianceResult,
-    confirm_undecided,
-    default_trackers,
-    evaluate_site,
-)
-from .crossing.families import FAMILIES
 from .crossing.measurements_io import (
     WARNING_COLUMNS,
     detections_frame,
@@ -50,13 +41,23 @@ from .crossing.measurements_io import (
     read_scene_detections,
     read_warnings,
 )
-from .crossing.mixed_traffic import MixedTraffic, mixed_traffic_study
-from .crossing.radar_sim import simulate_site_case
-from .crossing.report import build_report, render_html, sample_tracks
-from .crossing.scene import scene_spec, simulate_scene
-from .crossing.scene_metrics import HAZARD_COLUMNS, TRUTH_COLUMNS
-from .crossing.scene_tracker import load_scene_config, track_scene
-from .crossing.selection import (
+from .crossing.scene.tracker import load_scene_config, track_scene
+from .crossing.simulation.radar import simulate_site_case
+from .crossing.simulation.scene import scene_spec, simulate_scene
+from .crossing.site.model import Site, load_site, site_from_mapping
+from .crossing.studies.compliance import (
+    POSITION_LIMIT_M,
+    SPEED_LIMIT_KMH,
+    ComplianceResult,
+    confirm_undecided,
+    default_trackers,
+    evaluate_site,
+)
+from .crossing.studies.families import FAMILIES
+from .crossing.studies.mixed_traffic import MixedTraffic, mixed_traffic_study
+from .crossing.studies.report import build_report, render_html, sample_tracks
+from .crossing.studies.scene_metrics import HAZARD_COLUMNS, TRUTH_COLUMNS
+from .crossing.studies.selection import (
     CRITERIA,
     CRITERION_TEXT,
     SiteTuning,
@@ -64,8 +65,7 @@ from .crossing.selection import (
     select_estimator,
     site_for,
 )
-from .crossing.site import Site, load_site, site_from_mapping
-from .crossing.trackers import RoadTracker, Tracker
+from .crossing.studies.trackers import RoadTracker, Tracker
 from .io.navigation import read_navigation_measurements, read_radar_record
 from .io.tables import (
     DataFormatError,
@@ -630,7 +630,7 @@ def _track_scene_file(
         settings = load_scene_config(config) if config is not None else None
     except (ValueError, OSError) as exc:
         _fail(str(exc))
-    announce_compilation(TRACK_COMPILE_TIME, "_scene_loop.run_scans")
+    announce_compilation(TRACK_COMPILE_TIME, "scan_loop.run_scans")
     with progress(Console(), "tracking (scans)") as bar:
         try:
             tracks, events_frame, log = track_scene(

@@ -2,7 +2,7 @@
 
 GOSPA with its parts, identity switches and fragmentations, and each class's accuracy through
 association with its verdict against the crossing's limits
-(:func:`adaptrack.crossing.scene_metrics.score_scene`).
+(:func:`adaptrack.crossing.studies.scene_metrics.score_scene`).
 """
 
 from __future__ import annotations
@@ -18,7 +18,8 @@ from rich.console import Console
 from rich.table import Table
 
 from ._cli_errors import check_outputs, fail
-from .crossing.scene_metrics import (
+from .crossing.site.model import load_site
+from .crossing.studies.scene_metrics import (
     HAZARD_COLUMNS,
     TRACK_COLUMNS,
     TRUTH_COLUMNS,
@@ -26,7 +27,6 @@ from .crossing.scene_metrics import (
     event_outcomes,
     score_scene,
 )
-from .crossing.site import load_site
 from .io.tables import numeric_column, read_table, require_columns, write_text_atomic
 
 

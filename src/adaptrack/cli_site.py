@@ -9,8 +9,8 @@ from rich.console import Console
 from rich.table import Table
 
 from ._cli_errors import fail
-from .crossing.site import blind_zones, builtin_sites, load_site
-from .crossing.site_authoring import coverage_svg, coverage_table, site_map_svg, site_template
+from .crossing.site.authoring import coverage_svg, coverage_table, site_map_svg, site_template
+from .crossing.site.model import blind_zones, builtin_sites, load_site
 from .io.tables import write_text_atomic
 
 site_app = typer.Typer(

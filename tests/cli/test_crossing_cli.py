@@ -11,7 +11,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from adaptrack.crossing.selection import Candidate, SiteTuning, load_tuning
+from adaptrack.crossing.studies.selection import Candidate, SiteTuning, load_tuning
 
 IMM_PARAMS = {"accel_psd": 0.1, "jerk_psd": 3.0, "sojourn_s": 10.0}
 
@@ -264,7 +264,7 @@ def test_false_tracks_and_the_time_to_confirm():
     """A car in the zone from 0 s, tracked from 1 s; a confirmed track 50 m from it at 1 and
     1.5 s: one false track, a time to confirm of 1 s. A tentative track (a new one on an
     established body) is not a reported road user."""
-    from adaptrack.crossing.scene_metrics import TRACK_COLUMNS, TRUTH_COLUMNS, score_scene
+    from adaptrack.crossing.studies.scene_metrics import TRACK_COLUMNS, TRUTH_COLUMNS, score_scene
 
     times = [0.0, 0.5, 1.0, 1.5]
     truth = pd.DataFrame([(1, "car", t, 0.0, 10.0 + 10.0 * t, 10.0, True) for t in times],
@@ -308,9 +308,9 @@ def test_score_times_the_stopped_between_the_barriers_event_of_a_stall(tmp_path)
     files as `adaptrack simulate --scene --truth` does): `track` raises the event, and
     `score --events` finds the true stop from the truth file alone (as the truth in memory
     does), detected within 1 s, no false event."""
-    from adaptrack.crossing.scene import Stall, scene_spec, simulate_scene
-    from adaptrack.crossing.scene_metrics import HAZARD_COLUMNS, TRUTH_COLUMNS, hazard_stops
-    from adaptrack.crossing.site import load_site
+    from adaptrack.crossing.simulation.scene import Stall, scene_spec, simulate_scene
+    from adaptrack.crossing.site.model import load_site
+    from adaptrack.crossing.studies.scene_metrics import HAZARD_COLUMNS, TRUTH_COLUMNS, hazard_stops
 
     site = load_site("lx_default")
     spec = scene_spec(site, duration_s=200.0,

@@ -5,9 +5,9 @@ from importlib.metadata import version
 import pytest
 from pydantic import BaseModel
 
-from adaptrack.crossing.site import builtin_sites, load_site
-from adaptrack.crossing.site_authoring import site_template
-from adaptrack.crossing.site_schema import SiteFile
+from adaptrack.crossing.site.authoring import site_template
+from adaptrack.crossing.site.model import builtin_sites, load_site
+from adaptrack.crossing.site.schema import SiteFile
 
 
 def _field_names(model: type[BaseModel]) -> set[str]:
@@ -102,7 +102,7 @@ def test_site_check_refuses_a_file_as_its_output_folder(cli, tmp_path):
 
 def _tuned(path, site: str, fingerprint: str = ""):
     """A tuned.toml of one CV candidate, recording ``site`` (and its fingerprint)."""
-    from adaptrack.crossing.selection import Candidate, SiteTuning
+    from adaptrack.crossing.studies.selection import Candidate, SiteTuning
 
     cv = Candidate("cv", "road EKF (CV)", {"accel_psd": 0.5}, 0.4, 10, 0.42, 0.5, "car / x")
     tuning = SiteTuning(site, "tail", 0, 1, 2, (cv,), "cv", "test", site_fingerprint=fingerprint)
@@ -111,7 +111,7 @@ def _tuned(path, site: str, fingerprint: str = ""):
 
 
 def test_the_site_comes_from_the_option_or_the_tuned_configuration(tmp_path):
-    from adaptrack.crossing.selection import load_tuning, site_for
+    from adaptrack.crossing.studies.selection import load_tuning, site_for
 
     stress = load_site("lx_stress")
     tuned = _tuned(tmp_path / "tuned.toml", "lx_stress", stress.fingerprint)

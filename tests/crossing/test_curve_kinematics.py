@@ -11,12 +11,12 @@ import math
 import numpy as np
 import pytest
 
-from adaptrack.crossing.radar_sim import simulate_case
-from adaptrack.crossing.road import RoadElement, build_road
-from adaptrack.crossing.sensor import Curve
-from adaptrack.crossing.site import load_site
-from adaptrack.crossing.tracking import _road_estimates, _road_measure
-from adaptrack.crossing.traffic import VEHICLES, Case
+from adaptrack.crossing.estimators.road_filters import _road_estimates, _road_measure
+from adaptrack.crossing.simulation.radar import simulate_case
+from adaptrack.crossing.site.model import load_site
+from adaptrack.crossing.site.road import RoadElement, build_road
+from adaptrack.crossing.site.sensor import Curve
+from adaptrack.crossing.site.traffic import VEHICLES, Case
 
 RADIUS_M = 80.0
 HEADING = 0.3

@@ -4,9 +4,9 @@ the requirement there."""
 
 import pytest
 
-from adaptrack.crossing.compliance import evaluate_site
-from adaptrack.crossing.selection import criterion_value, select_estimator
-from adaptrack.crossing.site import builtin_sites, load_site
+from adaptrack.crossing.site.model import builtin_sites, load_site
+from adaptrack.crossing.studies.compliance import evaluate_site
+from adaptrack.crossing.studies.selection import criterion_value, select_estimator
 
 
 def _per_pair(rows, label):

@@ -6,14 +6,14 @@ import json
 import numpy as np
 import pytest
 
-from adaptrack.crossing._figures import site_layers
-from adaptrack.crossing.compliance import verdict_of
-from adaptrack.crossing.mixed_traffic import (
+from adaptrack.crossing.site.drawing import site_layers
+from adaptrack.crossing.site.model import load_site, site_from_mapping
+from adaptrack.crossing.studies.compliance import verdict_of
+from adaptrack.crossing.studies.mixed_traffic import (
     MixedTraffic,
     mixed_traffic_html,
     mixed_traffic_study,
 )
-from adaptrack.crossing.site import load_site, site_from_mapping
 from tests.browser import render_in_chromium
 from tests.crossing.test_report import SMALL
 

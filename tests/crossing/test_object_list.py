@@ -5,11 +5,11 @@ import pandas as pd
 import pytest
 
 from adaptrack.crossing.measurements_io import read_scene_detections
-from adaptrack.crossing.object_list import object_list_ids
-from adaptrack.crossing.scene import scene_spec, simulate_scene
-from adaptrack.crossing.scene_metrics import score_scene
-from adaptrack.crossing.scene_tracker import SceneTracker, SceneTrackerConfig, track_scene
-from adaptrack.crossing.site import load_site
+from adaptrack.crossing.scene.tracker import SceneTracker, SceneTrackerConfig, track_scene
+from adaptrack.crossing.simulation.object_list import object_list_ids
+from adaptrack.crossing.simulation.scene import scene_spec, simulate_scene
+from adaptrack.crossing.site.model import load_site
+from adaptrack.crossing.studies.scene_metrics import score_scene
 
 SITE = load_site("lx_default")
 

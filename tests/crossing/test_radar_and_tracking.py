@@ -6,13 +6,13 @@ import math
 import numpy as np
 import pytest
 
-from adaptrack.crossing._radar_kernel import wrapped
-from adaptrack.crossing.compliance import ComplianceResult, evaluate_site
-from adaptrack.crossing.radar_sim import simulate_case
-from adaptrack.crossing.sensor import Curve
-from adaptrack.crossing.site import load_site
-from adaptrack.crossing.tracking import track_free_2d, track_on_road
-from adaptrack.crossing.traffic import VEHICLES
+from adaptrack.crossing.estimators.road_filters import track_free_2d, track_on_road
+from adaptrack.crossing.simulation.radar import simulate_case
+from adaptrack.crossing.simulation.radar_kernel import wrapped
+from adaptrack.crossing.site.model import load_site
+from adaptrack.crossing.site.sensor import Curve
+from adaptrack.crossing.site.traffic import VEHICLES
+from adaptrack.crossing.studies.compliance import ComplianceResult, evaluate_site
 from adaptrack.models import ConstantAcceleration
 
 SITE = load_site("lx_default")
@@ -75,7 +75,7 @@ def test_detections_noise_and_gates():
         stop_line_m=15.0,
         lateral_offset_std_m=0.0,
     )
-    from adaptrack.crossing.radar_sim import radial_geometry
+    from adaptrack.crossing.simulation.radar import radial_geometry
 
     r_true, _, vr_true = radial_geometry(pt.position, pt.velocity, radar)
     ok = pt.detected
@@ -138,7 +138,7 @@ def test_tracks_start_at_first_detection_and_coast():
 
 @pytest.mark.distributed
 def test_compliance_on_a_dask_cluster_is_bit_identical_and_structured(dask_pool, monkeypatch):
-    from adaptrack.crossing import compliance
+    from adaptrack.crossing.studies import compliance
 
     monkeypatch.setattr(compliance, "RUN_BLOCK_STEPS", 1_000)  # several blocks per pair
     cases = (CASE["B/pass_60"], CASE["A/pass_60"])
@@ -163,7 +163,7 @@ def test_compliance_on_a_dask_cluster_is_bit_identical_and_structured(dask_pool,
 
 @pytest.mark.distributed
 def test_custom_trackers_run_on_the_cluster_too(dask_pool):
-    from adaptrack.crossing.trackers import RoadTracker
+    from adaptrack.crossing.studies.trackers import RoadTracker
 
     mine = {"road EKF (CA, q = 1)": RoadTracker(ConstantAcceleration(jerk_psd=1.0))}
     cases = (CASE["B/pass_60"],)
@@ -180,10 +180,10 @@ def test_run_blocks_merge_to_the_pooled_rms(monkeypatch):
     """Blocks of runs (own seed streams) pool into the RMS over all their epochs."""
     import math
 
-    from adaptrack.crossing import compliance
-    from adaptrack.crossing.compliance import _blocks, evaluate_pair
-    from adaptrack.crossing.radar_sim import site_scan_count
-    from adaptrack.crossing.trackers import RoadTracker
+    from adaptrack.crossing.simulation.radar import site_scan_count
+    from adaptrack.crossing.studies import compliance
+    from adaptrack.crossing.studies.compliance import _blocks, evaluate_pair
+    from adaptrack.crossing.studies.trackers import RoadTracker
 
     case, veh = CASE["B/pass_60"], VEHICLES["car"]
     mine = {"ca": RoadTracker(ConstantAcceleration(jerk_psd=3.0))}
@@ -205,7 +205,7 @@ def test_run_blocks_merge_to_the_pooled_rms(monkeypatch):
 def test_road_pcrlb_matches_the_filter_covariance_on_point_targets():
     """On a point target the EKF linearises at (nearly) the truth: its reported position and
     speed variances must approach the bound's (same model, same Jacobians)."""
-    from adaptrack.crossing.tracking import road_pcrlb
+    from adaptrack.crossing.estimators.road_filters import road_pcrlb
 
     radar, runs = point_target(20, 2)
     model = ConstantAcceleration(jerk_psd=3.0)
@@ -230,7 +230,7 @@ def test_road_pcrlb_matches_the_filter_covariance_on_point_targets():
 
 
 def test_converted_measurement_kf_tracks_but_needs_doppler_for_speed():
-    from adaptrack.crossing.tracking import track_converted
+    from adaptrack.crossing.estimators.road_filters import track_converted
 
     radar, runs = point_target(30, 5, detection_probability=0.95)
     zone = (runs.along_road_m <= 150) & (runs.true_times >= 1.0)
@@ -254,7 +254,7 @@ def test_compiled_trackers_and_bound_equal_the_numpy_reference(case_name):
     """The compiled EKFs and PCRLB give the NumPy loops' numbers to rounding. (Cases whose
     vehicles pass close under the radar are left out: there the linearisation is so
     ill-conditioned that rounding differences grow along the track, as between two builds.)"""
-    from adaptrack.crossing.tracking import road_pcrlb
+    from adaptrack.crossing.estimators.road_filters import road_pcrlb
     from adaptrack.models import ShapingFilter
 
     case = CASE[case_name]
@@ -289,7 +289,7 @@ def test_compiled_trackers_and_bound_equal_the_numpy_reference(case_name):
 
 def test_generated_ekf_kernel_equals_the_generic_kernel(monkeypatch):
     """The straight-line kernel (per state size) and the generic-loop one agree to rounding."""
-    from adaptrack.crossing import _ekf_codegen, _ekf_kernels
+    from adaptrack.crossing.estimators import codegen, kernels
 
     case = CASE["A/stop_60"]
     radar, runs = simulate(case, vehicle="truck", n_runs=8, seed=5)
@@ -299,7 +299,7 @@ def test_generated_ekf_kernel_equals_the_generic_kernel(monkeypatch):
         track_on_road(*args, road, model=ConstantAcceleration(jerk_psd=3.0), backend="numba"),
         track_free_2d(*args, scatter_std_m=0.7, backend="numba"),
     ]
-    monkeypatch.setattr(_ekf_codegen, "ekf_kernel", lambda *_: _ekf_kernels.ekf_kernel)
+    monkeypatch.setattr(codegen, "ekf_kernel", lambda *_: kernels.ekf_kernel)
     generic = [
         track_on_road(*args, road, model=ConstantAcceleration(jerk_psd=3.0), backend="numba"),
         track_free_2d(*args, scatter_std_m=0.7, backend="numba"),
@@ -313,9 +313,9 @@ def test_generated_ekf_kernel_equals_the_generic_kernel(monkeypatch):
 def test_detection_kernel_equals_the_numpy_geometry():
     """Detections of the compiled simulation equal :func:`radial_geometry` plus unit noise
     scaled by the radar's curves at the true geometry, gated by near/far fields of view."""
-    from adaptrack.crossing._radar_kernel import detections_kernel
-    from adaptrack.crossing.radar_sim import radial_geometry
-    from adaptrack.crossing.sensor import FieldOfView
+    from adaptrack.crossing.simulation.radar import radial_geometry
+    from adaptrack.crossing.simulation.radar_kernel import detections_kernel
+    from adaptrack.crossing.site.sensor import FieldOfView
 
     radar = dataclasses.replace(
         SITE.radar_for("A"),
@@ -377,7 +377,7 @@ def test_detection_probability_follows_class_and_range():
         SITE.roads["B"], radar, VEHICLES["motorcycle"], CASE["B/pass_60"], n_runs=400,
         rng=np.random.default_rng(8), start_m=200.0, stop_line_m=15.0, lateral_offset_std_m=0.3,
     )  # fmt: skip
-    from adaptrack.crossing.radar_sim import radial_geometry
+    from adaptrack.crossing.simulation.radar import radial_geometry
 
     rng_m, _, _ = radial_geometry(runs.position, runs.velocity, radar)
     for lo, hi in ((20.0, 40.0), (95.0, 105.0), (170.0, 190.0)):

@@ -6,11 +6,11 @@ import re
 
 import pytest
 
-from adaptrack.crossing._interactive import plotly_script
-from adaptrack.crossing.compliance import evaluate_site
-from adaptrack.crossing.report import build_report, render_html, sample_tracks
-from adaptrack.crossing.selection import select_estimator
-from adaptrack.crossing.site import site_from_mapping
+from adaptrack.crossing.site.interactive import plotly_script
+from adaptrack.crossing.site.model import site_from_mapping
+from adaptrack.crossing.studies.compliance import evaluate_site
+from adaptrack.crossing.studies.report import build_report, render_html, sample_tracks
+from adaptrack.crossing.studies.selection import select_estimator
 from tests.browser import chromium_executable
 
 # a small site written as a user would: one arm, a near and a far field, two cases

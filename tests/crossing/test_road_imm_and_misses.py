@@ -7,16 +7,16 @@ import numpy as np
 import pytest
 from scipy.linalg import expm
 
-from adaptrack.crossing import tracking
-from adaptrack.crossing.radar_sim import simulate_case
-from adaptrack.crossing.sensor import Curve
-from adaptrack.crossing.site import load_site
-from adaptrack.crossing.tracking import (
+from adaptrack.crossing.estimators import road_filters as tracking
+from adaptrack.crossing.estimators.road_filters import (
     switching_generator,
     track_on_road,
     track_on_road_imm,
 )
-from adaptrack.crossing.traffic import VEHICLES
+from adaptrack.crossing.simulation.radar import simulate_case
+from adaptrack.crossing.site.model import load_site
+from adaptrack.crossing.site.sensor import Curve
+from adaptrack.crossing.site.traffic import VEHICLES
 from adaptrack.models import ConstantAcceleration, ConstantVelocity
 
 SITE = load_site("lx_default")

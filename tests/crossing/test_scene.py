@@ -4,17 +4,17 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from adaptrack.crossing.scene import (
+from adaptrack.crossing.scene.tracker import SceneTracker, track_scene
+from adaptrack.crossing.simulation.scene import (
     STEP_S,
     WALKERS_AND_RIDERS,
     Stall,
     scene_spec,
     simulate_scene,
 )
-from adaptrack.crossing.scene_metrics import event_outcomes, hazard_stops, score_scene
-from adaptrack.crossing.scene_tracker import SceneTracker, track_scene
-from adaptrack.crossing.site import load_site
-from adaptrack.crossing.traffic import VEHICLES
+from adaptrack.crossing.site.model import load_site
+from adaptrack.crossing.site.traffic import VEHICLES
+from adaptrack.crossing.studies.scene_metrics import event_outcomes, hazard_stops, score_scene
 
 SITE = load_site("lx_default")
 
@@ -172,8 +172,8 @@ def test_the_compiled_runs_equal_the_scan_by_scan_steps(stalled, monkeypatch):
     """track_scene (runs of 4096 scans in one compiled call, one row buffer) gives the same
     rows and events as SceneTracker.step scan by scan, and as runs of 7 scans whose row
     buffer starts empty and grows (a stall: alarms, a queue, tracks opened and deleted)."""
-    import adaptrack.crossing.scene_tracker as scene_tracker
-    from adaptrack.crossing.scene_tracker import iter_scans
+    import adaptrack.crossing.scene.tracker as scene_tracker
+    from adaptrack.crossing.scene.tracker import iter_scans
 
     tracks, events, log = track_scene(SITE, stalled.detections)
     assert len(events) >= 1
@@ -228,7 +228,7 @@ def test_a_detection_beside_every_road_opens_no_track_and_is_counted(across_m, o
     (a footway) opens a tentative track; 25 m (a field beside the site's roads, farther than
     ``max_open_offset_m`` = 15 m from every corridor) opens none and is counted as
     ``off_road``; every detection is accounted for either way."""
-    from adaptrack.crossing._scene_kernels import nearest_sample
+    from adaptrack.crossing.scene.spawn import nearest_sample
 
     tracker = SceneTracker(SITE)
     cor, radar, _ = _queue_lane(tracker)
@@ -271,14 +271,14 @@ def test_bad_scene_settings_are_named():
     with pytest.raises(ValueError, match="unknown class 'tram'"):
         scene_spec(SITE, mix={"tram": 1.0})
     with pytest.raises(ValueError, match="unknown road 'Z'"):
-        from adaptrack.crossing.scene import Flow
+        from adaptrack.crossing.simulation.scene import Flow
 
         scene_spec(SITE, flows=(Flow("A", "Z", 100.0),))
     with pytest.raises(ValueError, match="no traffic flow"):
         scene_spec(SITE, flows=(Flow("A", "B", 0.0),))
     with pytest.raises(ValueError, match="no traffic flow"):
         scene_spec(load_site("lx_curve_near"))  # one road: no corridor to drive through
-    from adaptrack.crossing.site import site_from_mapping
+    from adaptrack.crossing.site.model import site_from_mapping
 
     data = dict(SITE.source)
     data["scene"] = {"duraton_s": 10.0}
@@ -288,7 +288,7 @@ def test_bad_scene_settings_are_named():
 
 def test_corridor_follows_the_roads_as_built():
     """lx_default: arm A runs straight north for 60 m, arm B straight south (site file)."""
-    from adaptrack.crossing.corridor import site_corridors
+    from adaptrack.crossing.site.corridor import site_corridors
 
     (cor,) = site_corridors(SITE.roads, 200.0)
     pts = cor.path.lane_point(cor.crossing_u + np.array([-30.0, 0.0, 100.0]), 0.0)
@@ -334,9 +334,9 @@ def test_events_over_closures_queues_and_a_stall(seed):
 def test_learnt_clutter_reserves_its_own_detections():
     """A static object older than clutter_age_s keeps the detections in its tight gate; a
     young one (a vehicle waiting at a closure may look static) and moving tracks do not."""
-    from adaptrack.crossing._scene_kernels import reserve_clutter
-    from adaptrack.crossing._scene_loop import learnt_clutter
-    from adaptrack.crossing.scene_tracker import SceneTrackerConfig, _Tracks
+    from adaptrack.crossing.scene.gate import reserve_clutter
+    from adaptrack.crossing.scene.scan_loop import learnt_clutter
+    from adaptrack.crossing.scene.tracker import SceneTrackerConfig, _Tracks
 
     tracker = SceneTracker(SITE, SceneTrackerConfig(clutter_age_s=100.0))
     tracker.book.add(2, 0.0)  # an old static object and a road user
@@ -359,7 +359,7 @@ def test_learnt_clutter_is_frozen_and_a_young_static_object_is_not():
     """A static object older than ``clutter_age_s`` (learnt clutter) is neither predicted nor
     updated by its detections: its state and covariance stay as they were, while a young
     static object's are updated (its place converges on its reflections)."""
-    from adaptrack.crossing.scene_tracker import SceneTrackerConfig, _Tracks
+    from adaptrack.crossing.scene.tracker import SceneTrackerConfig, _Tracks
 
     tracker = SceneTracker(SITE, SceneTrackerConfig(clutter_age_s=100.0))
     cor, radar, half_lane = _queue_lane(tracker)
@@ -387,7 +387,7 @@ def test_stored_clutter_views_equal_views_made_anew():
     after; tracking 90 s of a scene (learnt clutter after 10 s; cars, trucks and clutter)
     with the stored views gives the same tracks, to the last bit, as making every view anew
     (the stored views cleared before each scan)."""
-    from adaptrack.crossing.scene_tracker import SceneTrackerConfig, iter_scans
+    from adaptrack.crossing.scene.tracker import SceneTrackerConfig, iter_scans
 
     spec = scene_spec(SITE, duration_s=90.0)
     rec = simulate_scene(SITE, spec, 5)
@@ -405,8 +405,8 @@ def test_stored_clutter_views_equal_views_made_anew():
     for name in ("x", "p", "spread"):
         np.testing.assert_array_equal(getattr(stored.tracks, name), getattr(anew.tracks, name))
     # the gate itself, on the last scan of each radar: the same to the last bit
-    from adaptrack.crossing._scene_kernels import associate_scan
-    from adaptrack.crossing._scene_loop import learnt_clutter
+    from adaptrack.crossing.scene.gate import associate_scan
+    from adaptrack.crossing.scene.scan_loop import learnt_clutter
 
     t, st, site = stored._rows(), stored._settings, stored._tables
     clutter = learnt_clutter(t.stopped, t.moved, t.time_s, t.born_s, config.clutter_age_s)
@@ -437,8 +437,8 @@ def test_will_not_stop_before_the_stop_line_rule():
     27.4 / 20 s. At 10 m/s it needs 1.8 m/s^2: none. A car following the first one stops
     behind it: none. Not detected for longer than ``stop_seen_s``: none.
     """
-    from adaptrack.crossing._scene_loop import stop_line_rows, warning_on
-    from adaptrack.crossing.scene_tracker import _Tracks
+    from adaptrack.crossing.scene.scan_loop import stop_line_rows, warning_on
+    from adaptrack.crossing.scene.tracker import _Tracks
 
     tracker = SceneTracker(SITE, warnings=np.array([[0.0, 100.0]]))
     cor = tracker.corridors[0]
@@ -474,7 +474,7 @@ def test_a_sites_own_classes_drive_in_its_scene():
     """A site's custom class (rural_crossing's tractor, its 16.5 m truck) joins its traffic."""
     from pathlib import Path
 
-    from adaptrack.crossing.scene import detections_per_scan, road_users
+    from adaptrack.crossing.simulation.scene import detections_per_scan, road_users
 
     site = load_site(Path(__file__).parents[2] / "examples" / "sites" / "rural_crossing.toml")
     users = road_users(site)
@@ -520,7 +520,7 @@ def _queue_lane(tracker):
 def _one_stopped_track(tracker, u, d, spread):
     """Make ``tracker`` hold one confirmed road user (id 1) stopped at ``(u, d)`` on its
     first corridor, approaching the crossing, with body ``spread`` [m]."""
-    from adaptrack.crossing.scene_tracker import _Tracks
+    from adaptrack.crossing.scene.tracker import _Tracks
 
     x = np.array([[u, 0.0, 0.0, d]])
     p = np.diag([0.01, 1e-4, 1e-4, 0.04])[None]
@@ -537,7 +537,7 @@ def test_one_track_over_two_queued_cars_splits_into_two(kurtosis):
     with a spread stretched over both: its gate takes both cars' reflections) splits into two
     tracks on the cars; the part towards the crossing keeps the identity. With the split
     switched off (kurtosis 0) it stays one track between the cars (the test can fail)."""
-    from adaptrack.crossing.scene_tracker import SceneTrackerConfig
+    from adaptrack.crossing.scene.tracker import SceneTrackerConfig
 
     tracker = SceneTracker(SITE, SceneTrackerConfig(split_kurtosis=kurtosis))
     cor, radar, half_lane = _queue_lane(tracker)
@@ -568,7 +568,7 @@ def test_a_stopped_users_body_spread_stays_what_it_learnt_while_moving():
     in: in a queue the bodies touch, and a spread stretched by a neighbour's reflections
     widens the gate that takes more of them (learning on, it reached 1.38 m here). The
     reflections' moments still learn (they decide a split, switched off here)."""
-    from adaptrack.crossing.scene_tracker import SceneTrackerConfig
+    from adaptrack.crossing.scene.tracker import SceneTrackerConfig
 
     tracker = SceneTracker(SITE, SceneTrackerConfig(split_kurtosis=0.0))
     cor, radar, half_lane = _queue_lane(tracker)
@@ -589,7 +589,7 @@ def test_a_stopped_users_body_spread_stays_what_it_learnt_while_moving():
 def _stopped_tracks(tracker, bodies):
     """Make ``tracker`` hold confirmed road users (ids 1, 2, ...) stopped on its first corridor,
     approaching the crossing: ``bodies`` is a list of ``(u, d, spread)``."""
-    from adaptrack.crossing.scene_tracker import _Tracks
+    from adaptrack.crossing.scene.tracker import _Tracks
 
     n = len(bodies)
     x = np.zeros((n, 4))
@@ -648,7 +648,7 @@ def test_a_hidden_truck_in_a_queue_keeps_its_place_behind_the_car_ahead(
     (within 0.5 m), with or without the occlusion gate. Without either it creeps 3 m towards
     the car in 45 s (a development-seed failure). (The occlusion gate alone does not hold it:
     it applies while the truck track stands, and a false start lets it learn a longer body.)"""
-    from adaptrack.crossing.scene_tracker import SceneTrackerConfig
+    from adaptrack.crossing.scene.tracker import SceneTrackerConfig
 
     config = SceneTrackerConfig(
         split_kurtosis=0.0, body_extent_gate=bool(extent_gate), occlusion_gate=bool(occlusion_gate)
@@ -680,7 +680,7 @@ def test_a_car_hidden_behind_a_queued_bus_does_not_creep_onto_the_bus(
     track itself stays within 0.5 m; with 2 m its far end's reflections first open a static
     track, which is its own reflection and goes (``absorb_young_static``; kept, it held the
     bus's front reflections and the bus track drifted 1.7 m backwards in the minute)."""
-    from adaptrack.crossing.scene_tracker import SceneTrackerConfig
+    from adaptrack.crossing.scene.tracker import SceneTrackerConfig
 
     config = SceneTrackerConfig(
         split_kurtosis=0.0, occlusion_gate=bool(occlusion_gate), body_extent_gate=bool(extent_gate)
@@ -702,7 +702,7 @@ def test_a_queued_bus_whose_reflections_are_missed_keeps_off_the_truck_ahead(see
     but a stopped one learns no spread, so it costs the bus track its excess over its body's
     end all the same. The bus track stays within 0.5 m after a minute; taking them whenever
     its own were missed, it stood 0.9-1.4 m towards the truck (validation seed 909, 0.93 m)."""
-    from adaptrack.crossing.scene_tracker import SceneTrackerConfig
+    from adaptrack.crossing.scene.tracker import SceneTrackerConfig
 
     config = SceneTrackerConfig(split_kurtosis=0.0, occlusion_gate=False)
     truck, bus = (7.1, 2.5, 3, 1.56), (12.0, 2.55, 3, 3.0)
@@ -717,7 +717,7 @@ def test_a_track_stopping_on_an_alarmed_object_raises_no_second_alarm(same_objec
     took the car's reflections, validation seed 31 at 767 s) and one stops 7 m behind it (a
     second object). One object, one alarm: the first raises none, the second does; with
     ``same_object_m = 0`` both would (the test can fail)."""
-    from adaptrack.crossing.scene_tracker import SceneTrackerConfig
+    from adaptrack.crossing.scene.tracker import SceneTrackerConfig
 
     tracker = SceneTracker(SITE, SceneTrackerConfig(same_object_m=same_object_m))
     cor, radar, half_lane = _queue_lane(tracker)
@@ -764,7 +764,7 @@ def test_a_road_user_standing_beside_an_alarmed_one_raises_its_own_alarm():
 def _moving_track(tracker, u, d, speed, spread):
     """Add a confirmed road user moving at ``speed`` [m/s] along the first corridor (u
     rising) at ``(u, d)`` with body ``spread`` [m] to ``tracker`` (its next id)."""
-    from adaptrack.crossing.scene_tracker import _Tracks
+    from adaptrack.crossing.scene.tracker import _Tracks
 
     x = np.array([[u, speed, 0.0, d]])
     p = np.diag([0.01, 0.01, 0.01, 0.04])[None]
@@ -788,7 +788,7 @@ def test_a_stopped_motorcycle_does_not_start_on_a_car_passing_beside_it(passing_
     road user moving beside it (two across spreads or more) gates starts no stopped track
     (``passing_gate``): the motorcycle's track stays stopped on it (within 0.5 m after the
     car has passed); without the rule it follows the car (the test can fail)."""
-    from adaptrack.crossing.scene_tracker import SceneTrackerConfig
+    from adaptrack.crossing.scene.tracker import SceneTrackerConfig
 
     tracker = SceneTracker(SITE, SceneTrackerConfig(passing_gate=passing_gate))
     cor, radar, half_lane = _queue_lane(tracker)
@@ -935,7 +935,7 @@ def test_a_ghost_behind_a_car_is_not_confirmed_but_a_car_in_a_trucks_shadow_is(s
     (spread 3 m), seen past it in 15 % of the scans (the scene simulator loses 85 % of the
     detections in a large body's shadow), is confirmed all the same, within 4 s (0.55-3.6 s
     over seeds 0-5): a truck's shadow still hides it."""
-    from adaptrack.crossing.scene_tracker import SceneTrackerConfig
+    from adaptrack.crossing.scene.tracker import SceneTrackerConfig
 
     ghost = {}
     for s in (1.4, 0.0):
@@ -953,7 +953,7 @@ def _track_left_behind(config, spread, scans):
     alarm 20 m behind it on radar_A's line of sight through it, which opens a tentative
     track. Returns whether that track is still there after ``scans`` more scans
     (the object's reflection alone)."""
-    from adaptrack.crossing.scene_tracker import _Tracks
+    from adaptrack.crossing.scene.tracker import _Tracks
 
     tracker = SceneTracker(SITE, config)
     cor, radar, half_lane = _queue_lane(tracker)
@@ -983,7 +983,7 @@ def test_a_post_hides_no_track_but_a_body_as_long_as_a_trucks_does():
     and so does the post when every body is taken as a shadow (``shadow_spread_m = 0``, the
     former rule, under which such tracks stayed for seconds: 6 of the 19 live tracks per
     scan on the first 300 s of validation seed 901)."""
-    from adaptrack.crossing.scene_tracker import SceneTrackerConfig
+    from adaptrack.crossing.scene.tracker import SceneTrackerConfig
 
     default, every_body = SceneTrackerConfig(), SceneTrackerConfig(shadow_spread_m=0.0)
     assert not _track_left_behind(default, 0.3, 2)
@@ -994,7 +994,7 @@ def test_a_post_hides_no_track_but_a_body_as_long_as_a_trucks_does():
 @pytest.mark.parametrize("value", [np.nan, -0.5])
 def test_a_bad_shadow_spread_is_named(value):
     """``shadow_spread_m`` must be >= 0 (inf: no body hides a new track; 0: every body does)."""
-    from adaptrack.crossing.scene_tracker import SceneTrackerConfig
+    from adaptrack.crossing.scene.tracker import SceneTrackerConfig
 
     with pytest.raises(ValueError, match=r"SceneTrackerConfig.shadow_spread_m must be >= 0"):
         SceneTrackerConfig(shadow_spread_m=value)

@@ -5,26 +5,23 @@ import math
 import numpy as np
 import pytest
 
-from adaptrack.crossing._ekf_kernels import lane_at
-from adaptrack.crossing._scene_kernels import (
+from adaptrack.crossing.estimators.kernels import lane_at
+from adaptrack.crossing.scene.body import (
     BODY_HALF_SPREADS,
     VISIBLE_SAMPLES,
-    _visible_part,
-    confirmed_rows,
-    merged_rows,
-    mode_changes,
     nearer_occluders,
-    nearest_sample,
-    open_tracks,
-    owners,
-    predict_tracks,
     sight_lines,
-    split_rows,
-    unambiguous_assignment,
+    visible_part,
 )
-from adaptrack.crossing.corridor import nearest_corridor
-from adaptrack.crossing.scene_tracker import SceneTracker
-from adaptrack.crossing.site import load_site
+from adaptrack.crossing.scene.gate import unambiguous_assignment
+from adaptrack.crossing.scene.modes import mode_changes
+from adaptrack.crossing.scene.predict import predict_tracks
+from adaptrack.crossing.scene.prune import confirmed_rows, merged_rows
+from adaptrack.crossing.scene.spawn import nearest_sample, open_tracks, split_rows
+from adaptrack.crossing.scene.tracker import SceneTracker
+from adaptrack.crossing.scene.update import owners
+from adaptrack.crossing.site.corridor import nearest_corridor
+from adaptrack.crossing.site.model import load_site
 from adaptrack.filters._kernels import predict_into
 from adaptrack.tracking import cluster_labels, cluster_points, gnn_assign
 
@@ -205,7 +202,7 @@ def test_a_body_reaching_past_the_radars_range_is_seen_over_its_near_part():
 
     def visible(i):
         lane = lane_at(roads, 0, end, x[i, 0])
-        return _visible_part(x[i, 0], x[i, 3], spread[i], 0, end, roads, radar, fields, lane)
+        return visible_part(x[i, 0], x[i, 3], spread[i], 0, end, roads, radar, fields, lane)
 
     offset, part_spread, slope, out = visible(0)
     # independently: in view up to the ground range sqrt(40^2 - 6^2) = 39.55 m
@@ -253,7 +250,7 @@ def test_the_visible_part_of_a_body_equals_a_sampled_field_of_view_test(site_nam
                 want = (offset, spread[i] * k / VISIBLE_SAMPLES, slope)
                 checked += 1
             lo, hi = bounds[corridor[i]]
-            got = _visible_part(
+            got = visible_part(
                 x[i, 0], x[i, 3], spread[i], lo, hi, roads, radar.kernel_row(),
                 radar.field_table(), lane_at(roads, lo, hi, x[i, 0]),
             )  # fmt: skip

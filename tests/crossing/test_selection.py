@@ -5,8 +5,9 @@ import math
 
 import pytest
 
-from adaptrack.crossing.families import FAMILIES
-from adaptrack.crossing.selection import (
+from adaptrack.crossing.site.model import site_from_mapping
+from adaptrack.crossing.studies.families import FAMILIES
+from adaptrack.crossing.studies.selection import (
     Candidate,
     SiteTuning,
     criterion_value,
@@ -16,8 +17,7 @@ from adaptrack.crossing.selection import (
     training_set,
     tune_family,
 )
-from adaptrack.crossing.site import site_from_mapping
-from adaptrack.crossing.trackers import IMMTracker, RoadTracker
+from adaptrack.crossing.studies.trackers import IMMTracker, RoadTracker
 
 from .test_report import SMALL
 

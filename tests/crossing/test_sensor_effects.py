@@ -12,20 +12,24 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from adaptrack.crossing._ekf_kernels import innovation_into
+from adaptrack.crossing.estimators.kernels import innovation_into
+from adaptrack.crossing.estimators.road_filters import (
+    track_free_2d,
+    track_on_road,
+    track_on_road_imm,
+)
 from adaptrack.crossing.measurements_io import detections_frame, read_detections
-from adaptrack.crossing.radar_sim import simulate_case
-from adaptrack.crossing.scene import scene_spec, simulate_scene
-from adaptrack.crossing.scene_metrics import score_scene
-from adaptrack.crossing.scene_tracker import (
+from adaptrack.crossing.scene.tracker import (
     SceneTracker,
     SceneTrackerConfig,
     iter_scans,
     track_scene,
 )
-from adaptrack.crossing.site import load_site
-from adaptrack.crossing.tracking import track_free_2d, track_on_road, track_on_road_imm
-from adaptrack.crossing.traffic import VEHICLES
+from adaptrack.crossing.simulation.radar import simulate_case
+from adaptrack.crossing.simulation.scene import scene_spec, simulate_scene
+from adaptrack.crossing.site.model import load_site
+from adaptrack.crossing.site.traffic import VEHICLES
+from adaptrack.crossing.studies.scene_metrics import score_scene
 from adaptrack.models import ConstantAcceleration, ConstantVelocity
 
 SITE = load_site("lx_default")

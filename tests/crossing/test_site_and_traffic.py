@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from adaptrack.crossing.road import RoadElement, build_road
-from adaptrack.crossing.site import blind_zones, builtin_sites, load_site, site_from_mapping
-from adaptrack.crossing.traffic import (
+from adaptrack.crossing.site.model import blind_zones, builtin_sites, load_site, site_from_mapping
+from adaptrack.crossing.site.road import RoadElement, build_road
+from adaptrack.crossing.site.traffic import (
     VEHICLES,
     Case,
     along_road_profile,
@@ -301,7 +301,7 @@ def test_bad_case_kind():
 
 
 def test_random_approaches_respect_the_class_limits():
-    from adaptrack.crossing.traffic import random_profiles
+    from adaptrack.crossing.site.traffic import random_profiles
 
     case = next(c for c in default_cases(["B"]) if c.kind == "random")
     veh = VEHICLES["truck"]
@@ -344,14 +344,14 @@ def test_blind_zones_from_the_field_of_view():
     ],
 )
 def test_curve_errors(points, message):
-    from adaptrack.crossing.sensor import Curve
+    from adaptrack.crossing.site.sensor import Curve
 
     with pytest.raises(ValueError, match=message):
         Curve(points)
 
 
 def test_curve_values_and_packing():
-    from adaptrack.crossing.sensor import Curve, curve_tables
+    from adaptrack.crossing.site.sensor import Curve, curve_tables
 
     c = Curve(((10.0, 1.0), (20.0, 3.0)))
     np.testing.assert_allclose(c([0.0, 15.0, 99.0]), [1.0, 2.0, 3.0])

@@ -7,8 +7,8 @@ import pandas as pd
 import pytest
 
 from adaptrack.crossing.measurements_io import WARNING_COLUMNS
-from adaptrack.crossing.scene import scene_spec, simulate_scene
-from adaptrack.crossing.site import Site, load_site
+from adaptrack.crossing.simulation.scene import scene_spec, simulate_scene
+from adaptrack.crossing.site.model import Site, load_site
 from adaptrack.io.tables import write_table_atomic
 
 

@@ -7,7 +7,7 @@ import pandas as pd
 import pytest
 
 from adaptrack.crossing.measurements_io import read_scene_detections, read_warnings
-from adaptrack.crossing.scene_tracker import load_scene_config, track_scene
+from adaptrack.crossing.scene.tracker import load_scene_config, track_scene
 from adaptrack.service.engine import LiveTracker, load_state
 
 from .records import live_records, tracks_of

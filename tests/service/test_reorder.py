@@ -4,7 +4,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from adaptrack.crossing.scene_tracker import iter_scans
+from adaptrack.crossing.scene.tracker import iter_scans
 from adaptrack.service.messages import Detection
 from adaptrack.service.reorder import ReorderBuffer
 

@@ -1,22 +1,22 @@
 """Coverage of the compliance verdict's bounds on crossing Monte Carlos (not on a textbook law).
 
-Squared errors of crossing runs are right-skewed (stops, random manoeuvres): a bound at a
-nominal level covers the true RMS less often than that level. The verdict states 95 % and
-computes at a nominal 99 % (``adaptrack.crossing.compliance.BOUND_LEVEL``); this test measures
-how often the stated upper bound of a small Monte Carlo (10 runs; 40 for a random approach, as
-the demo runs them) lies above the RMS of a large one. Scripted cases reach the stated level;
-random approaches are heavy-tailed (rare runs with a manoeuvre the radar cannot see dominate
-the mean) and their bound is optimistic: the measured coverage is asserted as documented.
+Squared errors of crossing runs are right-skewed (stops, random manoeuvres): a bound at a nominal
+level covers the true RMS less often than that level. The verdict states 95 % and computes at a
+nominal 99 % (``adaptrack.crossing.studies.compliance.BOUND_LEVEL``); this test measures how often
+the stated upper bound of a small Monte Carlo (10 runs; 40 for a random approach, as the demo runs
+them) lies above the RMS of a large one. Scripted cases reach the stated level; random approaches
+are heavy-tailed (rare runs with a manoeuvre the radar cannot see dominate the mean) and their bound
+is optimistic: the measured coverage is asserted as documented.
 """
 
 import numpy as np
 import pytest
 
 from adaptrack.analysis.confidence import rms_with_bounds
-from adaptrack.crossing.compliance import BOUND_LEVEL, CONFIDENCE, run_sums, runs_of
-from adaptrack.crossing.families import FAMILIES
-from adaptrack.crossing.radar_sim import simulate_site_case
-from adaptrack.crossing.site import load_site
+from adaptrack.crossing.simulation.radar import simulate_site_case
+from adaptrack.crossing.site.model import load_site
+from adaptrack.crossing.studies.compliance import BOUND_LEVEL, CONFIDENCE, run_sums, runs_of
+from adaptrack.crossing.studies.families import FAMILIES
 
 
 @pytest.mark.statistical

@@ -43,7 +43,7 @@ from adaptrack._progress import LINE_PREFIX
 from adaptrack.cli import VERDICT_EXIT, main
 
 DEFECTS = ("internal error", "traceback", "bad message", "partial output", "silent failure")
-SITES = Path(__file__).parents[2] / "src" / "adaptrack" / "crossing" / "sites"
+SITES = Path(__file__).parents[2] / "src" / "adaptrack" / "crossing" / "site" / "sites"
 
 
 FIT_TOML = """[fit]

@@ -11,7 +11,7 @@ error (delta method) is
 and the one-sided bounds at level ``c`` are taken on the log scale (squared errors are
 right-skewed): ``R exp(+- t_{c, N-1} se / R)`` (Student's t with ``N - 1`` degrees of freedom),
 then the square root. On skewed, heavy-tailed run errors every such bound covers less often
-than its nominal level; :mod:`adaptrack.crossing.compliance` therefore states a lower
+than its nominal level; :mod:`adaptrack.crossing.studies.compliance` therefore states a lower
 confidence than the level it computes with, and a statistical test measures the coverage on
 crossing Monte Carlos.
 """

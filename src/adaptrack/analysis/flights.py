@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -37,6 +36,7 @@ from ..coords.geodetic import (
 from ..coords.radar import enu_to_polar, polar_to_enu, polar_to_enu_cov
 from ..filters.ekf import ekf_filter
 from ..filters.run import kalman_filter
+from ..io.navigation import NavigationNodes, RadarRecord
 from ..io.tables import Flight
 from ..models.continuous import Singer
 from ..models.measurement import RadarMeasurement
@@ -44,9 +44,6 @@ from ..smoothers.batch_ls import smooth_polynomial
 from ..smoothers.rts import rts_smooth
 from ..smoothers.triple_nodes import radar_triple_nodes, smooth_triple_nodes
 from ..types import GaussianState
-
-if TYPE_CHECKING:
-    from ..io.navigation import RadarRecord
 
 RANGE_STD_M = 30.0
 AZIMUTH_STD_RAD = math.radians(0.08)
@@ -71,28 +68,6 @@ class FlightRow:
     n_scored: int
     n_scans: int = 0  # radar scans of the whole flight
     n_radars: int = 1  # radars (stretches) the flight was seen by
-
-
-@dataclass(frozen=True, eq=False)
-class NavigationNodes:
-    """Position nodes (radar, converted to ENU) and velocity nodes of a second source.
-
-    Attributes
-    ----------
-    radar_times : ndarray, shape (K,)
-    radar_position, radar_cov : ndarray, shapes (K, 3), (K, 3, 3)
-        ENU positions [m] and their covariance.
-    velocity_times : ndarray, shape (J,)
-    velocity, velocity_cov : ndarray, shapes (J, 3), (J, 3, 3)
-        ENU velocities [m/s] and their covariance.
-    """
-
-    radar_times: FloatArray
-    radar_position: FloatArray
-    radar_cov: FloatArray
-    velocity_times: FloatArray
-    velocity: FloatArray
-    velocity_cov: FloatArray
 
 
 @dataclass(frozen=True, eq=False)
@@ -410,7 +385,6 @@ def evaluate_flight(
 __all__ = [
     "FlightMeasurements",
     "FlightRow",
-    "NavigationNodes",
     "evaluate_flight",
     "radar_site",
     "radar_sites",

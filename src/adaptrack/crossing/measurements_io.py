@@ -16,8 +16,8 @@ import pandas as pd
 
 from .._typing import FloatArray
 from ..io.tables import DataFormatError, numeric_column, read_table, require_columns
-from .radar_sim import CrossingRuns
-from .site import Site
+from .simulation.radar import CrossingRuns
+from .site.model import Site
 
 COLUMNS = ["object_id", "radar", "time_s", "range_m", "azimuth_rad", "radial_speed_mps"]
 

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..analysis.flights import NavigationNodes
+from .._typing import FloatArray
 from ..coords.radar import polar_to_enu, polar_to_enu_cov
 from .radar_plots import angle_column, read_radar_log
 from .tables import (
@@ -39,6 +39,28 @@ KNOWN_COLUMNS = {
     "time_s", "range_m", "azimuth_deg", "azimuth_rad", "elevation_deg", "elevation_rad",
     *VELOCITY_COLUMNS, *RATE_COLUMNS,
 }  # fmt: skip
+
+
+@dataclass(frozen=True, eq=False)
+class NavigationNodes:
+    """Position nodes (radar, converted to ENU) and velocity nodes of a second source.
+
+    Attributes
+    ----------
+    radar_times : ndarray, shape (K,)
+    radar_position, radar_cov : ndarray, shapes (K, 3), (K, 3, 3)
+        ENU positions [m] and their covariance.
+    velocity_times : ndarray, shape (J,)
+    velocity, velocity_cov : ndarray, shapes (J, 3), (J, 3, 3)
+        ENU velocities [m/s] and their covariance.
+    """
+
+    radar_times: FloatArray
+    radar_position: FloatArray
+    radar_cov: FloatArray
+    velocity_times: FloatArray
+    velocity: FloatArray
+    velocity_cov: FloatArray
 
 
 def read_navigation_measurements(
@@ -157,4 +179,4 @@ class RadarRecord:
     range_accel: np.ndarray | None
 
 
-__all__ = ["RadarRecord", "read_navigation_measurements", "read_radar_record"]
+__all__ = ["NavigationNodes", "RadarRecord", "read_navigation_measurements", "read_radar_record"]

@@ -62,8 +62,8 @@ def serve(
     --publish subscriber. SIGTERM or SIGINT: flush, final snapshot and stats, exit 0.
     """
     from ..crossing.measurements_io import read_warnings
-    from ..crossing.scene_tracker import load_scene_config
-    from ..crossing.selection import site_for
+    from ..crossing.scene.tracker import load_scene_config
+    from ..crossing.studies.selection import site_for
     from .engine import LiveTracker, load_state
     from .server import Endpoint, Service, announce
 
@@ -119,7 +119,7 @@ def replay(
     site: str = typer.Option("lx_default", "--site", help="Built-in site name or a .toml."),
 ) -> None:
     """Send a detection file to a running service in real or accelerated time."""
-    from ..crossing.site import load_site
+    from ..crossing.site.model import load_site
     from .replay import replay as send
     from .server import Endpoint
 

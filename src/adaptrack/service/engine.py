@@ -22,8 +22,8 @@ import orjson
 
 from .._files import write_atomic
 from .._typing import FloatArray
-from ..crossing.scene_tracker import STATUS_NAMES, SceneTracker, SceneTrackerConfig
-from ..crossing.site import Site
+from ..crossing.scene.tracker import STATUS_NAMES, SceneTracker, SceneTrackerConfig
+from ..crossing.site.model import Site
 from .messages import Rejected, is_header, parse_line, record_line
 from .reorder import ReorderBuffer, Scan
 
@@ -38,7 +38,7 @@ class LiveTracker:
     """Incremental scene tracking of a line stream (module docstring).
 
     ``window_s``: reorder window [s]; ``warnings`` (K, 2): the crossing's warning intervals
-    [s] (stop-line prediction), as in :func:`adaptrack.crossing.scene_tracker.track_scene`.
+    [s] (stop-line prediction), as in :func:`adaptrack.crossing.scene.tracker.track_scene`.
     """
 
     def __init__(

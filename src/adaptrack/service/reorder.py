@@ -2,7 +2,7 @@
 
 A scan is the detections of one radar with one timestamp. Scans are released in the order of
 the times they were made (timestamp less the radar's declared latency; radar name breaks
-ties: the order of offline :func:`adaptrack.crossing.scene_tracker.iter_scans`) once the
+ties: the order of offline :func:`adaptrack.crossing.scene.tracker.iter_scans`) once the
 newest time seen is ``window_s`` past them, or all at once on :meth:`ReorderBuffer.flush`.
 A detection of a scan that was released already, or older than the last released scan, is
 late: :meth:`ReorderBuffer.push` returns the reason instead of buffering it.

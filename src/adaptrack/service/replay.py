@@ -19,7 +19,7 @@ from itertools import groupby
 from pathlib import Path
 
 from ..crossing.measurements_io import read_scene_detections
-from ..crossing.site import Site
+from ..crossing.site.model import Site
 from .messages import CSV_HEADER
 from .server import Endpoint
 

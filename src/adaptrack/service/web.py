@@ -25,7 +25,7 @@ from starlette.responses import HTMLResponse, JSONResponse
 from starlette.routing import Route, WebSocketRoute
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
-from ..crossing.site import Site
+from ..crossing.site.model import Site
 from .engine import track_lines
 from .server import Service
 

@@ -1,7 +1,7 @@
 """Generic multi-object tracking machinery: gating, assignment, track life cycle.
 
 Independent of any application: the level-crossing scene tracker
-(:mod:`adaptrack.crossing.scene_tracker`) builds on it, as any other would.
+(:mod:`adaptrack.crossing.scene.tracker`) builds on it, as any other would.
 """
 
 from .assignment import assignment_by_components, cluster_labels, cluster_points, gnn_assign
