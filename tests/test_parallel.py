@@ -96,7 +96,7 @@ def test_a_task_that_kills_every_worker_stops_the_run_with_a_clear_error():
 def test_the_command_line_reports_a_lost_worker_in_one_line(capsys):
     import typer
 
-    from adaptrack.cli import _pool
+    from adaptrack.cli.options import worker_pool as _pool
 
     with pytest.raises(typer.Exit) as exit_info, _pool(1, None):
         raise WorkerLost("task 1 of 4 (fn): worker processes died every time it ran")

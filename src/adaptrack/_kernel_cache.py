@@ -3,7 +3,7 @@
 numba keys a cached kernel on the content of its own file only. A kernel that calls a
 compiled function of another module compiles that function into itself, yet stays cached
 when that module changes: it keeps running the old code (``run_scans`` in
-``crossing/_scene_loop.py`` after an edit of ``crossing/_scene_kernels.py``) until its own
+``crossing/scene/scan_loop.py`` after an edit of ``crossing/scene/gate.py``) until its own
 file changes. An installed package is new as a whole, but in a source tree (an editable
 install) a test or a benchmark after such an edit runs stale kernels and cannot tell.
 

@@ -230,7 +230,8 @@ def test_a_first_fit_says_it_compiles_only_the_kernel_its_model_runs(
 ):
     """Only the kernel the model runs is missing from the cache: the EKF's and the IMM's are
     announced with their own compile times; the Kalman filter's (seconds) is not."""
-    from adaptrack import _progress, cli_fit
+    from adaptrack import _progress
+    from adaptrack.cli import fit as cli_fit
     from adaptrack.tuning.position_log import compiled_kernel
 
     gnss_log(tmp_path / "log.csv")
@@ -250,7 +251,7 @@ def test_a_first_fit_says_it_compiles_only_the_kernel_its_model_runs(
 
 
 def test_a_rough_likelihood_is_one_note_naming_its_parameters():
-    from adaptrack.cli_fit import _fit_notes
+    from adaptrack.cli.fit import _fit_notes
     from adaptrack.tuning.likelihood import LikelihoodFit
 
     cov = np.diag([np.nan, 0.01])

@@ -40,7 +40,8 @@ import pandas as pd
 import tomllib
 
 from adaptrack._progress import LINE_PREFIX
-from adaptrack.cli import VERDICT_EXIT, main
+from adaptrack.cli import main
+from adaptrack.cli.crossing import VERDICT_EXIT
 
 DEFECTS = ("internal error", "traceback", "bad message", "partial output", "silent failure")
 SITES = Path(__file__).parents[2] / "src" / "adaptrack" / "crossing" / "site" / "sites"

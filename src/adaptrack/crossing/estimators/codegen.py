@@ -1,4 +1,4 @@
-"""Generated straight-line version of :func:`._ekf_kernels.ekf_kernel` per state size.
+"""Generated straight-line version of :func:`.kernels.ekf_kernel` per state size.
 
 The generic kernel's run-time-sized loops cost about 0.7 us per step for four states; this one
 keeps the state and covariance in scalar locals and runs the predict and Joseph update of

@@ -3,8 +3,8 @@
 Per run (runs in parallel) and scan: switching probabilities of the step from the series table
 of the mode chain's generator, IMM interaction (:func:`adaptrack.filters._imm_kernel.mix_into`),
 per mode the road EKF predict (series-table transition), the no-reversal hold and the Joseph
-update at the mode's prediction (:func:`._ekf_kernels.measure`) or, on a missed detection,
-the Doppler-gate pseudo-measurement and the miss's likelihood (:func:`._ekf_kernels.
+update at the mode's prediction (:func:`.kernels.measure`) or, on a missed detection,
+the Doppler-gate pseudo-measurement and the miss's likelihood (:func:`.kernels.
 gate_update_into`), mode probabilities and the
 combination over the common states ``[s, ds/dt, d]``, written as planar estimates. Agrees with
 the NumPy reference to rounding (tests).
@@ -74,7 +74,7 @@ def road_imm_kernel(  # type: ignore[no-untyped-def]
     ``expm(L^T h)`` of the chain generator ``L`` (``chain_h_max``); ``emb_*``/``out_idx`` as
     in :func:`adaptrack.filters._imm_kernel.imm_kernel`; ``m0`` (M, N, nmax), ``p0``
     (M, N, nmax, nmax) the initial states at ``first`` (N,). ``pos``/``vel``/``speed``/
-    ``pcov`` as in :func:`._ekf_kernels.ekf_kernel`, ``probs`` (N, T, M) the mode
+    ``pcov`` as in :func:`.kernels.ekf_kernel`, ``probs`` (N, T, M) the mode
     probabilities (NaN before the start); ``status[i] = t + 1`` if run ``i`` stops at step
     ``t`` (S not positive definite).
     """

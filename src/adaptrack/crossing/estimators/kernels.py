@@ -314,7 +314,7 @@ def ekf_kernel(  # type: ignore[no-untyped-def]
     ``pos``/``vel`` (N, T, 2), ``speed`` (N, T), ``pcov`` (N, T, 2, 2) (pre-filled with
     NaN) receive the planar estimates; ``status[i] = t + 1`` if run ``i`` stops at step ``t``
     (S not positive definite). Generic loops:
-    :mod:`._ekf_codegen` generates the same recursion in straight-line code per state size.
+    :mod:`.codegen` generates the same recursion in straight-line code per state size.
     """
     n_runs, n_steps = detected.shape
     n = m0.shape[1]

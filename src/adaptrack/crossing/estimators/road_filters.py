@@ -99,7 +99,7 @@ def _initial_point(z: FloatArray, radar: RadarSpec) -> tuple[FloatArray, FloatAr
 class _Compiled:
     """What the compiled EKF needs to evaluate a tracker's measurement model."""
 
-    kind: int  # _ekf_kernels.ROAD or FREE
+    kind: int  # kernels.ROAD or FREE
     k: int  # along-road model size (ROAD)
     radar: FloatArray  # x, y, height, boresight, min range, Doppler gate
     noise_tab: FloatArray  # (3, 2, K) range / azimuth / radial-speed sigma curves
@@ -153,7 +153,7 @@ def _doppler_usable(
 ) -> tuple[BoolArray, FloatArray, FloatArray]:
     """Where a folded radial speed can be used (N,), and ``h``, ``r`` with it left out elsewhere.
 
-    NumPy form of :func:`._ekf_kernels.doppler_usable`: the prediction tells the alias while
+    NumPy form of :func:`.kernels.doppler_usable`: the prediction tells the alias while
     the radial speed's innovation sigma is below ``fold / UNFOLD_SIGMAS``; elsewhere its
     Jacobian row and its noise cross terms are zeroed (returned copies).
     """
@@ -309,7 +309,7 @@ def _run_compiled(
     spec: _Compiled,
     n: int,
 ) -> TrackEstimates:
-    """Run the compiled EKF (:mod:`._ekf_codegen`); the planar estimates come from the kernel."""
+    """Run the compiled EKF (:mod:`.codegen`); the planar estimates come from the kernel."""
     from .codegen import ekf_kernel
 
     n_runs, n_steps = detected.shape
@@ -753,7 +753,7 @@ def _road_imm_numpy(p: _RoadIMM) -> RoadIMMEstimates:
 
 
 def _road_imm_compiled(p: _RoadIMM) -> RoadIMMEstimates:
-    """Run :func:`track_on_road_imm` in :mod:`._road_imm_kernel`."""
+    """Run :func:`track_on_road_imm` in :mod:`.imm_kernel`."""
     from ...filters.imm import _embed
     from ...models.series_table import series_table
     from .imm_kernel import road_imm_kernel

@@ -3,9 +3,10 @@
 :class:`adaptrack.crossing.scene.tracker.SceneTracker` keeps its tracks as rows of arrays
 (:class:`TrackRows`: the track book's columns and the filter's). :func:`run_scans` takes them
 into arrays with spare rows (a track opened or split is written in place, a deleted one is
-compacted away, in the order of creation), processes a run of scans with the per-scan kernels
-of :mod:`._scene_kernels` and returns them. The global assignment of an ambiguous scan is
-solved by :func:`adaptrack.tracking.gnn_assign` (SciPy), called from the loop in object mode.
+compacted away, in the order of creation), processes a run of scans with the per-scan kernels of
+the stage modules (predict, gate, update, spawn, prune, modes) and returns them. The global
+assignment of an ambiguous scan is solved by :func:`adaptrack.tracking.gnn_assign` (SciPy),
+called from the loop in object mode.
 Hazard events and, if asked, every scan's confirmed tracks (:class:`RowBuffer`) are written
 to buffers that grow as needed.
 """
@@ -171,7 +172,7 @@ class RadarState(NamedTuple):
 class RowBuffer(NamedTuple):
     """Confirmed tracks after each scan, a column each (the columns of ``SceneTracker.rows``).
 
-    Status as codes (``scene_tracker.STATUS_NAMES``); sigmas of position and speed.
+    Status as codes (``scene.tracker.STATUS_NAMES``); sigmas of position and speed.
     """
 
     track_id: np.ndarray
@@ -478,7 +479,7 @@ def warning_on(site, time_s):  # type: ignore[no-untyped-def]
 def learnt_clutter(stopped, moved, time_s, born_s, clutter_age_s):  # type: ignore[no-untyped-def]
     """Return the static objects older than ``clutter_age_s`` [s] (bool per track).
 
-    Barrier posts, rails: their detections are their own (:func:`._scene_kernels.reserve_clutter`);
+    Barrier posts, rails: their detections are their own (:func:`.gate.reserve_clutter`);
     a young one may be a vehicle waiting at a closure.
     """
     clutter = np.empty(stopped.size, np.bool_)

@@ -38,8 +38,8 @@ split a stopped track whose reflections come from two bodies of a queue
 (:meth:`SceneTracker._split`); merge two tracks on one body (two moving parts of one long
 vehicle among them; a young static object whose body overlaps a stopped road user's,
 ``absorb_young_static``). All of it runs compiled: the per-scan kernels of
-:mod:`._scene_kernels` inside one loop over scans (:mod:`._scene_loop`), so that a run of
-scans is one call (:func:`track_scene`) and a single scan too
+the stage modules of :mod:`adaptrack.crossing.scene` inside one loop over scans
+(:mod:`.scan_loop`), so that a run of scans is one call (:func:`track_scene`) and a single scan too
 (:meth:`SceneTracker.step`); the global assignment of a scan where a detection lies in two
 tracks' gates is SciPy's, called from the loop.
 
@@ -64,7 +64,7 @@ there raises "vehicle will not stop before the stop line", with its lead time (d
 the line over speed).
 
 Sensor effects: each radar's declared latency is taken off its timestamps; radial speeds of a
-folding radar are unfolded (:func:`._ekf_kernels.doppler_usable`); a constant azimuth bias of
+folding radar are unfolded (:func:`..estimators.kernels.doppler_usable`); a constant azimuth bias of
 each radar can be estimated from the offsets across the lane of the detections of tracks
 faster than 6 m/s against the centre of the lane they drive in (vehicles keep to their lane on
 average; ``estimate_azimuth_bias``, ``bias_*`` settings) and taken off the radar's next scans
@@ -297,7 +297,7 @@ class _Tracks:
     ) -> _Tracks:
         """Return new tentative tracks on ``corridor`` rows with states ``x``, ``p`` at ``time_s``.
 
-        Written as the scan loop opens a track (:func:`._scene_loop.new_row`: body ``spread_m``
+        Written as the scan loop opens a track (:func:`.scan_loop.new_row`: body ``spread_m``
         [m], no sensor object id from any of the ``n_radars`` radars).
         """
         n = corridor.size
@@ -355,7 +355,7 @@ class SceneTracker:
     ``step(radar, time_s, detections)`` processes one scan; ``rows(time_s)`` (or the arrays
     of ``columns``) gives the confirmed tracks after it; ``events`` and ``log`` collect hazard
     events and detection outcomes. :func:`track_scene` processes many scans in one compiled call
-    (:func:`._scene_loop.run_scans`), as :func:`track_scene` does.
+    (:func:`.scan_loop.run_scans`), as :func:`track_scene` does.
     """
 
     def __init__(
@@ -429,7 +429,7 @@ class SceneTracker:
 
         Scan ``k`` is ``z[starts[k]:starts[k+1]]`` with sensor ``ids``, of radar row
         ``radar_rows[k]`` (the site's order), stamped ``stamps_s[k]``; stamps of one radar
-        must increase. With ``rows_out`` (:func:`._scene_loop.empty_rows`, ``n_out`` rows
+        must increase. With ``rows_out`` (:func:`.scan_loop.empty_rows`, ``n_out`` rows
         used), the confirmed tracks after every scan are appended to it; returns the buffer
         (grown if it was full) and its rows used.
         """

@@ -188,7 +188,7 @@ def update_tracks(  # type: ignore[no-untyped-def]
 ):  # fmt: skip
     """Update each owning track with its detections in ``order`` (sequential EKF updates).
 
-    ``clutter`` rows (learnt static clutter: :func:`._scene_loop.learnt_clutter`) are frozen:
+    ``clutter`` rows (learnt static clutter: :func:`.scan_loop.learnt_clutter`) are frozen:
     after standing longer than any closure, a post's or a rail's place and body are known, and
     its detections only need to be its own (:func:`reserve_clutter`); they are not updated
     (nor predicted: :func:`predict_tracks`), which leaves its gate as it is.
@@ -311,7 +311,8 @@ def miss_updates(  # type: ignore[no-untyped-def]
 ):  # fmt: skip
     """Apply what a scan without a detection tells to the tracks in ``rows``.
 
-    :func:`._ekf_kernels.gate_update_into`: a slow vehicle is hidden by the Doppler gate, so a
+    :func:`~adaptrack.crossing.estimators.kernels.gate_update_into`: a slow
+    vehicle is hidden by the Doppler gate, so a
     run of misses that the gate explains better than ``1 - P_D`` measures a radial speed of
     0 within the gate; ``miss_run`` (T,) is each track's probability of its current run of
     misses for a moving target.

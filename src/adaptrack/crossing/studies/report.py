@@ -12,7 +12,8 @@ pass/fail table.
 
 The HTML is one file: inline CSS, inline SVG figures (matplotlib, fixed hash salt, no dates)
 and the interactive ones with the plotting library's JavaScript inlined
-(:mod:`._interactive`); it loads no network resource. Every user-supplied string is escaped.
+(:mod:`adaptrack.crossing.site.interactive`); it loads no network resource. Every
+user-supplied string is escaped.
 """
 
 from __future__ import annotations

@@ -1,9 +1,11 @@
 """Estimators of a crossing site as picklable callables: simulated runs of a case -> tracks.
 
-A tracker takes the runs of one class x case (:class:`~.radar_sim.CrossingRuns`) and the site,
-and returns :class:`~.tracking.TrackEstimates`; :meth:`estimate` runs it on detections of a
-known road and radar (a recorded file). The Monte Carlo (:mod:`.compliance`) and the
-design-time selection (:mod:`.selection`) run any mapping of names to trackers, in-process or
+A tracker takes the runs of one class x case
+(:class:`~adaptrack.crossing.simulation.radar.CrossingRuns`) and the site, and returns
+:class:`~.tracking.TrackEstimates`; :meth:`estimate` runs it on detections of a known road and
+radar (a recorded file), and :func:`track_objects` on every object of an object list whose ids
+are taken as truth. The Monte Carlo (:mod:`.compliance`) and the design-time selection
+(:mod:`.selection`) run any mapping of names to trackers, in-process or
 on a cluster (the trackers are shipped with their parameters).
 """
 
@@ -11,11 +13,16 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pandas as pd
 
 from ..._backend import Backend
 from ..._typing import BoolArray, FloatArray
 from ...models.continuous import MotionModel
 from ..estimators.road_filters import TrackEstimates, track_on_road, track_on_road_imm
+from ..measurements_io import ObjectDetections
 from ..simulation.radar import CrossingRuns
 from ..site.model import Site
 from ..site.road import Road
@@ -133,6 +140,44 @@ class IMMTracker(_RoadTrackerBase):
             scatter_std_m=scatter_std_m, detection_probability=detection_probability,
             backend=self.backend,
         )  # fmt: skip
+
+
+def track_objects(objects: list[ObjectDetections], site: Site, estimator: Any) -> pd.DataFrame:
+    """Track each object of an object list on its own with a road estimator; one table.
+
+    ``estimator`` has :meth:`RoadTracker.estimate` (a road tracker, or the deployed one of a
+    tuned configuration). Each object is one track on the road its radar watches, with the
+    reflection-point scatter and detection curve of its ``vehicle_class`` (a car when none).
+    Columns: ``object_id, time_s, east_m, north_m, speed_mps, speed_kmh, position_std_m``
+    (the root of the position covariance's trace).
+    """
+    frames = []
+    for obj in objects:
+        radar = site.radar(obj.radar)
+        user = obj.vehicle_class or "car"
+        est = estimator.estimate(
+            obj.times[None],
+            obj.measurements[None],
+            np.ones((1, obj.times.size), dtype=bool),
+            radar,
+            site.roads[site.road_of_radar(obj.radar)],
+            site.classes[user].scatter_std_m,
+            radar.detection_curve(user),
+        )
+        frames.append(
+            pd.DataFrame(
+                {
+                    "object_id": obj.object_id,
+                    "time_s": obj.times,
+                    "east_m": est.position[0, :, 0],
+                    "north_m": est.position[0, :, 1],
+                    "speed_mps": est.speed[0],
+                    "speed_kmh": 3.6 * est.speed[0],
+                    "position_std_m": np.sqrt(np.trace(est.position_cov[0], axis1=-2, axis2=-1)),
+                }
+            )
+        )
+    return pd.concat(frames, ignore_index=True)
 
 
 __all__ = ["IMMTracker", "PlanarTracker", "RoadTracker", "Tracker"]

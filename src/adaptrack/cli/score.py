@@ -17,9 +17,8 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
-from ._cli_errors import check_outputs, fail
-from .crossing.site.model import load_site
-from .crossing.studies.scene_metrics import (
+from ..crossing.site.model import load_site
+from ..crossing.studies.scene_metrics import (
     HAZARD_COLUMNS,
     TRACK_COLUMNS,
     TRUTH_COLUMNS,
@@ -27,7 +26,8 @@ from .crossing.studies.scene_metrics import (
     event_outcomes,
     score_scene,
 )
-from .io.tables import numeric_column, read_table, require_columns, write_text_atomic
+from ..io.tables import numeric_column, read_table, require_columns, write_text_atomic
+from .errors import check_outputs, fail
 
 
 def _table(path: Path, columns: list[str], numeric: list[str]) -> pd.DataFrame:

@@ -8,7 +8,7 @@ from typing import NoReturn
 import typer
 from rich.console import Console
 
-from ._files import check_writable
+from .._files import check_writable
 
 err_console = Console(stderr=True, soft_wrap=True)  # one line, whatever the width
 

@@ -9,15 +9,14 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
-from ._cli_errors import check_outputs, err_console, fail
-from ._progress import announce_compilation, progress
-from ._toml import load_toml
-from .analysis.consistency import innovation_consistency
-from .filters.imm import IMMResult
-from .io.radar_plots import RADAR_LAYOUTS, RadarLog, read_radar_log
-from .io.tables import DataFormatError, write_table_atomic, write_text_atomic
-from .tuning.likelihood import LikelihoodFit
-from .tuning.position_log import (
+from .._progress import announce_compilation, progress
+from .._toml import load_toml
+from ..analysis.consistency import innovation_consistency
+from ..filters.imm import IMMResult
+from ..io.radar_plots import RADAR_LAYOUTS, RadarLog, read_radar_log
+from ..io.tables import DataFormatError, write_table_atomic, write_text_atomic
+from ..tuning.likelihood import LikelihoodFit
+from ..tuning.position_log import (
     ALL_MEASUREMENTS,
     MODELS,
     MotionFit,
@@ -29,6 +28,7 @@ from .tuning.position_log import (
     fit_toml,
     read_position_log,
 )
+from .errors import check_outputs, err_console, fail
 
 
 def _read(path: Path, measurement: str) -> PositionLog | RadarLog:

@@ -10,9 +10,9 @@ from pathlib import Path
 
 import typer
 
-from .._cli_errors import err_console as _err
-from .._cli_errors import fail as _fail
 from .._files import check_writable
+from .errors import err_console as _err
+from .errors import fail as _fail
 
 
 def serve(
@@ -64,8 +64,8 @@ def serve(
     from ..crossing.measurements_io import read_warnings
     from ..crossing.scene.tracker import load_scene_config
     from ..crossing.studies.selection import site_for
-    from .engine import LiveTracker, load_state
-    from .server import Endpoint, Service, announce
+    from ..service.engine import LiveTracker, load_state
+    from ..service.server import Endpoint, Service, announce
 
     try:
         if out != "-":
@@ -95,7 +95,7 @@ def serve(
         for ep in outputs:
             svc.publish(ep)
         if page is not None:
-            from .web import LiveView, PageServer, live_app
+            from ..service.web import LiveView, PageServer, live_app
 
             view = LiveView(st)
             svc.on_output = view.update
@@ -120,8 +120,8 @@ def replay(
 ) -> None:
     """Send a detection file to a running service in real or accelerated time."""
     from ..crossing.site.model import load_site
-    from .replay import replay as send
-    from .server import Endpoint
+    from ..service.replay import replay as send
+    from ..service.server import Endpoint
 
     try:
         speed = float("inf") if rate == "max" else float(rate)

@@ -8,10 +8,10 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
-from ._cli_errors import fail
-from .crossing.site.authoring import coverage_svg, coverage_table, site_map_svg, site_template
-from .crossing.site.model import blind_zones, builtin_sites, load_site
-from .io.tables import write_text_atomic
+from ..crossing.site.authoring import coverage_svg, coverage_table, site_map_svg, site_template
+from ..crossing.site.model import blind_zones, builtin_sites, load_site
+from ..io.tables import write_text_atomic
+from .errors import fail
 
 site_app = typer.Typer(
     help="Site files: list the built-in sites, write a commented template, check a file.",
