@@ -65,6 +65,7 @@ from adaptrack.analysis.flights import RANGE_STD_M as RANGE_STD
 from adaptrack.coords.geodetic import ecef_to_enu, geodetic_to_ecef
 from adaptrack.coords.radar import polar_to_enu, polar_to_enu_cov
 from adaptrack.filters.imm import IMMResult, imm_filter
+from adaptrack.io.position_log import read_position_log
 from adaptrack.io.tables import read_flight_csv
 from adaptrack.models import (
     ConstantAcceleration,
@@ -77,7 +78,6 @@ from adaptrack.models import (
 from adaptrack.smoothers import imm_smooth
 from adaptrack.tuning.causal import refit_online
 from adaptrack.tuning.likelihood import fit_by_likelihood
-from adaptrack.tuning.position_log import read_position_log
 
 R_POLAR = np.diag([RANGE_STD**2, AZIMUTH_STD_RAD**2, ELEVATION_STD_RAD**2])
 WARM_UP = 3  # scans of each track not scored

@@ -232,7 +232,7 @@ def test_a_first_fit_says_it_compiles_only_the_kernel_its_model_runs(
     announced with their own compile times; the Kalman filter's (seconds) is not."""
     from adaptrack import _progress
     from adaptrack.cli import fit as cli_fit
-    from adaptrack.tuning.position_log import compiled_kernel
+    from adaptrack.tuning.log_fit import compiled_kernel
 
     gnss_log(tmp_path / "log.csv")
     log = cli_fit._read(tmp_path / "log.csv", "gnss")
@@ -300,7 +300,8 @@ def test_filter_refit_online_writes_the_causal_refitted_estimates(tmp_path, cli)
     """The CLI's refitted run is MotionFit.filter_online's; its first estimates, before any
     refit, are the plain filter's."""
     from adaptrack._toml import load_toml
-    from adaptrack.tuning.position_log import fit_from_toml, read_position_log
+    from adaptrack.io.position_log import read_position_log
+    from adaptrack.tuning.log_fit import fit_from_toml
 
     gnss_log(tmp_path / "log.csv", seed=8)
     code, _, err = cli(

@@ -285,7 +285,8 @@ def test_a_recorded_drive_with_all_but_certain_modes_smooths_to_finite_estimates
     smoother gives finite estimates and probabilities summing to 1 (it gave NaN)."""
     from pathlib import Path
 
-    from adaptrack.tuning.position_log import _run, _switching, motion_models, read_position_log
+    from adaptrack.io.position_log import read_position_log
+    from adaptrack.tuning.log_fit import _run, _switching, motion_models
 
     car = Path(__file__).parents[2] / "docs" / "data" / "ground_10hz_car_dresden_20140326.csv"
     log = read_position_log(car, "gnss")

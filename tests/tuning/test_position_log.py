@@ -6,11 +6,8 @@ import pymap3d
 import pytest
 
 import adaptrack as at
-from adaptrack.tuning.position_log import (
-    estimates_table,
-    fit_motion,
-    read_position_log,
-)
+from adaptrack.io.position_log import estimates_table, read_position_log
+from adaptrack.tuning.log_fit import fit_motion
 
 DT, N = 0.1, 1200
 Q_H, Q_V, R_H, R_V = 2.0, 0.05, 0.25, 1.0  # [m^2/s^3], [m^2]
@@ -161,7 +158,7 @@ def test_the_fit_s_compiled_likelihood_is_the_ekf_s(tmp_path, layout, model, val
     """The fit's log-likelihood (the compiled filter) equals the sum over the NumPy EKF's
     steps (``ekf_filter(backend="numpy")``), at parameters away from the fit's maximum."""
     from adaptrack.io.radar_plots import read_radar_log
-    from adaptrack.tuning.position_log import _inputs, _log_likelihood, _measured
+    from adaptrack.tuning.log_fit import _inputs, _log_likelihood, _measured
     from tests.tuning.test_radar_log import radar_plot_list
 
     if layout == "position":
@@ -209,7 +206,7 @@ def test_compiled_kernel_names_the_kernel_the_fit_runs(tmp_path, monkeypatch, mo
     """Each compiled kernel is replaced by one that raises its own name: the fit's first
     evaluation raises the name `compiled_kernel` gives (none: the Kalman filter's)."""
     from adaptrack.filters import _ekf_kernel, _imm_kernel
-    from adaptrack.tuning.position_log import compiled_kernel
+    from adaptrack.tuning.log_fit import compiled_kernel
 
     for module, name in ((_ekf_kernel, "ekf_kernel"), (_imm_kernel, "imm_kernel")):
         label = f"{module.__name__.rsplit('.', 1)[1]}.{name}"

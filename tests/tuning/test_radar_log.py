@@ -6,7 +6,7 @@ import pymap3d
 import pytest
 
 from adaptrack.io.radar_plots import read_radar_log
-from adaptrack.tuning.position_log import fit_motion
+from adaptrack.tuning.log_fit import fit_motion
 from tests.cv_truth import cv_states
 
 Q_H, Q_V = 0.8, 0.05  # white-acceleration PSDs of the truth [m^2/s^3]

@@ -13,21 +13,11 @@ from .._progress import announce_compilation, progress
 from .._toml import load_toml
 from ..analysis.consistency import innovation_consistency
 from ..filters.imm import IMMResult
+from ..io.position_log import ALL_MEASUREMENTS, PositionLog, estimates_table, read_position_log
 from ..io.radar_plots import RADAR_LAYOUTS, RadarLog, read_radar_log
 from ..io.tables import DataFormatError, write_table_atomic, write_text_atomic
 from ..tuning.likelihood import LikelihoodFit
-from ..tuning.position_log import (
-    ALL_MEASUREMENTS,
-    MODELS,
-    MotionFit,
-    PositionLog,
-    compiled_kernel,
-    estimates_table,
-    fit_from_toml,
-    fit_motion,
-    fit_toml,
-    read_position_log,
-)
+from ..tuning.log_fit import MODELS, MotionFit, compiled_kernel, fit_from_toml, fit_motion, fit_toml
 from .errors import check_outputs, err_console, fail
 
 

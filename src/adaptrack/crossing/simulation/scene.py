@@ -584,7 +584,7 @@ def detect(
         sd_r, sd_a, sd_v = radar.noise_std(all_rng, all_az)
         z_r = all_rng + sd_r * rng.standard_normal(all_rng.size)
         z_a = all_az + radar.azimuth_bias_rad + sd_a * rng.standard_normal(all_rng.size)
-        z_v = all_vr + sd_v * rng.standard_normal(all_rng.size)
+        z_v: FloatArray = all_vr + sd_v * rng.standard_normal(all_rng.size)
         if radar.max_unambiguous_speed_mps:
             h = radar.max_unambiguous_speed_mps
             z_v = wrap(z_v, h)
