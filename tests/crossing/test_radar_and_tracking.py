@@ -8,7 +8,7 @@ import pytest
 
 from adaptrack.crossing.estimators.road_filters import track_free_2d, track_on_road
 from adaptrack.crossing.simulation.radar import simulate_case
-from adaptrack.crossing.simulation.radar_kernel import wrapped
+from adaptrack.crossing.site.geometry import wrapped
 from adaptrack.crossing.site.model import load_site
 from adaptrack.crossing.site.sensor import Curve
 from adaptrack.crossing.site.traffic import VEHICLES

@@ -405,6 +405,7 @@ def test_stored_clutter_views_equal_views_made_anew():
     for name in ("x", "p", "spread"):
         np.testing.assert_array_equal(getattr(stored.tracks, name), getattr(anew.tracks, name))
     # the gate itself, on the last scan of each radar: the same to the last bit
+    from adaptrack.crossing.scene.bundles import RadarView
     from adaptrack.crossing.scene.gate import associate_scan
     from adaptrack.crossing.scene.scan_loop import learnt_clutter
 
@@ -414,16 +415,17 @@ def test_stored_clutter_views_equal_views_made_anew():
     last = {name: z for name, _, z, _ in iter_scans(rec.detections)}
     for r, radar in enumerate(SITE.radars):
         gates = []
+        view = RadarView(
+            site.radar[r], site.noise_tab[r], site.noise_cnt[r],
+            site.fields[r, : site.field_count[r]], site.pd_tab[r], site.pd_cnt[r],
+        )  # fmt: skip
         for views in (t.clutter_views[:, r].copy(), np.zeros_like(t.clutter_views[:, r])):
-            out = associate_scan(
-                t.x, t.p, t.spread, t.stopped, t.moved, t.confirmed, clutter, t.direction,
-                t.corridor, t.sensor_id[:, r], site.roads, site.bounds, site.radar[r],
-                site.noise_tab[r], site.noise_cnt[r], site.fields[r, : site.field_count[r]],
-                st.body_across_std_m, st.start_speed_max_mps, st.body_extent_gate,
-                st.occlusion_gate, st.passing_gate, st.beside_m, st.gate, st.clutter_gate,
-                st.sensor_id_bonus, last[radar.name], np.full(len(last[radar.name]), -1), views,
-            )  # fmt: skip
-            assert (views[clutter, 0] == 1.0).all()  # stored now if not before
+            all_views = t.clutter_views.copy()
+            all_views[:, r] = views
+            rows = t._replace(clutter_views=all_views)
+            ids = np.full(len(last[radar.name]), -1)
+            out = associate_scan(rows, clutter, r, site, view, st, last[radar.name], ids)
+            assert (all_views[clutter, r, 0] == 1.0).all()  # stored now if not before
             gates.append(out[:4])  # seen, d2, logdet, gated
         for stored_part, anew_part in zip(*gates, strict=True):
             np.testing.assert_array_equal(stored_part, anew_part)

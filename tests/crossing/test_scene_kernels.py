@@ -5,7 +5,6 @@ import math
 import numpy as np
 import pytest
 
-from adaptrack.crossing.estimators.kernels import lane_at
 from adaptrack.crossing.scene.body import (
     BODY_HALF_SPREADS,
     VISIBLE_SAMPLES,
@@ -21,9 +20,11 @@ from adaptrack.crossing.scene.spawn import nearest_sample, open_tracks, split_ro
 from adaptrack.crossing.scene.tracker import SceneTracker
 from adaptrack.crossing.scene.update import owners
 from adaptrack.crossing.site.corridor import nearest_corridor
+from adaptrack.crossing.site.geometry import lane_at
 from adaptrack.crossing.site.model import load_site
 from adaptrack.filters._kernels import predict_into
 from adaptrack.tracking import cluster_labels, cluster_points, gnn_assign
+from tests.crossing.scene_bundles import radar_view, settings, site_tables, track_rows
 
 GATE = 16.27
 
@@ -55,7 +56,10 @@ def test_predicted_tracks_equal_the_generic_kalman_prediction_to_the_last_bit():
     psd, lateral, stopped_psd = 3.0, 0.2, 1e-4
     xp, pp, tp = x.copy(), p.copy(), t.copy()
     frozen = np.zeros(n, bool)
-    predict_tracks(xp, pp, tp, stopped, direction, frozen, 10.0, psd, lateral, stopped_psd)
+    rows = track_rows(n, x=xp, p=pp, time_s=tp, stopped=stopped, direction=direction)
+    predict_tracks(
+        rows, frozen, 10.0, settings(accel_psd=psd, lateral_psd=lateral, stopped_psd=stopped_psd)
+    )
     assert np.all(tp == 10.0)
     for i in range(n):
         dt = 10.0 - t[i]
@@ -305,7 +309,10 @@ def test_opened_tracks_start_where_the_detections_are_with_their_radial_speed():
     z = np.stack([rng_m, az, vr], -1)
     radar_row, noise_tab, noise_cnt = radar.kernel_row(), *radar.noise_table()
     corridor, x, p, labels, first = open_tracks(
-        z, radar_row, noise_tab, noise_cnt, roads, bounds, 3.0, 15.0**2, 1.5**2
+        z,
+        site_tables("lx_three_arm", roads=roads, bounds=bounds),
+        radar_view(radar_row, noise_tab, noise_cnt),
+        settings(cluster_radius_m=3.0, initial_speed_var=15.0**2, body_along_std_m=1.5),
     )
     assert labels.tolist() == [0, 0, 1] and first.tolist() == [0, 2]
     assert corridor.tolist() == nearest_corridor(corridors, ground[[0, 2]])[0].tolist()
@@ -410,21 +417,34 @@ def test_a_road_user_followed_for_long_is_not_merged_into_one_beside_it():
     assert drop([True, True], across=0.3) == [False, True]  # in one lane: one body
 
 
+def _one_track(x, p, stopped, slow_since, t, exit_sigmas, event=None, shown=None):
+    """``mode_changes``' bundles for one confirmed, moved track on a corridor whose crossing
+    is at 1000 m (lane half width 1.75 m, barriers 10 m from it)."""
+    one = np.ones(1, bool)
+    rows = track_rows(
+        1, x=x, p=p, corridor=np.zeros(1, np.int64), confirmed=one, last_hit_s=np.full(1, t),
+        anchor_u=np.zeros(1), stopped=stopped, moved=one.copy(), direction=np.ones(1),
+        slow_since=slow_since, event_raised=np.zeros(1, bool) if event is None else event,
+        doppler_seen_s=np.full(1, t) if shown is None else shown,
+    )  # fmt: skip
+    site = site_tables(crossing_u=np.array([1e3]), half_lane_m=np.array([1.75]), barrier_m=10.0)
+    rules = settings(
+        moved_speed_mps=0.8, moving_speed_std_mps=1.0, moved_distance_m=3.0, stop_speed_mps=0.3,
+        stop_exit_sigmas=exit_sigmas, stop_confirm_s=0.5, stop_seen_s=0.3,
+        stationary_detections=True,
+    )  # fmt: skip
+    return rows, site, rules
+
+
 def _creep(speeds, exit_sigmas, speed_std=0.1, dt=0.05):
     """Feed one confirmed, moved track's speed estimates to ``mode_changes``; stop time."""
-    one = np.ones(1, bool)
     x, p = np.zeros((1, 4)), np.tile(np.eye(4) * 0.01, (1, 1, 1))
     p[0, 1, 1] = speed_std**2
     stopped, slow_since = np.zeros(1, bool), np.full(1, np.nan)
     for k, v in enumerate(speeds):
         t = k * dt
         x[0, 1] = v
-        mode_changes(
-            t, x, p, np.zeros(1, np.int64), one, np.full(1, t), np.zeros(1), stopped, one.copy(),
-            np.ones(1), slow_since, np.zeros(1, bool), np.full(1, t), np.array([1e3]),
-            np.array([1.75]), 10.0,
-            0.8, 1.0, 3.0, 0.3, exit_sigmas, 0.5, 0.3,
-        )  # fmt: skip
+        mode_changes(t, *_one_track(x, p, stopped, slow_since, t, exit_sigmas))
         if stopped[0]:
             return t
     return np.inf
@@ -457,10 +477,8 @@ def test_a_stop_between_the_barriers_raises_only_once_a_doppler_measuring_detect
 
     def hazard(t):
         rows, _ = mode_changes(
-            t, x, p, np.zeros(1, np.int64), one, np.full(1, t), np.zeros(1), stopped,
-            one.copy(), np.ones(1), np.full(1, np.nan), event, shown, np.array([1e3]),
-            np.array([1.75]), 10.0, 0.8, 1.0, 3.0, 0.3, 2.0, 0.5, 0.3,
-        )  # fmt: skip
+            t, *_one_track(x, p, stopped, np.full(1, np.nan), t, 2.0, event=event, shown=shown)
+        )
         return bool(rows[0])
 
     assert not hazard(10.0) and not event[0]  # every detection across the line of sight

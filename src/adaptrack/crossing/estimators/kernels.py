@@ -18,6 +18,11 @@ from numba import prange
 
 from ...filters._kernels import predict_into, series_transition_into, update_into
 from ..site.geometry import (
+    RADAR_DOPPLER_GATE,
+    RADAR_FOLD,
+    RADAR_MIN_RANGE,
+    RADAR_X,
+    RADAR_Y,
     centreline,
     curve_at,
     in_view,
@@ -63,7 +68,7 @@ def alias_known(var, radar):  # type: ignore[no-untyped-def]
     True without folding (``radar[6]`` 0); else while the sigma is below
     ``radar[6] / UNFOLD_SIGMAS``.
     """
-    fold = radar[6]
+    fold = radar[RADAR_FOLD]
     return fold <= 0.0 or var * UNFOLD_SIGMAS * UNFOLD_SIGMAS < fold * fold
 
 
@@ -77,7 +82,7 @@ def doppler_usable(h, p, rm, radar):  # type: ignore[no-untyped-def]
     radial-speed row of ``h`` and the noise's cross terms with it are zeroed: an update with a
     zero radial-speed residual then uses range and azimuth alone.
     """
-    if radar[6] <= 0.0:
+    if radar[RADAR_FOLD] <= 0.0:
         return True
     n = h.shape[1]
     var = rm[2, 2]
@@ -100,7 +105,7 @@ def innovation_into(z, zp, radar, doppler, nu):  # type: ignore[no-untyped-def]
     prediction where the radar folds (``radar[6] > 0``), or 0 where it is left out
     (``doppler`` false: :func:`doppler_usable`).
     """
-    fold = radar[6]
+    fold = radar[RADAR_FOLD]
     nu[0] = z[0] - zp[0]
     nu[1] = wrapped(z[1] - zp[1], math.pi)
     if not doppler:
@@ -118,7 +123,7 @@ def folded_log_likelihood_gap(rm, radar):  # type: ignore[no-untyped-def]
     The update counted ``N(0; 0, rm[2, 2])`` for it; a folded radial speed the prediction
     cannot place is uniform over the folding interval ``2 radar[6]``.
     """
-    return 0.5 * math.log(2.0 * math.pi * rm[2, 2]) - math.log(2.0 * radar[6])
+    return 0.5 * math.log(2.0 * math.pi * rm[2, 2]) - math.log(2.0 * radar[RADAR_FOLD])
 
 
 @numba.njit(cache=True)
@@ -161,7 +166,7 @@ def measure_span(  # type: ignore[no-untyped-def]
         if speed > 0.5:
             ux, uy = vx / max(speed, 1e-9), vy / max(speed, 1e-9)
         else:
-            ex, ey = x[0] - radar[0], x[1] - radar[1]
+            ex, ey = x[0] - radar[RADAR_X], x[1] - radar[RADAR_Y]
             dist = math.sqrt(ex * ex + ey * ey)
             ux, uy = -ex / dist, -ey / dist
         _noise_into(radar, noise_tab, noise_cnt, zp, jp, ux, uy, scatter_std, rm)
@@ -248,7 +253,7 @@ def gate_update_into(  # type: ignore[no-untyped-def]
         for b in range(n):
             p[a, b] = pp[a, b]
     off = off_boresight(zp[1], radar)
-    if not in_view(zp[0], off, fields, radar[4]):
+    if not in_view(zp[0], off, fields, radar[RADAR_MIN_RANGE]):
         return 0.0, miss_run
     if kind == ROAD:
         along = abs(h[2, 1])
@@ -260,7 +265,7 @@ def gate_update_into(  # type: ignore[no-untyped-def]
         for b in range(n):
             var += h[2, a] * pp[a, b] * h[2, b]
     sd = math.sqrt(max(var, 1e-24))
-    gate, mu = radar[5], zp[2]
+    gate, mu = radar[RADAR_DOPPLER_GATE], zp[2]
     p_gate = _normal_cdf((gate - mu) / sd) - _normal_cdf((-gate - mu) / sd)
     p_det = curve_at(pd_tab, pd_cnt, 0, zp[0])
     p_miss = p_gate + (1.0 - p_det) * (1.0 - p_gate)
@@ -408,7 +413,7 @@ def pcrlb_kernel(  # type: ignore[no-untyped-def]
         h, hp, kt = np.zeros((3, n)), np.empty((3, n)), np.empty((3, n))
         jp, jv = np.empty((3, 2)), np.empty((3, 2))
         s, lo = np.empty((3, 3)), np.empty((3, 3))
-        r1 = np.full((1, 1), radar[5] * radar[5] / 3.0)
+        r1 = np.full((1, 1), radar[RADAR_DOPPLER_GATE] * radar[RADAR_DOPPLER_GATE] / 3.0)
         started = False
         for t in range(n_steps):
             if started:
@@ -438,7 +443,7 @@ def pcrlb_kernel(  # type: ignore[no-untyped-def]
                 started = True
             else:
                 p[:, :] = pp
-                if started and radar[5] > 0.0:
+                if started and radar[RADAR_DOPPLER_GATE] > 0.0:
                     xp[:] = truth[i, t]
                     measure(
                         ROAD, xp, k, radar, noise_tab, noise_cnt, road, half_width, scatter_std,
@@ -446,7 +451,11 @@ def pcrlb_kernel(  # type: ignore[no-untyped-def]
                     )  # fmt: skip
                     off = off_boresight(zp[1], radar)
                     informs = abs(h[2, 1]) >= GATE_MIN_COS
-                    if in_view(zp[0], off, fields, radar[4]) and abs(zp[2]) < radar[5] and informs:
+                    if (
+                        in_view(zp[0], off, fields, radar[RADAR_MIN_RANGE])
+                        and abs(zp[2]) < radar[RADAR_DOPPLER_GATE]
+                        and informs
+                    ):
                         update_into(
                             xp, pp, resid[:1], h[2:3], r1, True, x, p, hp[:1], s[:1, :1],
                             lo[:1, :1], kt[:1], w[:1], ikh, tmp,

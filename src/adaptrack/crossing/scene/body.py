@@ -19,7 +19,19 @@ import numpy as np
 
 from ..._borrowed import on_stack
 from ..estimators.kernels import ROAD, measure_span, road_measure
-from ..site.geometry import centreline_span, in_view, lane_at, off_boresight, wrapped
+from ..site.geometry import (
+    FIELD_HALF_ANGLE,
+    FIELD_MAX_RANGE,
+    RADAR_HEIGHT,
+    RADAR_MIN_RANGE,
+    RADAR_X,
+    RADAR_Y,
+    centreline_span,
+    in_view,
+    lane_at,
+    off_boresight,
+    wrapped,
+)
 
 N_STATE = 4
 BODY_HALF_SPREADS = 2.0  # a body reaches this many spreads either side of its centre
@@ -70,8 +82,8 @@ def store_lane(lanes, i, roads, bounds, corridor, x):  # type: ignore[no-untyped
 @numba.njit(cache=True, inline="always")
 def ground_point(z_row, radar):  # type: ignore[no-untyped-def]
     """Ground point (x, y) and horizontal range of a detection (range, azimuth, ...)."""
-    rho = math.sqrt(max(z_row[0] ** 2 - radar[2] ** 2, 0.01))
-    return radar[0] + rho * math.sin(z_row[1]), radar[1] + rho * math.cos(z_row[1]), rho
+    rho = math.sqrt(max(z_row[0] ** 2 - radar[RADAR_HEIGHT] ** 2, 0.01))
+    return radar[RADAR_X] + rho * math.sin(z_row[1]), radar[RADAR_Y] + rho * math.cos(z_row[1]), rho
 
 
 @numba.njit(cache=True, inline="always")
@@ -84,22 +96,24 @@ def _view_uniform(lane, d, half, radar, fields):  # type: ignore[no-untyped-def]
     ``half`` and their bearings by at most ``asin(half / ground range)``.
     """
     cx, cy, _, tx, ty = lane
-    ex = cx - d * ty - radar[0]
-    ey = cy + d * tx - radar[1]
+    ex = cx - d * ty - radar[RADAR_X]
+    ey = cy + d * tx - radar[RADAR_Y]
     ground = math.sqrt(ex * ex + ey * ey)
     if ground <= half:
         return 0
-    rng = math.sqrt(ground * ground + radar[2] * radar[2])
-    if rng + half < radar[4]:
+    rng = math.sqrt(ground * ground + radar[RADAR_HEIGHT] * radar[RADAR_HEIGHT])
+    if rng + half < radar[RADAR_MIN_RANGE]:
         return -1  # all nearer than the minimum range
     off = off_boresight(math.atan2(ex, ey), radar)
     widen = math.asin(half / ground)
-    all_in = rng - half >= radar[4]
+    all_in = rng - half >= radar[RADAR_MIN_RANGE]
     some_field = False
     for f in range(fields.shape[0]):
-        if rng + half <= fields[f, 0] and off + widen <= fields[f, 1]:
+        if rng + half <= fields[f, FIELD_MAX_RANGE] and off + widen <= fields[f, FIELD_HALF_ANGLE]:
             return 1 if all_in else 0
-        some_field |= rng - half <= fields[f, 0] and off - widen <= fields[f, 1]
+        some_field |= (
+            rng - half <= fields[f, FIELD_MAX_RANGE] and off - widen <= fields[f, FIELD_HALF_ANGLE]
+        )
     return 0 if some_field else -1
 
 
@@ -128,10 +142,10 @@ def visible_part(u, d, spread, lo, hi, roads, radar, fields, lane):  # type: ign
     for k in range(VISIBLE_SAMPLES):
         a = half * (2.0 * k / (VISIBLE_SAMPLES - 1) - 1.0)
         cx, cy, th, _ = centreline_span(roads, lo, hi, u + a)
-        ex = cx - d * math.cos(th) - radar[0]
-        ey = cy + d * math.sin(th) - radar[1]
-        rng = math.sqrt(ex * ex + ey * ey + radar[2] * radar[2])
-        if in_view(rng, off_boresight(math.atan2(ex, ey), radar), fields, radar[4]):
+        ex = cx - d * math.cos(th) - radar[RADAR_X]
+        ey = cy + d * math.sin(th) - radar[RADAR_Y]
+        rng = math.sqrt(ex * ex + ey * ey + radar[RADAR_HEIGHT] * radar[RADAR_HEIGHT])
+        if in_view(rng, off_boresight(math.atan2(ex, ey), radar), fields, radar[RADAR_MIN_RANGE]):
             n_in += 1
             total += a
             first_in |= k == 0
@@ -214,7 +228,7 @@ def sight_lines(rows, x, spread, lanes, radar, sight):  # type: ignore[no-untype
     for i in rows:
         cx, cy, tx, ty = lanes[i, 0], lanes[i, 1], lanes[i, 3], lanes[i, 4]
         px, py = cx - x[i, 3] * ty, cy + x[i, 3] * tx
-        ex, ey = px - radar[0], py - radar[1]
+        ex, ey = px - radar[RADAR_X], py - radar[RADAR_Y]
         rng = math.sqrt(ex * ex + ey * ey)
         ux, uy = ex / max(rng, 1e-9), ey / max(rng, 1e-9)
         half_length = BODY_HALF_SPREADS * spread[i]

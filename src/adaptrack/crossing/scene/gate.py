@@ -10,7 +10,7 @@ import numpy as np
 from ..._borrowed import on_stack
 from ...filters._kernels import cholesky_into
 from ..estimators.kernels import doppler_usable, innovation_into
-from ..site.geometry import curve_at, in_view, off_boresight
+from ..site.geometry import RADAR_MIN_RANGE, curve_at, in_view, off_boresight
 from .body import (
     BODY_HALF_SPREADS,
     N_STATE,
@@ -32,7 +32,7 @@ def detections_in_view(z, radar, fields):  # type: ignore[no-untyped-def]
     """Whether each detection (range, azimuth, ...) of ``z`` (n, 3) lies in the radar's view."""
     seen = np.zeros(z.shape[0], dtype=np.bool_)
     for j in range(z.shape[0]):
-        seen[j] = in_view(z[j, 0], off_boresight(z[j, 1], radar), fields, radar[4])
+        seen[j] = in_view(z[j, 0], off_boresight(z[j, 1], radar), fields, radar[RADAR_MIN_RANGE])
     return seen
 
 
@@ -92,9 +92,7 @@ def _stored_view(views, i, gated, seen, logdet, zp, lo):  # type: ignore[no-unty
 
 @numba.njit(cache=True)
 def gate_scan(  # type: ignore[no-untyped-def]
-    x, p, spread, starting, road_user, moving, occluder, direction, corridor, roads, bounds,
-    radar, noise_tab, noise_cnt, fields, across_std, start_speed_max, extent_gate,
-    passing_gate, beside_m, gate, z, d2, logdet, gated, clutter, views,
+    t, starting, road_user, moving, occluder, site, view, cfg, z, d2, logdet, gated, clutter, views,
 ):  # fmt: skip
     """Fill ``d2`` (T, D) with each detection's squared Mahalanobis distance to each track.
 
@@ -132,7 +130,17 @@ def gate_scan(  # type: ignore[no-untyped-def]
     past it, and follow the car).
     Rows of tracks whose predicted detection lies outside
     the radar's view are ``inf``; returns whether each track is in view (T,).
+    Bundles: ``t`` (the track rows, :class:`~.bundles.TrackRows`), ``site`` (the site,
+    :class:`~.bundles.SiteTables`), ``view`` (the scan's radar, :class:`~.bundles.RadarView`),
+    ``cfg`` (the settings, :class:`~.bundles.Settings`); a setting named here is the field of
+    ``cfg``.
     """
+    x, p, spread, direction, corridor = t.x, t.p, t.spread, t.direction, t.corridor
+    roads, bounds = site.roads, site.bounds
+    radar, noise_tab, noise_cnt, fields = view.radar, view.noise_tab, view.noise_cnt, view.fields
+    across_std, start_speed_max = cfg.body_across_std_m, cfg.start_speed_max_mps
+    extent_gate, passing_gate, beside_m = cfg.body_extent_gate, cfg.passing_gate, cfg.beside_m
+    gate = cfg.gate
     n_t, n_d = x.shape[0], z.shape[0]
     seen = np.zeros(n_t, dtype=np.bool_)
     # buffers passed per track: on the stack
@@ -167,7 +175,9 @@ def gate_scan(  # type: ignore[no-untyped-def]
                     i, x, spread, corridor, roads, bounds, radar, noise_tab, noise_cnt, fields,
                     across_std, xv, zp, h, rm, jp, jv, part, lane,
                 )  # fmt: skip
-                seen[i] = in_view(zp[0], off_boresight(zp[1], radar), fields, radar[4])
+                seen[i] = in_view(
+                    zp[0], off_boresight(zp[1], radar), fields, radar[RADAR_MIN_RANGE]
+                )
             if seen[i]:
                 doppler = doppler_usable(h, p[i], rm, radar)
                 for a in range(3):
@@ -313,11 +323,7 @@ def unambiguous_assignment(d2, gate):  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True)
-def associate_scan(  # type: ignore[no-untyped-def]
-    x, p, spread, stopped, moved, confirmed, clutter, direction, corridor, sensor_id, roads,
-    bounds, radar, noise_tab, noise_cnt, fields, across_std, start_speed_max, extent_gate,
-    occlusion_gate, passing_gate, beside_m, gate, clutter_gate, id_bonus, z, ids, views,
-):  # fmt: skip
+def associate_scan(t, clutter, r, site, view, cfg, z, ids):  # type: ignore[no-untyped-def]
     """Gate a scan's detections ``z`` (D, 3) to the predicted tracks; try the simple assignment.
 
     In a standing queue a stopped track's gate is narrowed behind the stopped road user that
@@ -336,7 +342,19 @@ def associate_scan(  # type: ignore[no-untyped-def]
     one-to-one assignment (:func:`unambiguous_assignment`), and the tracks' lines of sight
     if the occlusion gate computed them (:func:`sight_lines`: when a road user stands, of the
     queued tracks and the road users, NaN rows for the rest; else no rows).
+    Bundles: ``t`` (the track rows, :class:`~.bundles.TrackRows`), ``site`` (the site,
+    :class:`~.bundles.SiteTables`), ``view`` (the scan's radar, :class:`~.bundles.RadarView`),
+    ``cfg`` (the settings, :class:`~.bundles.Settings`); a setting named here is the field of
+    ``cfg``.
     """
+    x, spread, stopped, moved, confirmed = t.x, t.spread, t.stopped, t.moved, t.confirmed
+    corridor = t.corridor
+    sensor_id = t.sensor_id[:, r]
+    views = t.clutter_views[:, r]
+    roads, bounds = site.roads, site.bounds
+    radar = view.radar
+    occlusion_gate, gate, clutter_gate = cfg.occlusion_gate, cfg.gate, cfg.clutter_gate
+    id_bonus = cfg.sensor_id_bonus
     n_t, n_d = x.shape[0], z.shape[0]
     d2 = np.empty((n_t, n_d))
     logdet = np.empty(n_t)
@@ -369,11 +387,21 @@ def associate_scan(  # type: ignore[no-untyped-def]
             if nearest[k] >= 0 and stopped[nearest[k]]:  # else the nearest is moving
                 behind[queued[k]] = nearest[k]
     seen = gate_scan(
-        x, p, spread, starting, road_user, moving, behind, direction,
-        corridor, roads, bounds, radar, noise_tab, noise_cnt, fields, across_std,
-        start_speed_max, extent_gate, passing_gate, beside_m, gate, z, d2, logdet, gated,
-        clutter, views,
-    )  # fmt: skip
+        t,
+        starting,
+        road_user,
+        moving,
+        behind,
+        site,
+        view,
+        cfg,
+        z,
+        d2,
+        logdet,
+        gated,
+        clutter,
+        views,
+    )
     if n_d == 0:
         none = np.zeros(0, np.int64)
         return seen, d2, logdet, gated, True, none, none, sight

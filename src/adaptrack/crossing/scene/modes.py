@@ -11,11 +11,7 @@ from .body import N_STATE
 
 
 @numba.njit(cache=True)
-def mode_changes(  # type: ignore[no-untyped-def]
-    time_s, x, p, corridor, confirmed, last_hit_s, anchor_u, stopped, moved, direction,
-    slow_since, event_raised, doppler_seen_s, crossing_u, half_lane, barrier_m, moved_speed,
-    moving_speed_std, moved_distance, stop_speed, stop_exit_sigmas, stop_confirm_s, seen_s,
-):  # fmt: skip
+def mode_changes(time_s, t, site, cfg):  # type: ignore[no-untyped-def]
     """Update the moving / stopped modes after a scan in place (``SceneTracker._modes``).
 
     A confirmed track whose speed is known (sigma below half of it and below
@@ -29,7 +25,18 @@ def mode_changes(  # type: ignore[no-untyped-def]
     within ``seen_s`` (``doppler_seen_s``), raised once: ``event_raised`` set) and which
     tracks are on the carriageway (bool each). A stop that only misses and radial speeds
     blind to the lane (across the line of sight) suggest raises nothing yet.
+    Bundles: ``t`` (the track rows, :class:`~.bundles.TrackRows`), ``site`` (the site,
+    :class:`~.bundles.SiteTables`), ``cfg`` (the settings, :class:`~.bundles.Settings`); a setting
+    named here is the field of ``cfg``.
     """
+    x, p, corridor, confirmed, last_hit_s = t.x, t.p, t.corridor, t.confirmed, t.last_hit_s
+    anchor_u, stopped, moved, direction = t.anchor_u, t.stopped, t.moved, t.direction
+    slow_since, event_raised, doppler_seen_s = t.slow_since, t.event_raised, t.doppler_seen_s
+    crossing_u, half_lane, barrier_m = site.crossing_u, site.half_lane_m, site.barrier_m
+    moved_speed, moving_speed_std = cfg.moved_speed_mps, cfg.moving_speed_std_mps
+    moved_distance, stop_speed = cfg.moved_distance_m, cfg.stop_speed_mps
+    stop_exit_sigmas, stop_confirm_s = cfg.stop_exit_sigmas, cfg.stop_confirm_s
+    seen_s = cfg.stop_seen_s if cfg.stationary_detections else np.inf
     n = x.shape[0]
     hazard = np.zeros(n, dtype=np.bool_)
     on_road = np.zeros(n, dtype=np.bool_)

@@ -9,15 +9,18 @@ from .body import N_STATE
 
 
 @numba.njit(cache=True)
-def predict_tracks(  # type: ignore[no-untyped-def]
-    x, p, t, stopped, direction, frozen, time_s, accel_psd, lateral_psd, stopped_psd
-):
+def predict_tracks(tracks, frozen, time_s, cfg):  # type: ignore[no-untyped-def]
     """Predict every track to ``time_s`` in place (white-jerk CA; stopped rows held).
 
     A track with a known ``direction`` (+1 / -1 along ``u``) does not reverse: a predicted
     speed against it becomes a standstill (speed and acceleration 0), as a braking vehicle.
     ``frozen`` rows (learnt clutter: :func:`update_tracks`) keep their state and covariance.
+    Bundles: ``tracks`` (the track rows, :class:`~.bundles.TrackRows`), ``cfg`` (the settings,
+    :class:`~.bundles.Settings`); a setting named here is the field of ``cfg``.
     """
+    x, p, t, stopped = tracks.x, tracks.p, tracks.time_s, tracks.stopped
+    direction = tracks.direction
+    accel_psd, lateral_psd, stopped_psd = cfg.accel_psd, cfg.lateral_psd, cfg.stopped_psd
     q_moving, q_stopped = on_stack((N_STATE, N_STATE)), on_stack((N_STATE, N_STATE))
     tmp = on_stack((N_STATE, N_STATE))
     moving_dt, stopped_dt = -1.0, -1.0  # the steps q_moving, q_stopped were made for

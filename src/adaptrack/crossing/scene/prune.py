@@ -116,13 +116,7 @@ def merged_rows(  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True)
-def retired_rows(  # type: ignore[no-untyped-def]
-    time_s, track_time_s, x, p, corridor, length_m, spread, stopped, moved, occluded, ids,
-    confirmed, misses, born_s, last_hit_s, stopped_detectable, tentative_misses,
-    max_tentative_s, max_coast_s, max_coast_stopped_s, max_coast_hidden_s, max_position_std_m,
-    max_stopped_misses, lateral_m, speed_mps, parts_speed, clutter_age_s, absorb_young_static,
-    settled_s, settled_lateral_m,
-):  # fmt: skip
+def retired_rows(time_s, t, site, cfg):  # type: ignore[no-untyped-def]
     """Tracks to delete after a scan at ``time_s`` (bool per track).
 
     Those the life-cycle rules expire (:func:`adaptrack.tracking.lifecycle.expired_rows`,
@@ -131,7 +125,22 @@ def retired_rows(  # type: ignore[no-untyped-def]
     (:func:`merged_rows`; a static object younger than ``clutter_age_s`` may be absorbed if
     ``absorb_young_static``; a confirmed road user that has moved and been followed longer
     than ``settled_s`` is settled).
+    Bundles: ``t`` (the track rows, :class:`~.bundles.TrackRows`), ``site`` (the site,
+    :class:`~.bundles.SiteTables`), ``cfg`` (the settings, :class:`~.bundles.Settings`); a setting
+    named here is the field of ``cfg``.
     """
+    track_time_s, x, p, corridor, spread = t.time_s, t.x, t.p, t.corridor, t.spread
+    stopped, moved, occluded, ids, confirmed = t.stopped, t.moved, t.occluded, t.ids, t.confirmed
+    misses, born_s, last_hit_s = t.misses, t.born_s, t.last_hit_s
+    length_m = site.length_m
+    stopped_detectable, tentative_misses = cfg.stationary_detections, cfg.tentative_misses
+    max_tentative_s, max_coast_s = cfg.max_tentative_s, cfg.max_coast_s
+    max_coast_stopped_s, max_coast_hidden_s = cfg.max_coast_stopped_s, cfg.max_coast_hidden_s
+    max_position_std_m, max_stopped_misses = cfg.max_position_std_m, cfg.max_stopped_misses
+    lateral_m, speed_mps = cfg.merge_lateral_m, cfg.merge_speed_mps
+    parts_speed, clutter_age_s = cfg.merge_parts_speed_mps, cfg.clutter_age_s
+    absorb_young_static, settled_s = cfg.absorb_young_static, cfg.merge_settled_s
+    settled_lateral_m = cfg.merge_settled_lateral_m
     n = x.shape[0]
     position_std = np.zeros(n)
     for i in range(n):

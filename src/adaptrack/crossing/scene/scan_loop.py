@@ -14,7 +14,6 @@ to buffers that grow as needed.
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -23,6 +22,20 @@ from ..._borrowed import borrowed
 from ...tracking import assignment_by_components, gnn_assign
 from ..site.geometry import wrapped
 from .body import lane_frame, planar_rows
+from .bundles import (
+    BIAS_SAMPLES,
+    BIAS_SUM,
+    BIAS_WEIGHT,
+    LOG_JOINED_NEW,
+    LOG_OFF_ROAD,
+    LOG_OPENED,
+    LOG_OUTSIDE_VIEW,
+    LOG_UPDATED,
+    RadarView,
+    RowBuffer,
+    SiteTables,
+    TrackRows,
+)
 from .gate import associate_scan, detections_in_view
 from .modes import mode_changes
 from .predict import predict_tracks
@@ -33,166 +46,7 @@ from .update import apply_scan
 
 EVENT_NAMES = ("stopped_between_barriers", "will_not_stop_before_stop_line")  # by event code
 EVENT_FIELDS = 6  # time [s], event code, track id, east [m], north [m], lead [s] (NaN: none)
-LOG_FIELDS = ("updated", "opened", "joined_new", "rejected_outside_view", "off_road")
 MAX_CHOICES = 4096  # a scan's conflict with more choices goes to SciPy's assignment
-
-
-class TrackRows(NamedTuple):
-    """Live tracks, one row each: the track book's columns, then the filter's."""
-
-    ids: np.ndarray
-    history: np.ndarray
-    confirmed: np.ndarray
-    misses: np.ndarray
-    last_hit_s: np.ndarray
-    born_s: np.ndarray
-    corridor: np.ndarray
-    x: np.ndarray
-    p: np.ndarray
-    time_s: np.ndarray
-    stopped: np.ndarray
-    slow_since: np.ndarray
-    moved: np.ndarray
-    event_raised: np.ndarray
-    line_event_raised: np.ndarray
-    anchor_u: np.ndarray
-    spread: np.ndarray
-    along_m2: np.ndarray
-    along_m4: np.ndarray
-    direction: np.ndarray
-    miss_run: np.ndarray
-    occluded: np.ndarray
-    doppler_seen_s: np.ndarray
-    detection_d: np.ndarray
-    sensor_id: np.ndarray
-    clutter_views: np.ndarray
-
-
-class Settings(NamedTuple):
-    """The tracker's settings as the loop reads them (``SceneTrackerConfig`` and its rules)."""
-
-    accel_psd: float
-    lateral_psd: float
-    stopped_psd: float
-    body_along_std_m: float
-    body_across_std_m: float
-    start_speed_max_mps: float
-    body_extent_gate: bool
-    occlusion_gate: bool
-    passing_gate: bool
-    beside_m: float
-    shadow_spread_m: float
-    gate: float
-    clutter_gate: float
-    sensor_id_bonus: float
-    clutter_age_s: float
-    moving_radial_mps: float
-    spread_learning_rate: float
-    shape_learning_rate: float
-    spread_lo_m: float
-    spread_hi_m: float
-    estimate_azimuth_bias: bool
-    bias_forget: float
-    bias_gate_m: float
-    bias_min_samples: float
-    confirm_speed_var: float
-    window_mask: int
-    confirm_hits: int
-    cluster_radius_m: float
-    max_open_offset_m: float
-    initial_speed_var: float
-    moved_speed_mps: float
-    moving_speed_std_mps: float
-    moved_distance_m: float
-    stop_speed_mps: float
-    stop_exit_sigmas: float
-    stop_confirm_s: float
-    stop_seen_s: float
-    stationary_detections: bool
-    same_object_m: float
-    stop_decel_mps2: float
-    split_kurtosis: float
-    split_min_half_gap_m: float
-    tentative_misses: int
-    max_tentative_s: float
-    max_coast_s: float
-    max_coast_stopped_s: float
-    max_coast_hidden_s: float
-    max_position_std_m: float
-    max_stopped_misses: int
-    merge_lateral_m: float
-    merge_speed_mps: float
-    merge_parts_speed_mps: float
-    absorb_young_static: bool
-    merge_settled_s: float
-    merge_settled_lateral_m: float
-    coasting_s: float
-    status_codes: np.ndarray  # confirmed, coasting, stopped, static, tentative
-
-
-class SiteTables(NamedTuple):
-    """The site for compiled code: corridors, crossing, radars and the controller's warnings.
-
-    Radars are rows: geometry (R, 7), noise curves (R, 3, 2, K) and counts (R, 3), fields of
-    view (R, F, 2) with their counts (R,), detection-probability curves (R, 1, 2, K) and counts
-    (R, 1), latency (R,) [s].
-    """
-
-    roads: np.ndarray
-    bounds: np.ndarray
-    crossing_u: np.ndarray
-    length_m: np.ndarray
-    half_lane_m: np.ndarray
-    barrier_m: float
-    stop_line_m: float
-    warning_starts: np.ndarray
-    warning_ends: np.ndarray
-    radar: np.ndarray
-    noise_tab: np.ndarray
-    noise_cnt: np.ndarray
-    fields: np.ndarray
-    field_count: np.ndarray
-    pd_tab: np.ndarray
-    pd_cnt: np.ndarray
-    latency_s: np.ndarray
-
-
-class RadarState(NamedTuple):
-    """What the tracker keeps per radar.
-
-    The last scan's timestamp [s], the azimuth bias taken off [rad] and the running sums of
-    the alignment that estimates it (R, 3).
-    """
-
-    last_stamp_s: np.ndarray
-    azimuth_bias_rad: np.ndarray
-    bias_stats: np.ndarray
-
-
-class RowBuffer(NamedTuple):
-    """Confirmed tracks after each scan, a column each (the columns of ``SceneTracker.rows``).
-
-    Status as codes (``scene.tracker.STATUS_NAMES``); sigmas of position and speed.
-    """
-
-    track_id: np.ndarray
-    time_s: np.ndarray
-    east_m: np.ndarray
-    north_m: np.ndarray
-    speed_mps: np.ndarray
-    east_speed_mps: np.ndarray
-    north_speed_mps: np.ndarray
-    from_crossing_m: np.ndarray
-    status: np.ndarray
-    moved: np.ndarray
-    position_std_m: np.ndarray
-    speed_std_mps: np.ndarray
-
-
-def empty_rows(capacity: int) -> RowBuffer:
-    """Return a row buffer with room for ``capacity`` rows."""
-    kinds = {"track_id": np.int64, "status": np.int64, "moved": bool}
-    return RowBuffer(*(np.zeros(capacity, kinds.get(name, float)) for name in RowBuffer._fields))
 
 
 @numba.njit(cache=True)
@@ -575,63 +429,47 @@ def run_scans(  # type: ignore[no-untyped-def]
             for j in range(z.shape[0]):
                 z[j, 1] = wrapped(z[j, 1] - bias, np.pi)
         radar = site.radar[r]
-        noise_tab, noise_cnt = site.noise_tab[r], site.noise_cnt[r]
         fields = site.fields[r, : site.field_count[r]]
+        sensor = RadarView(
+            radar, site.noise_tab[r], site.noise_cnt[r], fields, site.pd_tab[r], site.pd_cnt[r]
+        )
         # learnt clutter (as of the tracks' last scans) is frozen: neither predicted nor updated
         clutter = learnt_clutter(v.stopped, v.moved, v.time_s, v.born_s, s.clutter_age_s)
         for i in range(n):
             if not clutter[i]:  # its stored views of the radars are out of date
                 v.clutter_views[i, :, 0] = 0.0
-        predict_tracks(
-            v.x, v.p, v.time_s, v.stopped, v.direction, clutter, time_s, s.accel_psd,
-            s.lateral_psd, s.stopped_psd,
-        )  # fmt: skip
+        predict_tracks(v, clutter, time_s, s)
         view = detections_in_view(z, radar, fields)
         n_out_view = 0
         for j in range(view.size):
             outside[a + j] = not view[j]
             n_out_view += not view[j]
         if n_out_view:
-            log[3] += n_out_view
+            log[LOG_OUTSIDE_VIEW] += n_out_view
             z, ids = z[view], ids[view]
         used = np.zeros(z.shape[0], np.bool_)
         if n:
             seen, d2, logdet, gated, simple, ti, di, sight = associate_scan(
-                v.x, v.p, v.spread, v.stopped, v.moved, v.confirmed, clutter, v.direction,
-                v.corridor, v.sensor_id[:, r], site.roads, site.bounds, radar, noise_tab,
-                noise_cnt, fields, s.body_across_std_m, s.start_speed_max_mps,
-                s.body_extent_gate, s.occlusion_gate, s.passing_gate, s.beside_m, s.gate,
-                s.clutter_gate, s.sensor_id_bonus, z, ids, v.clutter_views[:, r],
-            )  # fmt: skip
+                v, clutter, r, site, sensor, s, z, ids
+            )
             if not simple:
                 solved, ti, di = assignment_by_components(d2, s.gate, MAX_CHOICES)
                 if not solved:
                     ti, di = _assign(d2, s.gate)
             stats = radars.bias_stats[r]
             used = apply_scan(
-                time_s, seen, clutter, d2, logdet, gated, sight, s.gate, ti, di, z, ids, r, v.x,
-                v.p, v.spread, v.along_m2, v.along_m4, v.stopped, v.moved, v.direction,
-                v.slow_since, v.corridor, v.miss_run, v.occluded, v.anchor_u, v.doppler_seen_s,
-                v.detection_d, v.sensor_id, v.history, v.misses, v.last_hit_s, v.confirmed,
-                site.roads, site.bounds, radar, noise_tab, noise_cnt, fields, site.pd_tab[r],
-                site.pd_cnt[r], s.body_across_std_m, s.moving_radial_mps, s.start_speed_max_mps**2,
-                s.spread_learning_rate, s.shape_learning_rate, s.spread_lo_m, s.spread_hi_m,
-                s.estimate_azimuth_bias, site.half_lane_m, bias, stats, s.bias_forget,
-                s.bias_gate_m, s.confirm_speed_var, s.window_mask, s.confirm_hits,
-                s.shadow_spread_m,
+                time_s, seen, clutter, d2, logdet, gated, sight, ti, di, z,
+                ids, r, v, site, sensor, s, bias, stats,
             )  # fmt: skip
-            if stats[2] >= s.bias_min_samples:
-                radars.azimuth_bias_rad[r] = stats[1] / stats[0]
+            if stats[BIAS_SAMPLES] >= s.bias_min_samples:
+                radars.azimuth_bias_rad[r] = stats[BIAS_SUM] / stats[BIAS_WEIGHT]
         n_used = 0
         for j in range(used.size):
             n_used += used[j]
-        log[0] += n_used
+        log[LOG_UPDATED] += n_used
         if n_used < used.size:  # open tentative tracks from the detections left over
             left = rows_where(used, False)
-            corridor, x, p, labels, first = open_tracks(
-                z[left], radar, noise_tab, noise_cnt, site.roads, site.bounds,
-                s.cluster_radius_m, s.initial_speed_var, s.body_along_std_m**2,
-            )  # fmt: skip
+            corridor, x, p, labels, first = open_tracks(z[left], site, sensor, s)
             near_road = np.empty(corridor.size, np.bool_)  # else beside every road: not opened
             m, off_road = 0, 0  # bodies opened; detections of the bodies beside every road
             for g in range(corridor.size):
@@ -653,17 +491,11 @@ def run_scans(  # type: ignore[no-untyped-def]
                 n += m
                 next_id += m
                 v = _live(t, n)  # the rows grew
-            log[1] += m
-            log[2] += left.size - m - off_road
-            log[4] += off_road
+            log[LOG_OPENED] += m
+            log[LOG_JOINED_NEW] += left.size - m - off_road
+            log[LOG_OFF_ROAD] += off_road
         # modes and hazard events
-        hazard, on_road = mode_changes(
-            time_s, v.x, v.p, v.corridor, v.confirmed, v.last_hit_s, v.anchor_u, v.stopped,
-            v.moved, v.direction, v.slow_since, v.event_raised, v.doppler_seen_s,
-            site.crossing_u, site.half_lane_m, site.barrier_m, s.moved_speed_mps,
-            s.moving_speed_std_mps, s.moved_distance_m, s.stop_speed_mps, s.stop_exit_sigmas,
-            s.stop_confirm_s, s.stop_seen_s if s.stationary_detections else np.inf,
-        )  # fmt: skip
+        hazard, on_road = mode_changes(time_s, v, site, s)
         if hazard.any():
             alarm = new_objects(v, n, hazard, s, site)
             for i in np.flatnonzero(alarm):
@@ -691,15 +523,7 @@ def run_scans(  # type: ignore[no-untyped-def]
             next_id += rows.size
             v = _live(t, n)  # the rows grew
         # delete the expired, the departed and the younger of two tracks on one body
-        dead = retired_rows(
-            time_s, v.time_s, v.x, v.p, v.corridor, site.length_m, v.spread, v.stopped,
-            v.moved, v.occluded, v.ids, v.confirmed, v.misses, v.born_s, v.last_hit_s,
-            s.stationary_detections, s.tentative_misses, s.max_tentative_s, s.max_coast_s,
-            s.max_coast_stopped_s, s.max_coast_hidden_s, s.max_position_std_m,
-            s.max_stopped_misses, s.merge_lateral_m, s.merge_speed_mps,
-            s.merge_parts_speed_mps, s.clutter_age_s, s.absorb_young_static,
-            s.merge_settled_s, s.merge_settled_lateral_m,
-        )  # fmt: skip
+        dead = retired_rows(time_s, v, site, s)
         if dead.any():
             n = _compacted(v, n, dead)  # rows move within the live ones
             v = _live(t, n)

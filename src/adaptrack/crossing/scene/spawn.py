@@ -8,7 +8,7 @@ import numba
 import numpy as np
 
 from ...tracking.assignment import cluster_labels
-from ..site.geometry import curve_at
+from ..site.geometry import RADAR_FOLD, RADAR_HEIGHT, RADAR_X, RADAR_Y, curve_at
 from .body import N_STATE, ground_point, lane_frame
 
 NEAREST_BLOCK = 32  # centreline samples searched as a block once it may hold the nearest
@@ -74,9 +74,7 @@ def nearest_sample(roads, bounds, px, py):  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True)
-def open_tracks(  # type: ignore[no-untyped-def]
-    z, radar, noise_tab, noise_cnt, roads, bounds, radius, initial_speed_var, along_var
-):
+def open_tracks(z, site, view, cfg):  # type: ignore[no-untyped-def]
     """First states of the tentative tracks opened by left-over detections ``z`` (n, 3).
 
     Detections within ``radius`` [m] of each other on the ground are one body
@@ -86,7 +84,14 @@ def open_tracks(  # type: ignore[no-untyped-def]
     radar does not fold), else 0 with variance ``initial_speed_var``; the position along has
     variance ``1 + along_var``. Returns ``(corridor, x, p, labels, first)``: one row per body,
     each detection's body, and each body's first detection.
+    Bundles: ``site`` (the site, :class:`~.bundles.SiteTables`), ``view`` (the scan's radar,
+    :class:`~.bundles.RadarView`), ``cfg`` (the settings, :class:`~.bundles.Settings`); a setting
+    named here is the field of ``cfg``.
     """
+    radar, noise_tab, noise_cnt = view.radar, view.noise_tab, view.noise_cnt
+    roads, bounds = site.roads, site.bounds
+    radius, initial_speed_var = cfg.cluster_radius_m, cfg.initial_speed_var
+    along_var = cfg.body_along_std_m**2
     n = z.shape[0]
     gx, gy = np.zeros(n), np.zeros(n)
     for j in range(n):
@@ -107,12 +112,14 @@ def open_tracks(  # type: ignore[no-untyped-def]
     for g in range(m):
         c, u, d = nearest_sample(roads, bounds, sx[g] / cnt[g], sy[g] / cnt[g])
         _, _, tx, ty, _, px, py = lane_frame(roads, bounds, c, u, d)
-        ex, ey = px - radar[0], py - radar[1]
-        cos = (ex * tx + ey * ty) / math.sqrt(ex * ex + ey * ey + radar[2] * radar[2])
+        ex, ey = px - radar[RADAR_X], py - radar[RADAR_Y]
+        cos = (ex * tx + ey * ty) / math.sqrt(
+            ex * ex + ey * ey + radar[RADAR_HEIGHT] * radar[RADAR_HEIGHT]
+        )
         j = first[g]
         corridor[g] = c
         x[g, 0], x[g, 3] = u, d
-        if abs(cos) > 0.3 and radar[6] == 0.0:
+        if abs(cos) > 0.3 and radar[RADAR_FOLD] == 0.0:
             x[g, 1] = z[j, 2] / cos
             p[g, 1, 1] = (curve_at(noise_tab, noise_cnt, 2, z[j, 0]) / abs(cos)) ** 2 + 1.0
         else:

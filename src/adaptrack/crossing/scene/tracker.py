@@ -93,10 +93,7 @@ from ..site.corridor import Corridor, site_corridors
 from ..site.model import Site
 from ..site.sensor import curve_tables
 from .body import BODY_HALF_SPREADS
-from .gate import CLUTTER_VIEW
-from .scan_loop import (
-    EVENT_FIELDS,
-    EVENT_NAMES,
+from .bundles import (
     LOG_FIELDS,
     RadarState,
     RowBuffer,
@@ -104,11 +101,9 @@ from .scan_loop import (
     SiteTables,
     TrackRows,
     empty_rows,
-    new_row,
-    run_scans,
-    with_room,
-    write_rows,
 )
+from .gate import CLUTTER_VIEW
+from .scan_loop import EVENT_FIELDS, EVENT_NAMES, new_row, run_scans, with_room, write_rows
 
 N_STATE = 4  # u, du/dt, d2u/dt2, d
 STATIC = len(TrackStatus)  # status code of a stopped object that never moved

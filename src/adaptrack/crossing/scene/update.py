@@ -17,7 +17,7 @@ from ..estimators.kernels import (
     gate_update_into,
     innovation_into,
 )
-from ..site.geometry import curve_at, lane_at, off_boresight
+from ..site.geometry import RADAR_X, RADAR_Y, curve_at, lane_at, off_boresight
 from .body import (
     N_STATE,
     body_model,
@@ -29,6 +29,7 @@ from .body import (
     update_scratch,
     visible_part,
 )
+from .bundles import BIAS_SAMPLES, BIAS_SUM, BIAS_WEIGHT
 from .rows import rows_and_not
 
 BIAS_MIN_SPEED_MPS = 6.0  # azimuth alignment on vehicles, not on cyclists at the lane's edge
@@ -38,12 +39,8 @@ DETECTION_D_RATE = 0.2  # moving-average rate of a track's detections' offset ac
 
 @numba.njit(cache=True)
 def apply_scan(  # type: ignore[no-untyped-def]
-    time_s, seen, clutter, d2, logdet, gated, sight, gate, tracks, dets, z, ids, radar_col, x, p,
-    spread, along_m2, along_m4, stopped, moved, direction, slow_since, corridor, miss_run, occluded,
-    anchor_u, doppler_seen_s, detection_d, sensor_id, history, misses, last_hit_s, confirmed, roads,
-    bounds, radar, noise_tab, noise_cnt, fields, pd_tab, pd_cnt, across_std, moving_radial,
-    start_speed_var, learning_rate, shape_rate, spread_lo, spread_hi, align, lane_half_width, bias,
-    bias_stats, bias_forget, bias_gate, confirm_speed_var, window_mask, confirm_hits, shadow_spread,
+    time_s, seen, clutter, d2, logdet, gated, sight, tracks, dets, z, ids, r, t, site, view, cfg,
+    bias, bias_stats,
 ):  # fmt: skip
     """Update the tracks with a gated scan (:func:`associate_scan`, its ``gated``, ``sight``).
 
@@ -66,19 +63,25 @@ def apply_scan(  # type: ignore[no-untyped-def]
     though not towards its deletion (a multipath ghost lies behind the body that made it,
     moves with it, and is seen rarely). Returns which
     detections were used (D,).
+    Bundles: ``tracks`` (the track rows, :class:`~.bundles.TrackRows`), ``t`` (the track rows,
+    :class:`~.bundles.TrackRows`), ``site`` (the site, :class:`~.bundles.SiteTables`), ``view``
+    (the scan's radar, :class:`~.bundles.RadarView`), ``cfg`` (the settings,
+    :class:`~.bundles.Settings`); a setting named here is the field of ``cfg``.
     """
+    gate, confirm_speed_var, window_mask = cfg.gate, cfg.confirm_speed_var, cfg.window_mask
+    confirm_hits, shadow_spread = cfg.confirm_hits, cfg.shadow_spread_m
+    radar_col = r
+    x, p, spread, stopped, moved, corridor = t.x, t.p, t.spread, t.stopped, t.moved, t.corridor
+    miss_run, occluded, anchor_u, sensor_id = t.miss_run, t.occluded, t.anchor_u, t.sensor_id
+    history, misses, last_hit_s, confirmed = t.history, t.misses, t.last_hit_s, t.confirmed
+    roads, bounds = site.roads, site.bounds
+    radar = view.radar
     n_t, n_d = d2.shape
     used = np.zeros(n_d, dtype=np.bool_)
     hit = np.zeros(n_t, dtype=np.bool_)
     if n_d:
         owner, order = owners(d2, logdet, gate, tracks, dets)
-        update_tracks(
-            time_s, order, owner, clutter, gated, z, x, p, spread, along_m2, along_m4, stopped,
-            moved, direction, slow_since, doppler_seen_s, detection_d, corridor, roads, bounds,
-            radar, noise_tab, noise_cnt, fields, across_std, moving_radial, start_speed_var,
-            learning_rate, shape_rate, spread_lo, spread_hi, align, lane_half_width, bias,
-            bias_stats, bias_forget, bias_gate,
-        )  # fmt: skip
+        update_tracks(time_s, order, owner, clutter, gated, z, t, site, view, cfg, bias, bias_stats)
         for j in order:
             used[j] = True
             hit[owner[j]] = True
@@ -126,10 +129,7 @@ def apply_scan(  # type: ignore[no-untyped-def]
         if not occluded[i] and not stopped[i]:
             moving_missed[m] = i
             m += 1
-    miss_updates(
-        moving_missed[:m], x, p, spread, miss_run, corridor, roads, bounds, radar, noise_tab,
-        noise_cnt, fields, pd_tab, pd_cnt,
-    )  # fmt: skip
+    miss_updates(moving_missed[:m], t, site, view)
     rows = rows_and_not(seen, occluded)
     ready, row_hit = np.empty(rows.size, np.bool_), np.empty(rows.size, np.bool_)
     for k in range(rows.size):
@@ -181,10 +181,7 @@ def owners(d2, logdet, gate, primary_track, primary_det):  # type: ignore[no-unt
 
 @numba.njit(cache=True)
 def update_tracks(  # type: ignore[no-untyped-def]
-    time_s, order, owner, clutter, gated, z, x, p, spread, along_m2, along_m4, stopped, moved,
-    direction, slow_since, doppler_seen_s, detection_d, corridor, roads, bounds, radar, noise_tab,
-    noise_cnt, fields, across_std, moving_radial, start_speed_var, learning_rate, shape_rate,
-    spread_lo, spread_hi, align, lane_half_width, bias, bias_stats, bias_forget, bias_gate,
+    time_s, order, owner, clutter, gated, z, t, site, view, cfg, bias, bias_stats,
 ):  # fmt: skip
     """Update each owning track with its detections in ``order`` (sequential EKF updates).
 
@@ -224,7 +221,21 @@ def update_tracks(  # type: ignore[no-untyped-def]
     follows the detections' own offset across the lane (a moving average, rate
     ``DETECTION_D_RATE``; NaN before the first): where its reflections lie, not where the
     track's state says.
+    Bundles: ``t`` (the track rows, :class:`~.bundles.TrackRows`), ``site`` (the site,
+    :class:`~.bundles.SiteTables`), ``view`` (the scan's radar, :class:`~.bundles.RadarView`),
+    ``cfg`` (the settings, :class:`~.bundles.Settings`); a setting named here is the field of
+    ``cfg``.
     """
+    x, p, spread, stopped, moved, direction = t.x, t.p, t.spread, t.stopped, t.moved, t.direction
+    slow_since, doppler_seen_s, detection_d = t.slow_since, t.doppler_seen_s, t.detection_d
+    corridor, along_m2, along_m4 = t.corridor, t.along_m2, t.along_m4
+    start_speed_var = cfg.start_speed_max_mps**2
+    roads, bounds, lane_half_width = site.roads, site.bounds, site.half_lane_m
+    radar, noise_tab, noise_cnt, fields = view.radar, view.noise_tab, view.noise_cnt, view.fields
+    across_std, moving_radial = cfg.body_across_std_m, cfg.moving_radial_mps
+    learning_rate, shape_rate = cfg.spread_learning_rate, cfg.shape_learning_rate
+    spread_lo, spread_hi, align = cfg.spread_lo_m, cfg.spread_hi_m, cfg.estimate_azimuth_bias
+    bias_forget, bias_gate = cfg.bias_forget, cfg.bias_gate_m
     # buffers passed per detection: on the stack
     zp, h, rm, jp, jv = model_scratch()
     hp, s, lo, kt, w, ikh, tmp, xn, pn = update_scratch(3)
@@ -257,9 +268,9 @@ def update_tracks(  # type: ignore[no-untyped-def]
             lat = (gx - (cx + centre * nx)) * nx + (gy - (cy + centre * ny)) * ny
             g = rho * (math.cos(z[j, 1]) * nx - math.sin(z[j, 1]) * ny)  # d lat / d azimuth
             if abs(lat) <= bias_gate:
-                bias_stats[0] = bias_forget * bias_stats[0] + g * g
-                bias_stats[1] = bias_forget * bias_stats[1] + g * (lat + bias * g)
-                bias_stats[2] = bias_forget * bias_stats[2] + 1.0
+                bias_stats[BIAS_WEIGHT] = bias_forget * bias_stats[BIAS_WEIGHT] + g * g
+                bias_stats[BIAS_SUM] = bias_forget * bias_stats[BIAS_SUM] + g * (lat + bias * g)
+                bias_stats[BIAS_SAMPLES] = bias_forget * bias_stats[BIAS_SAMPLES] + 1.0
         sr = curve_at(noise_tab, noise_cnt, 0, z[j, 0])
         sa = curve_at(noise_tab, noise_cnt, 1, off_boresight(z[j, 1], radar))
         if as_gated[i]:
@@ -283,7 +294,7 @@ def update_tracks(  # type: ignore[no-untyped-def]
         doppler = doppler_usable(h, p[i], rm, radar)
         innovation_into(z[j], zp, radar, doppler, nu)
         # the radial speed of the detection's own point measures the speed along the lane
-        los = ((gx - radar[0]) * tx + (gy - radar[1]) * ty) / z[j, 0]
+        los = ((gx - radar[RADAR_X]) * tx + (gy - radar[RADAR_Y]) * ty) / z[j, 0]
         measures_speed = doppler and abs(los) >= GATE_MIN_COS
         if measures_speed:
             doppler_seen_s[i] = time_s
@@ -305,10 +316,7 @@ def update_tracks(  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True)
-def miss_updates(  # type: ignore[no-untyped-def]
-    rows, x, p, spread, miss_run, corridor, roads, bounds, radar, noise_tab, noise_cnt, fields,
-    pd_tab, pd_cnt,
-):  # fmt: skip
+def miss_updates(rows, t, site, view):  # type: ignore[no-untyped-def]
     """Apply what a scan without a detection tells to the tracks in ``rows``.
 
     :func:`~adaptrack.crossing.estimators.kernels.gate_update_into`: a slow
@@ -316,7 +324,14 @@ def miss_updates(  # type: ignore[no-untyped-def]
     run of misses that the gate explains better than ``1 - P_D`` measures a radial speed of
     0 within the gate; ``miss_run`` (T,) is each track's probability of its current run of
     misses for a moving target.
+    Bundles: ``t`` (the track rows, :class:`~.bundles.TrackRows`), ``site`` (the site,
+    :class:`~.bundles.SiteTables`), ``view`` (the scan's radar, :class:`~.bundles.RadarView`); a
+    setting named here is the field of ``cfg``.
     """
+    x, p, spread, miss_run, corridor = t.x, t.p, t.spread, t.miss_run, t.corridor
+    roads, bounds = site.roads, site.bounds
+    radar, noise_tab, noise_cnt, fields = view.radar, view.noise_tab, view.noise_cnt, view.fields
+    pd_tab, pd_cnt = view.pd_tab, view.pd_cnt
     if rows.size == 0:
         return
     # buffers passed per track: on the stack

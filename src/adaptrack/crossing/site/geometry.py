@@ -2,9 +2,9 @@
 
 The compiled (numba) forms serve the simulation's detection kernel, the road estimators and the
 scene tracker; the NumPy forms serve the Python paths. A radar row is
-``x, y, height, boresight, min range, ...`` (the estimators' layout, :mod:`adaptrack.crossing.
-estimators.kernels`); a packed road table (5, S) holds sampled ``s``, x, y, heading and
-curvature rows of one or more roads side by side. Azimuth is clockwise from north (+y).
+:data:`RADAR_FIELDS` (the estimators' and the scene tracker's layout); a packed road table
+(5, S) holds sampled ``s``, x, y, heading and curvature rows of one or more roads side by
+side. Azimuth is clockwise from north (+y).
 """
 
 from __future__ import annotations
@@ -15,6 +15,13 @@ import numba
 import numpy as np
 
 from ..._typing import ArrayLike, FloatArray
+
+RADAR_FIELDS = ("x", "y", "height", "boresight", "min_range", "doppler_gate", "fold")
+"""A radar's row in compiled code: east, north, height [m], boresight [rad], minimum slant
+range [m], Doppler gate [m/s] and folding speed [m/s] (0: none); indices ``RADAR_*``."""
+RADAR_X, RADAR_Y, RADAR_HEIGHT, RADAR_BORESIGHT, RADAR_MIN_RANGE = range(5)
+RADAR_DOPPLER_GATE, RADAR_FOLD = 5, 6
+FIELD_MAX_RANGE, FIELD_HALF_ANGLE = 0, 1  # columns of a field-of-view table (F, 2)
 
 
 def wrap(a: ArrayLike, half: float = math.pi) -> FloatArray:
@@ -103,7 +110,7 @@ def in_view(rng_m, off_axis, fields, min_range):  # type: ignore[no-untyped-def]
     if rng_m < min_range:
         return False
     for f in range(fields.shape[0]):
-        if rng_m <= fields[f, 0] and off_axis <= fields[f, 1]:
+        if rng_m <= fields[f, FIELD_MAX_RANGE] and off_axis <= fields[f, FIELD_HALF_ANGLE]:
             return True
     return False
 
@@ -111,9 +118,9 @@ def in_view(rng_m, off_axis, fields, min_range):  # type: ignore[no-untyped-def]
 @numba.njit(cache=True, inline="always")
 def polar_into(px, py, vx, vy, radar, zp, jp, jv):  # type: ignore[no-untyped-def]
     """Predicted (r, az, vr) and its Jacobians (3, 2) w.r.t. position and velocity."""
-    ex, ey = px - radar[0], py - radar[1]
+    ex, ey = px - radar[RADAR_X], py - radar[RADAR_Y]
     h2 = ex * ex + ey * ey
-    r = math.sqrt(h2 + radar[2] * radar[2])
+    r = math.sqrt(h2 + radar[RADAR_HEIGHT] * radar[RADAR_HEIGHT])
     rv = ex * vx + ey * vy
     zp[0], zp[1], zp[2] = r, math.atan2(ex, ey), rv / r
     jp[0, 0], jp[0, 1] = ex / r, ey / r
@@ -127,7 +134,7 @@ def polar_into(px, py, vx, vy, radar, zp, jp, jv):  # type: ignore[no-untyped-de
 @numba.njit(cache=True, inline="always")
 def off_boresight(az, radar):  # type: ignore[no-untyped-def]
     """Angle of azimuth ``az`` off the radar's boresight ``radar[3]``, in ``[0, pi]`` [rad]."""
-    return abs(wrapped(az - radar[3], math.pi))
+    return abs(wrapped(az - radar[RADAR_BORESIGHT], math.pi))
 
 
 @numba.njit(cache=True, inline="always")
