@@ -6,9 +6,9 @@ import math
 import numpy as np
 import pytest
 
+from adaptrack.angles import wrapped
 from adaptrack.crossing.estimators.road_filters import track_free_2d, track_on_road
 from adaptrack.crossing.simulation.radar import simulate_case
-from adaptrack.crossing.site.geometry import wrapped
 from adaptrack.crossing.site.model import load_site
 from adaptrack.crossing.site.sensor import Curve
 from adaptrack.crossing.site.traffic import VEHICLES

@@ -12,12 +12,12 @@ import numpy as np
 from .._linalg import mT, symmetrize
 from .._typing import ArrayLike, FloatArray
 from .._validation import as_float_array, broadcast_shape, check_symmetric_pd
+from ..angles import wrap
 
 
 def wrap_to_pi(angle: ArrayLike) -> FloatArray:
     """Wrap angles [rad] to [-pi, pi)."""
-    a = as_float_array(angle, "angle")
-    return (a + np.pi) % (2 * np.pi) - np.pi
+    return wrap(as_float_array(angle, "angle"))
 
 
 def _polar(polar: ArrayLike) -> FloatArray:

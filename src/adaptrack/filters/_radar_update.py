@@ -14,6 +14,7 @@ import numba
 import numpy as np
 
 from .._typing import FloatArray
+from ..angles import wrapped
 from ..models.measurement import RADAR_COMPONENTS, RadarMeasurement
 from ._kernels import update_into
 
@@ -29,11 +30,6 @@ def radar_layout(radar: RadarMeasurement) -> tuple[np.ndarray, FloatArray]:
     pose[2 : 2 + k] = np.asarray(radar.sensor_position)
     pose[5 : 5 + k] = np.asarray(radar.sensor_velocity)
     return codes, pose
-
-
-@numba.njit(cache=True, inline="always")
-def _wrap(a):  # type: ignore[no-untyped-def]
-    return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
 @numba.njit(cache=True, inline="always")
@@ -58,7 +54,7 @@ def radar_into(s, codes, pose, zp, jac):  # type: ignore[no-untyped-def]
             if k == 3:
                 jac[a, 2] = dz / r
         elif c == AZIMUTH:
-            zp[a] = _wrap(math.atan2(dx, dy) - pose[1])
+            zp[a] = wrapped(math.atan2(dx, dy) - pose[1], math.pi)
             jac[a, 0], jac[a, 1] = dy / horiz2, -dx / horiz2
         elif c == ELEVATION:
             rho = math.sqrt(horiz2)
@@ -109,7 +105,7 @@ def radar_update_into(  # type: ignore[no-untyped-def]
             for b in range(n_read):
                 hm[a, reads[b]] = jac[a, b]
             d = z[a] - zp[a]
-            nu[a] = _wrap(d) if codes[a] == AZIMUTH or codes[a] == ELEVATION else d
+            nu[a] = wrapped(d, math.pi) if codes[a] == AZIMUTH or codes[a] == ELEVATION else d
         else:
             nu[a] = 0.0
     ok, nis, logdet = update_into(xp, pp, nu, hm, rm, joseph, x, p, hp, s, lo, kt, w, ikh, tmp)

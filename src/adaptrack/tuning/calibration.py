@@ -22,6 +22,7 @@ import numpy as np
 
 from .._typing import ArrayLike, FloatArray
 from .._validation import as_float_array, check_times
+from ..angles import wrapped
 from ..filters.run import kalman_filter
 from ..models.continuous import ConstantVelocity
 from ..types import GaussianState
@@ -223,8 +224,7 @@ def _radar_reference_loglik(  # type: ignore[no-untyped-def]
             h[0, 0], h[0, 1] = dx / rho, dy / rho
             h[1, 0], h[1, 1] = dy / rho2, -dx / rho2
             nu[0] = z[k, 0] - range_bias - rho
-            nu[1] = (z[k, 1] - azimuth_bias - math.atan2(dx, dy) + math.pi) % (2 * math.pi)
-            nu[1] -= math.pi
+            nu[1] = wrapped(z[k, 1] - azimuth_bias - math.atan2(dx, dy), math.pi)
             r[0, 0], r[1, 1] = range_var, az_var
         else:
             h[0, 0] = h[1, 1] = 1.0

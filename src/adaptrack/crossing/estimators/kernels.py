@@ -16,6 +16,7 @@ import numba
 import numpy as np
 from numba import prange
 
+from ...angles import wrapped
 from ...filters._kernels import predict_into, series_transition_into, update_into
 from ..site.geometry import (
     RADAR_DOPPLER_GATE,
@@ -29,7 +30,6 @@ from ..site.geometry import (
     lane_at,
     off_boresight,
     polar_into,
-    wrapped,
 )
 
 ROAD, FREE = 0, 1  # measurement models

@@ -45,12 +45,13 @@ from scipy.special import ndtr
 from ..._backend import Backend, use_compiled
 from ..._linalg import symmetrize
 from ..._typing import BoolArray, FloatArray
+from ...angles import wrap
 from ...filters.kalman import CovarianceError, _update, predict
 from ...models.continuous import ConstantVelocity, MotionModel
 from ...models.discretize import discretize
 from ...models.series_table import SeriesTable, model_series_table
 from ...types import GaussianState, _trusted
-from ..site.geometry import polar_jacobian, wrap
+from ..site.geometry import polar_jacobian
 from ..site.road import Road
 from ..site.sensor import Curve, RadarSpec, curve_tables
 from .kernels import FREE, GATE_MIN_COS, MISS_RUN_FLOOR, ROAD, UNFOLD_SIGMAS

@@ -18,6 +18,7 @@ import numba
 import numpy as np
 
 from ..._borrowed import on_stack
+from ...angles import wrapped
 from ..estimators.kernels import ROAD, measure_span, road_measure
 from ..site.geometry import (
     FIELD_HALF_ANGLE,
@@ -30,7 +31,6 @@ from ..site.geometry import (
     in_view,
     lane_at,
     off_boresight,
-    wrapped,
 )
 
 N_STATE = 4

@@ -19,8 +19,8 @@ import numba
 import numpy as np
 
 from ..._borrowed import borrowed
+from ...angles import wrapped
 from ...tracking import assignment_by_components, gnn_assign
-from ..site.geometry import wrapped
 from .body import lane_frame, planar_rows
 from .bundles import (
     BIAS_SAMPLES,

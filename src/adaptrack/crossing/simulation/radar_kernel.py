@@ -15,7 +15,8 @@ import math
 import numba
 from numba import prange
 
-from ..site.geometry import curve_at, in_view, wrapped
+from ...angles import wrapped
+from ..site.geometry import curve_at, in_view
 
 
 @numba.njit(cache=True, parallel=True)

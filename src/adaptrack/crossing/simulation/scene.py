@@ -35,8 +35,9 @@ import numpy as np
 import pandas as pd
 
 from ..._typing import FloatArray
+from ...angles import wrap, wrapped
 from ..site.corridor import Corridor, site_corridors
-from ..site.geometry import radial_geometry, wrap, wrapped
+from ..site.geometry import radial_geometry
 from ..site.model import Site
 from ..site.sensor import RadarSpec
 from ..site.traffic import KMH, VehicleClass

@@ -1,10 +1,10 @@
-"""Ground geometry of a site, in one place: angle wrap, sensor curves, fields of view, lanes.
+"""Ground geometry of a site, in one place: sensor curves, fields of view, lanes, the radar.
 
-The compiled (numba) forms serve the simulation's detection kernel, the road estimators and the
-scene tracker; the NumPy forms serve the Python paths. A radar row is
-:data:`RADAR_FIELDS` (the estimators' and the scene tracker's layout); a packed road table
-(5, S) holds sampled ``s``, x, y, heading and curvature rows of one or more roads side by
-side. Azimuth is clockwise from north (+y).
+Angles wrap with :mod:`adaptrack.angles`. The compiled (numba) forms serve the simulation's
+detection kernel, the road estimators and the scene tracker; the NumPy forms serve the Python
+paths. A radar row is :data:`RADAR_FIELDS` (the estimators' and the scene tracker's layout); a
+packed road table (5, S) holds sampled ``s``, x, y, heading and curvature rows of one or more
+roads side by side. Azimuth is clockwise from north (+y).
 """
 
 from __future__ import annotations
@@ -15,6 +15,7 @@ import numba
 import numpy as np
 
 from ..._typing import ArrayLike, FloatArray
+from ...angles import wrapped
 
 RADAR_FIELDS = ("x", "y", "height", "boresight", "min_range", "doppler_gate", "fold")
 """A radar's row in compiled code: east, north, height [m], boresight [rad], minimum slant
@@ -22,11 +23,6 @@ range [m], Doppler gate [m/s] and folding speed [m/s] (0: none); indices ``RADAR
 RADAR_X, RADAR_Y, RADAR_HEIGHT, RADAR_BORESIGHT, RADAR_MIN_RANGE = range(5)
 RADAR_DOPPLER_GATE, RADAR_FOLD = 5, 6
 FIELD_MAX_RANGE, FIELD_HALF_ANGLE = 0, 1  # columns of a field-of-view table (F, 2)
-
-
-def wrap(a: ArrayLike, half: float = math.pi) -> FloatArray:
-    """Return ``(a + half) % (2 half) - half``: ``a`` wrapped to ``[-half, half)`` (floored)."""
-    return (np.asarray(a, dtype=float) + half) % (2 * half) - half
 
 
 def polar(
@@ -67,25 +63,6 @@ def polar_jacobian(
     jv = np.zeros_like(jp)
     jv[..., 2, :] = rel / r[..., None]
     return z, jp, jv
-
-
-@numba.njit(cache=True, inline="always")
-def wrapped(a, half):  # type: ignore[no-untyped-def]
-    """Return ``(a + half) % (2 half) - half`` (floored remainder, as Python and NumPy).
-
-    Within one turn either side the remainder is a subtraction or an addition, as Python's
-    (``fmod`` returns its argument, or its difference from the modulus exactly, there): the
-    same value to the last bit without the library call. Further out it is taken.
-    """
-    r = a + half
-    m = 2.0 * half
-    if 0.0 <= r < m:
-        return r - half
-    if m <= r < 2.0 * m:
-        return (r - m) - half
-    if -m <= r < 0.0:
-        return (r + m) - half
-    return r % m - half
 
 
 @numba.njit(cache=True, inline="always")

@@ -17,7 +17,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..._typing import ArrayLike, FloatArray
-from .geometry import polar, wrap
+from ...angles import wrap
+from .geometry import polar
 
 MAX_CURVE_POINTS = 32
 
