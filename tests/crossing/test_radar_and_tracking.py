@@ -75,9 +75,9 @@ def test_detections_noise_and_gates():
         stop_line_m=15.0,
         lateral_offset_std_m=0.0,
     )
-    from adaptrack.crossing.simulation.radar import radial_geometry
+    from adaptrack.crossing.site.geometry import radial_geometry
 
-    r_true, _, vr_true = radial_geometry(pt.position, pt.velocity, radar)
+    r_true, _, vr_true = radial_geometry(pt.position, pt.velocity, radar.position_m, radar.height_m)
     ok = pt.detected
     # ~12,000 draws: the sample sd has a relative sd of 0.65 %; 5 sigma = 3.3 %
     assert np.std((pt.measurements[..., 0] - r_true)[ok]) == pytest.approx(0.25, rel=0.033)
@@ -313,8 +313,8 @@ def test_generated_ekf_kernel_equals_the_generic_kernel(monkeypatch):
 def test_detection_kernel_equals_the_numpy_geometry():
     """Detections of the compiled simulation equal :func:`radial_geometry` plus unit noise
     scaled by the radar's curves at the true geometry, gated by near/far fields of view."""
-    from adaptrack.crossing.simulation.radar import radial_geometry
     from adaptrack.crossing.simulation.radar_kernel import detections_kernel
+    from adaptrack.crossing.site.geometry import radial_geometry
     from adaptrack.crossing.site.sensor import FieldOfView
 
     radar = dataclasses.replace(
@@ -341,7 +341,7 @@ def test_detection_kernel_equals_the_numpy_geometry():
         runs.position, direction, runs.speed, zeros, unit, zeros, radar_arr,
         radar.field_table(), *radar.noise_table(), *pd_tab, meas, detected,
     )  # fmt: skip
-    rng_m, az, vr = radial_geometry(runs.position, runs.velocity, radar)
+    rng_m, az, vr = radial_geometry(runs.position, runs.velocity, radar.position_m, radar.height_m)
     off = np.abs((az - radar.boresight_rad + np.pi) % (2 * np.pi) - np.pi)
     # near field: up to 60 m within +-60 deg; far field: up to 200 m within +-9 deg
     near = (rng_m <= 60.0) & (off <= np.radians(60.0))
@@ -377,9 +377,9 @@ def test_detection_probability_follows_class_and_range():
         SITE.roads["B"], radar, VEHICLES["motorcycle"], CASE["B/pass_60"], n_runs=400,
         rng=np.random.default_rng(8), start_m=200.0, stop_line_m=15.0, lateral_offset_std_m=0.3,
     )  # fmt: skip
-    from adaptrack.crossing.simulation.radar import radial_geometry
+    from adaptrack.crossing.site.geometry import radial_geometry
 
-    rng_m, _, _ = radial_geometry(runs.position, runs.velocity, radar)
+    rng_m, _, _ = radial_geometry(runs.position, runs.velocity, radar.position_m, radar.height_m)
     for lo, hi in ((20.0, 40.0), (95.0, 105.0), (170.0, 190.0)):
         sel = (rng_m > lo) & (rng_m < hi) & radar.covers(runs.position)
         expected = float(np.mean(radar.detection_curve("motorcycle")(rng_m[sel])))
