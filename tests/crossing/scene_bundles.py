@@ -40,3 +40,11 @@ def radar_view(radar, noise_tab, noise_cnt, fields=None, pd_tab=None, pd_cnt=Non
     pd_tab = np.ones((1, 2, 1)) if pd_tab is None else pd_tab
     pd_cnt = np.ones(1, np.int64) if pd_cnt is None else pd_cnt
     return RadarView(radar, noise_tab, noise_cnt, fields, pd_tab, pd_cnt)
+
+
+def scan_radar_view(site, r):
+    """Radar ``r`` of compiled site tables as the scan loop hands it to the stages."""
+    return RadarView(
+        site.radar[r], site.noise_tab[r], site.noise_cnt[r],
+        site.fields[r, : site.field_count[r]], site.pd_tab[r], site.pd_cnt[r],
+    )  # fmt: skip

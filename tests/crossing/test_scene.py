@@ -405,9 +405,9 @@ def test_stored_clutter_views_equal_views_made_anew():
     for name in ("x", "p", "spread"):
         np.testing.assert_array_equal(getattr(stored.tracks, name), getattr(anew.tracks, name))
     # the gate itself, on the last scan of each radar: the same to the last bit
-    from adaptrack.crossing.scene.bundles import RadarView
     from adaptrack.crossing.scene.gate import associate_scan
     from adaptrack.crossing.scene.scan_loop import learnt_clutter
+    from tests.crossing.scene_bundles import scan_radar_view
 
     t, st, site = stored._rows(), stored._settings, stored._tables
     clutter = learnt_clutter(t.stopped, t.moved, t.time_s, t.born_s, config.clutter_age_s)
@@ -415,10 +415,7 @@ def test_stored_clutter_views_equal_views_made_anew():
     last = {name: z for name, _, z, _ in iter_scans(rec.detections)}
     for r, radar in enumerate(SITE.radars):
         gates = []
-        view = RadarView(
-            site.radar[r], site.noise_tab[r], site.noise_cnt[r],
-            site.fields[r, : site.field_count[r]], site.pd_tab[r], site.pd_cnt[r],
-        )  # fmt: skip
+        view = scan_radar_view(site, r)
         for views in (t.clutter_views[:, r].copy(), np.zeros_like(t.clutter_views[:, r])):
             all_views = t.clutter_views.copy()
             all_views[:, r] = views

@@ -11,13 +11,13 @@ learnt spreads agree to rounding.
 import numpy as np
 import pytest
 
-from adaptrack.crossing.scene.bundles import RadarView
 from adaptrack.crossing.scene.gate import associate_scan
 from adaptrack.crossing.scene.predict import predict_tracks
 from adaptrack.crossing.scene.tracker import SceneTracker, SceneTrackerConfig, _Tracks
 from adaptrack.crossing.scene.update import apply_scan
 from adaptrack.crossing.site.model import load_site
 from tests.crossing import scene_reference as ref
+from tests.crossing.scene_bundles import scan_radar_view
 
 SITES = ("lx_three_arm", "lx_curve_near")  # three straight corridors; one curved road
 CONFIG = SceneTrackerConfig(occlusion_gate=False, passing_gate=False)  # the regime: none hides
@@ -89,10 +89,7 @@ def test_the_compiled_stages_of_one_scan_equal_the_numpy_reference(name):
     assert len(corridors) > 1 if name == "lx_three_arm" else max(np.abs(kappa)) > 1e-3
     # the stages as the scan loop calls them (no learnt clutter)
     t, site, cfg = tracker._rows(), tracker._tables, tracker._settings
-    sensor = RadarView(
-        site.radar[r], site.noise_tab[r], site.noise_cnt[r],
-        site.fields[r, : site.field_count[r]], site.pd_tab[r], site.pd_cnt[r],
-    )  # fmt: skip
+    sensor = scan_radar_view(site, r)
     clutter = np.zeros(3, bool)
     time_s = T0 + DT
     predict_tracks(t, clutter, time_s, cfg)
