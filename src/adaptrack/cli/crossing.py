@@ -21,8 +21,11 @@ from ..crossing.measurements_io import (
     read_warnings,
 )
 from ..crossing.scene.tracker import load_scene_config, track_scene
+from ..crossing.simulation.faces import RADAR_KINDS, FaceRadar, face_returns_of
+from ..crossing.simulation.motion import MotionTransform, read_motion, simulate_replay
+from ..crossing.simulation.object_list import object_list_ids
 from ..crossing.simulation.radar import simulate_site_case
-from ..crossing.simulation.scene import scene_spec, simulate_scene
+from ..crossing.simulation.scene import SceneRecording, scene_spec, simulate_scene
 from ..crossing.site.model import Site, load_site, site_from_mapping
 from ..crossing.studies.compliance import (
     POSITION_LIMIT_M,
@@ -378,24 +381,81 @@ def simulate(
     warnings: Path | None = typer.Option(
         None, "--warnings", help="Scene: also write when the lights flash or barriers are down."
     ),
+    motion: Path | None = typer.Option(
+        None,
+        "--motion",
+        help="Replay recorded motion (INTERACTION or generic layout) instead of the traffic model.",
+    ),
+    radar_kind: str | None = typer.Option(
+        None,
+        "--radar-kind",
+        help="Reflections: 'object', 'cluster' or 'cloud' (the face model), or 'symmetric' "
+        "(the scene's points about the body centre; the default of --scene). --motion: "
+        "default 'cluster'.",
+    ),
+    origin: str | None = typer.Option(
+        None, "--origin", help="--motion: X,Y [m] of the file that is the crossing centre."
+    ),
+    rotation: float = typer.Option(
+        0.0, "--rotation", help="--motion: turn the file's axes this much counter-clockwise [deg]."
+    ),
+    geodetic_origin: str | None = typer.Option(
+        None, "--geodetic-origin", help="--motion: LAT,LON [deg] of the crossing centre."
+    ),
+    start: float | None = typer.Option(
+        None, "--start", help="--motion: replay from this time of the file [s]."
+    ),
 ) -> None:
     """Simulate radar detections of traffic at a site.
 
     Without ``--scene``: one vehicle at a time per class and case, as a radar object list with
     ``object_id``. With ``--scene``: the site's mixed traffic (flows, closures, clutter), as
     raw detections without identities; ``--truth`` then holds every road user per traffic step.
+    With ``--motion``: the road users of a recorded trajectory file, put onto the site by
+    ``--origin``/``--rotation`` (or ``--geodetic-origin``), seen by the site's radars through
+    the face model; ``--truth`` as for a scene.
     """
     _outputs(out, truth, warnings)
     st = _load_site(site)
+    kinds = ("symmetric", *RADAR_KINDS)
+    if radar_kind is not None and radar_kind not in kinds:
+        _fail(f"--radar-kind must be one of {', '.join(kinds)}; got {radar_kind!r}")
+    if radar_kind is not None and not (scene or motion):
+        _fail("--radar-kind applies to --scene or --motion")
+    if motion is not None:
+        if scene:
+            _fail("--motion replaces the traffic model of --scene: give one of them")
+        kind = radar_kind or "cluster"
+        try:
+            transform = MotionTransform(
+                _pair(origin, "--origin") if origin else (0.0, 0.0),
+                rotation,
+                _pair(geodetic_origin, "--geodetic-origin") if geodetic_origin else None,
+            )
+            recorded = read_motion(motion, transform)
+            rec = simulate_replay(
+                st, recorded, seed, None if kind == "symmetric" else FaceRadar.of_kind(kind),
+                start_s=start, duration_s=duration,
+            )  # fmt: skip
+        except ValueError as exc:
+            _fail(str(exc))
+        _write_recording(rec, out, truth, kind, seed)
+        Console().print(
+            f"wrote {out} ({len(rec.detections)} detections, {kind}, of "
+            f"{len(rec.truth.users)} recorded road users over {rec.spec.duration_s:g} s)"
+        )
+        return
     if scene:
         try:
             spec = scene_spec(st, **({} if duration is None else {"duration_s": duration}))
         except ValueError as exc:
             _fail(str(exc))
-        rec = simulate_scene(st, spec, seed)
-        write_table_atomic(rec.detections, out)
-        if truth is not None:
-            write_table_atomic(rec.truth.table[TRUTH_COLUMNS + HAZARD_COLUMNS], truth)
+        kind = radar_kind or "symmetric"
+        if kind == "symmetric":
+            rec = simulate_scene(st, spec, seed)
+        else:
+            rec = simulate_scene(st, spec, seed, face_returns_of(FaceRadar.of_kind(kind)))
+        _write_recording(rec, out, truth, kind, seed)
         if warnings is not None:
             write_table_atomic(pd.DataFrame(spec.warnings(), columns=WARNING_COLUMNS), warnings)
         Console().print(
@@ -422,6 +482,26 @@ def simulate(
     if truth is not None:
         write_table_atomic(pd.concat(truths, ignore_index=True), truth)
     Console().print(f"wrote {out} ({next_id - 1} objects)")
+
+
+def _pair(text: str, option: str) -> tuple[float, float]:
+    try:
+        a, b = (float(v) for v in text.split(","))
+    except ValueError:
+        _fail(f"{option} takes two numbers A,B; got {text!r}")
+    return a, b
+
+
+def _write_recording(
+    rec: SceneRecording, out: Path, truth: Path | None, kind: str, seed: int
+) -> None:
+    """Write detections (an object list with the sensor's ids) and the truth of a scene."""
+    det = rec.detections
+    if kind == "object":
+        det = det.assign(object_id=object_list_ids(rec, seed))
+    write_table_atomic(det, out)
+    if truth is not None:
+        write_table_atomic(rec.truth.table[TRUTH_COLUMNS + HAZARD_COLUMNS], truth)
 
 
 def tune(

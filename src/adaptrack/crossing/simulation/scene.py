@@ -27,6 +27,7 @@ the centre of its body.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -488,72 +489,151 @@ def _radar_scans(radar: RadarSpec, duration_s: float, phase_s: float) -> FloatAr
     return np.arange(phase_s, duration_s, radar.period_s)
 
 
-def detect(
-    site: Site, spec: SceneSpec, truth: SceneTruth, rng: np.random.Generator
-) -> tuple[pd.DataFrame, np.ndarray]:
-    """Return the detections of every radar over the scene, and their sources."""
-    frames, sources = [], []
+@dataclass(frozen=True, eq=False)
+class ScanStates:
+    """Every road user at every scan of one radar, one row per user and scan.
+
+    ``scan_of`` indexes ``scans``; ``centre`` (N, 2) [m], ``forward`` (N, 2) unit heading,
+    ``velocity`` (N, 2) [m/s]; ``length``, ``width``, ``height`` (N,) [m] (NaN height: the
+    class's); ``object_id`` and ``vehicle_class`` per row.
+    """
+
+    scans: FloatArray
+    scan_of: np.ndarray
+    object_id: np.ndarray
+    vehicle_class: np.ndarray
+    centre: FloatArray
+    forward: FloatArray
+    velocity: FloatArray
+    length: FloatArray
+    width: FloatArray
+    height: FloatArray
+    offset_s: FloatArray  # scan time minus the truth sample's
+
+
+@dataclass(frozen=True, eq=False)
+class BodyReturns:
+    """Reflections of road users in one radar's scans, before measurement noise.
+
+    Slant range [m], azimuth [rad], radial speed [m/s] and scan index per return, the road
+    user's id as its source; ``elevation_rad`` (or None) for a radar that measures it;
+    ``doppler_step_mps`` (or None) quantises the measured radial speeds.
+    """
+
+    scan_of: np.ndarray
+    range_m: FloatArray
+    azimuth_rad: FloatArray
+    radial_speed_mps: FloatArray
+    source: np.ndarray
+    elevation_rad: FloatArray | None = None
+    doppler_step_mps: float | None = None
+
+
+def scan_states(truth: SceneTruth, scans: FloatArray) -> ScanStates:
+    """Road users at the scan times: the nearest traffic step's state moved on to the scan."""
     tab = truth.table
     users = truth.users.set_index("object_id")
-    for r_i, radar in enumerate(site.radars):
-        scans = _radar_scans(radar, spec.duration_s, rng.uniform(0.0, radar.period_s))
-        # object states at the scan times: the traffic steps are STEP_S apart, take the nearest
-        # and move it on to the scan time
-        k = np.rint(tab["time_s"].to_numpy() / STEP_S).astype(np.int64)
-        scan_k = np.rint(scans / STEP_S).astype(np.int64)
-        at = np.isin(k, scan_k)
-        rows = tab[at]
-        scan_of = np.searchsorted(scan_k, k[at])
-        obj = rows["object_id"].to_numpy()
-        cls = rows["vehicle_class"].to_numpy()
-        length = users.loc[obj, "length_m"].to_numpy()
-        width = users.loc[obj, "width_m"].to_numpy()
-        hd = rows["heading_rad"].to_numpy()
-        fwd = np.stack([np.sin(hd), np.cos(hd)], -1)
+    k = np.rint(tab["time_s"].to_numpy() / STEP_S).astype(np.int64)
+    scan_k = np.rint(scans / STEP_S).astype(np.int64)
+    at = np.isin(k, scan_k)
+    rows = tab[at]
+    scan_of = np.searchsorted(scan_k, k[at])
+    obj = rows["object_id"].to_numpy()
+    hd = rows["heading_rad"].to_numpy()
+    fwd = np.stack([np.sin(hd), np.cos(hd)], -1)
+    if "east_speed_mps" in rows.columns:  # recorded motion: the velocity as recorded
+        vel = rows[["east_speed_mps", "north_speed_mps"]].to_numpy(dtype=float)
+    else:
         vel = rows["speed_mps"].to_numpy()[:, None] * fwd
-        ahead_s = scans[scan_of] - k[at] * STEP_S
-        centre = rows[["east_m", "north_m"]].to_numpy() + ahead_s[:, None] * vel
-        rel = centre - np.asarray(radar.position_m)
-        rng_c, az_c, _ = radial_geometry(centre, vel, radar.position_m, radar.height_m)
-        near = radar.in_view(rng_c, az_c) | (rng_c < radar.max_range_m + 20.0)
-        occluded = np.zeros(obj.size, dtype=bool)
-        if spec.occlusion and obj.size:
-            order = np.argsort(scan_of, kind="stable")
-            starts = np.searchsorted(scan_of[order], np.arange(scans.size + 1))
-            # apparent half-width of the body across the line of sight
-            los = rel / np.maximum(np.hypot(rel[:, 0], rel[:, 1]), 1e-9)[:, None]
-            across = (
-                np.abs(los[:, 0] * fwd[:, 1] - los[:, 1] * fwd[:, 0]) * length
-                + np.abs(los[:, 0] * fwd[:, 0] + los[:, 1] * fwd[:, 1]) * width
-            )
-            half = np.arctan2(0.5 * across, rng_c)
-            large = width >= LARGE_WIDTH_M
-            occ = _occluded(
-                starts.astype(np.int64), rng_c[order], az_c[order], half[order], large[order],
-                rng.uniform(size=obj.size), OCCLUDED_P,
-            )  # fmt: skip
-            occluded[order] = occ
-        lo_hi = detections_per_scan(length)
-        count = rng.integers(lo_hi[:, 0], lo_hi[:, 1] + 1)
-        count = np.where(near & ~occluded, count, 0)
-        rep = np.repeat(np.arange(obj.size), count)
-        along = np.clip(rng.normal(0.0, 0.25 * length[rep]), -0.5 * length[rep], 0.5 * length[rep])
-        side = rng.uniform(-0.5, 0.5, rep.size) * width[rep]
-        right = np.stack([fwd[rep, 1], -fwd[rep, 0]], -1)
-        point = centre[rep] + along[:, None] * fwd[rep] + side[:, None] * right
-        prng, paz, pvr = radial_geometry(point, vel[rep], radar.position_m, radar.height_m)
-        pd_ = np.empty(rep.size)
-        for c in np.unique(cls[rep]) if rep.size else []:
-            m = cls[rep] == c
-            pd_[m] = radar.detection_curve(str(c))(prng[m])
-        seen = radar.in_view(prng, paz) & (rng.uniform(size=rep.size) < pd_)
-        if not spec.stationary_detections:
-            seen &= np.abs(pvr) >= radar.min_radial_speed_mps
-        rep, prng, paz, pvr = rep[seen], prng[seen], paz[seen], pvr[seen]
-        src = obj[rep]
-        t_det = scans[scan_of[rep]]
+    ahead_s = scans[scan_of] - k[at] * STEP_S
+    height = (
+        users.loc[obj, "height_m"].to_numpy(dtype=float)
+        if "height_m" in users.columns
+        else np.full(obj.size, np.nan)
+    )
+    return ScanStates(
+        scans, scan_of, obj, rows["vehicle_class"].to_numpy(),
+        rows[["east_m", "north_m"]].to_numpy() + ahead_s[:, None] * vel, fwd, vel,
+        users.loc[obj, "length_m"].to_numpy(), users.loc[obj, "width_m"].to_numpy(), height,
+        ahead_s,
+    )  # fmt: skip
+
+
+def symmetric_returns(
+    radar: RadarSpec, spec: SceneSpec, st: ScanStates, rng: np.random.Generator
+) -> BodyReturns:
+    """Draw the scene's own reflections: points spread symmetrically about the body centre.
+
+    Per user and scan, a length-dependent count of points along ``N(0, (L/4)^2)`` (clipped to
+    the body) and uniform across it; a nearer truck or bus shadows with ``OCCLUDED_P``.
+    """
+    obj, cls, length, width = st.object_id, st.vehicle_class, st.length, st.width
+    fwd, vel, centre, scan_of, scans = st.forward, st.velocity, st.centre, st.scan_of, st.scans
+    rel = centre - np.asarray(radar.position_m)
+    rng_c, az_c, _ = radial_geometry(centre, vel, radar.position_m, radar.height_m)
+    near = radar.in_view(rng_c, az_c) | (rng_c < radar.max_range_m + 20.0)
+    occluded = np.zeros(obj.size, dtype=bool)
+    if spec.occlusion and obj.size:
+        order = np.argsort(scan_of, kind="stable")
+        starts = np.searchsorted(scan_of[order], np.arange(scans.size + 1))
+        # apparent half-width of the body across the line of sight
+        los = rel / np.maximum(np.hypot(rel[:, 0], rel[:, 1]), 1e-9)[:, None]
+        across = (
+            np.abs(los[:, 0] * fwd[:, 1] - los[:, 1] * fwd[:, 0]) * length
+            + np.abs(los[:, 0] * fwd[:, 0] + los[:, 1] * fwd[:, 1]) * width
+        )
+        half = np.arctan2(0.5 * across, rng_c)
+        large = width >= LARGE_WIDTH_M
+        occ = _occluded(
+            starts.astype(np.int64), rng_c[order], az_c[order], half[order], large[order],
+            rng.uniform(size=obj.size), OCCLUDED_P,
+        )  # fmt: skip
+        occluded[order] = occ
+    lo_hi = detections_per_scan(length)
+    count = rng.integers(lo_hi[:, 0], lo_hi[:, 1] + 1)
+    count = np.where(near & ~occluded, count, 0)
+    rep = np.repeat(np.arange(obj.size), count)
+    along = np.clip(rng.normal(0.0, 0.25 * length[rep]), -0.5 * length[rep], 0.5 * length[rep])
+    side = rng.uniform(-0.5, 0.5, rep.size) * width[rep]
+    right = np.stack([fwd[rep, 1], -fwd[rep, 0]], -1)
+    point = centre[rep] + along[:, None] * fwd[rep] + side[:, None] * right
+    prng, paz, pvr = radial_geometry(point, vel[rep], radar.position_m, radar.height_m)
+    pd_ = np.empty(rep.size)
+    for c in np.unique(cls[rep]) if rep.size else []:
+        m = cls[rep] == c
+        pd_[m] = radar.detection_curve(str(c))(prng[m])
+    seen = radar.in_view(prng, paz) & (rng.uniform(size=rep.size) < pd_)
+    if not spec.stationary_detections:
+        seen &= np.abs(pvr) >= radar.min_radial_speed_mps
+    rep = rep[seen]
+    return BodyReturns(scan_of[rep], prng[seen], paz[seen], pvr[seen], obj[rep])
+
+
+Returns = Callable[[RadarSpec, SceneSpec, ScanStates, np.random.Generator], BodyReturns]
+
+
+def detect(
+    site: Site,
+    spec: SceneSpec,
+    truth: SceneTruth,
+    rng: np.random.Generator,
+    returns: Returns = symmetric_returns,
+) -> tuple[pd.DataFrame, np.ndarray]:
+    """Return the detections of every radar over the scene, and their sources.
+
+    ``returns`` models the road users' reflections (default: :func:`symmetric_returns`; the
+    face model is :func:`adaptrack.crossing.simulation.faces.face_returns`); multipath ghosts,
+    false alarms, static clutter and the measurement noise are the scene's.
+    """
+    frames, sources = [], []
+    duration = spec.duration_s
+    for r_i, radar in enumerate(site.radars):
+        scans = _radar_scans(radar, duration, rng.uniform(0.0, radar.period_s))
+        body = returns(radar, spec, scan_states(truth, scans), rng)
+        prng, paz, pvr, src = body.range_m, body.azimuth_rad, body.radial_speed_mps, body.source
+        t_det = scans[body.scan_of]
         # multipath ghosts: the same direction and Doppler, further out
-        ghost = rng.uniform(size=rep.size) < spec.multipath_probability
+        ghost = rng.uniform(size=src.size) < spec.multipath_probability
         g_rng = prng[ghost] + spec.multipath_extra_m * rng.uniform(0.5, 1.5, ghost.sum())
         # false alarms over the fields of view
         n_fa = rng.poisson(spec.false_alarms_per_scan, scans.size)
@@ -586,6 +666,8 @@ def detect(
         z_r = all_rng + sd_r * rng.standard_normal(all_rng.size)
         z_a = all_az + radar.azimuth_bias_rad + sd_a * rng.standard_normal(all_rng.size)
         z_v: FloatArray = all_vr + sd_v * rng.standard_normal(all_rng.size)
+        if body.doppler_step_mps:
+            z_v = body.doppler_step_mps * np.round(z_v / body.doppler_step_mps)
         if radar.max_unambiguous_speed_mps:
             h = radar.max_unambiguous_speed_mps
             z_v = wrap(z_v, h)
@@ -601,6 +683,11 @@ def detect(
                 "_scan": r_i * 10_000_000 + scan_idx,
             }
         )
+        if body.elevation_rad is not None:  # clutter and false alarms: on the ground
+            ground = -np.arcsin(np.minimum(radar.height_m / np.maximum(all_rng, 1e-9), 1.0))
+            frame["elevation_rad"] = np.concatenate(
+                [body.elevation_rad, body.elevation_rad[ghost], ground[src.size + ghost.sum() :]]
+            )
         frames.append(frame)
         sources.append(all_src)
     det = pd.concat(frames, ignore_index=True)
@@ -612,17 +699,24 @@ def detect(
     return det, src[order]
 
 
-def simulate_scene(site: Site, spec: SceneSpec, seed: int) -> SceneRecording:
-    """Traffic and detections of one scene (``seed`` makes it reproducible)."""
+def simulate_scene(
+    site: Site, spec: SceneSpec, seed: int, returns: Returns = symmetric_returns
+) -> SceneRecording:
+    """Traffic and detections of one scene (``seed`` makes it reproducible).
+
+    ``returns``: the reflection model (:func:`detect`).
+    """
     rng = np.random.default_rng(seed)
     truth = simulate_traffic(site, spec, rng)
-    det, src = detect(site, spec, truth, rng)
+    det, src = detect(site, spec, truth, rng, returns)
     return SceneRecording(truth, det, src, spec)
 
 
 __all__ = [
     "WALKERS_AND_RIDERS",
+    "BodyReturns",
     "Flow",
+    "ScanStates",
     "SceneRecording",
     "SceneSpec",
     "SceneTruth",
@@ -631,7 +725,9 @@ __all__ = [
     "detect",
     "detections_per_scan",
     "road_users",
+    "scan_states",
     "scene_spec",
     "simulate_scene",
     "simulate_traffic",
+    "symmetric_returns",
 ]
