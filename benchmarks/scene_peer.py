@@ -22,7 +22,7 @@ import numpy as np
 import pandas as pd
 
 from adaptrack.crossing.scene.tracker import SceneTrackerConfig, iter_scans
-from adaptrack.crossing.site.corridor import nearest_corridor, site_corridors
+from adaptrack.crossing.site.corridor import nearest_corridor
 from adaptrack.crossing.site.model import Site
 from adaptrack.tracking import cluster_points, gate_threshold
 
@@ -177,6 +177,6 @@ def _polar_initiator(prior):  # type: ignore[no-untyped-def]
 
 def _from_crossing(site: Site, xy: np.ndarray) -> np.ndarray:
     """Distance along the nearest corridor to the crossing centre [m]."""
-    corridors = site_corridors(site.roads, site.zone_m + site.run_in_m)
+    corridors = site.corridors
     index, u, _ = nearest_corridor(corridors, xy)
     return np.abs(np.array([c.crossing_u for c in corridors])[index] - u)

@@ -10,6 +10,7 @@ from rich.table import Table
 
 from ..crossing.site.authoring import coverage_svg, coverage_table, site_map_svg, site_template
 from ..crossing.site.model import blind_zones, builtin_sites, load_site
+from ..crossing.site.network import overlaps
 from ..io.tables import write_text_atomic
 from .errors import fail
 
@@ -88,6 +89,14 @@ def site_check(
     for name, parts in blind.items():
         spans = ", ".join(f"{a:.1f}-{b:.1f} m" for a, b in parts)
         console.print(f"blind zone on road {name}: {spans} (its radar does not see it)")
+    for a, b, s0, s1 in overlaps(st.roads):
+        console.print(
+            f"warning: roads {a} and {b} lie on each other along {a} {s0:.0f}-{s1:.0f} m, away "
+            "from where they meet (a road drawn twice, or roads that should meet at a junction)"
+        )
+    paths = ", ".join(f"{c.first}->{c.second}" for c in st.corridors if c.second in st.roads)
+    if paths:
+        console.print(f"driven paths: {paths}")
     write_text_atomic(out / "site_map.svg", site_map_svg(st))
     write_text_atomic(out / "coverage.svg", coverage_svg(st))
     console.print(

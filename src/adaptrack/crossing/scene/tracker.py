@@ -89,7 +89,7 @@ import pandas as pd
 from ..._toml import load_toml
 from ..._typing import FloatArray
 from ...tracking import LifecycleRules, TrackBook, TrackStatus, gate_threshold
-from ..site.corridor import Corridor, site_corridors
+from ..site.corridor import Corridor
 from ..site.model import Site
 from ..site.sensor import curve_tables
 from .body import BODY_HALF_SPREADS
@@ -361,7 +361,7 @@ class SceneTracker:
     ) -> None:
         self.site = site
         self.config = config or SceneTrackerConfig()
-        self.corridors = site_corridors(site.roads, site.zone_m + site.run_in_m)
+        self.corridors = site.corridors
         self.book = TrackBook(self.config.rules)
         self.tracks = _Tracks.empty(len(site.radars))
         self.events: list[dict[str, object]] = []

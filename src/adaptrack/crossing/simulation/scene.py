@@ -37,16 +37,12 @@ import pandas as pd
 
 from ..._typing import FloatArray
 from ...angles import wrap, wrapped
-from ..site.corridor import Corridor, site_corridors
+from ..site.corridor import Corridor
 from ..site.geometry import radial_geometry
 from ..site.model import Site
 from ..site.sensor import RadarSpec
-from ..site.traffic import KMH, VehicleClass
+from ..site.traffic import KMH, WALKERS_AND_RIDERS, VehicleClass
 
-WALKERS_AND_RIDERS = {  # road users of every scene besides the site's vehicle classes
-    "pedestrian": VehicleClass("pedestrian", 0.5, 0.5, 1.0, 2.0, 3.0, 8.0, 0.1),
-    "cyclist": VehicleClass("cyclist", 1.8, 0.6, 1.0, 2.5, 4.0, 40.0, 0.3),
-}
 DESIRED_SPEED_KMH = {  # mean and standard deviation of the desired speed per class
     "car": (60.0, 12.0),
     "motorcycle": (65.0, 15.0),
@@ -111,6 +107,37 @@ class Stall:
 
 
 @dataclass(frozen=True)
+class Parked:
+    """A road user standing at ``position_m`` from ``from_s`` to ``until_s`` (None: the end).
+
+    ``heading_deg`` clockwise from north; size the class's unless given [m].
+    """
+
+    position_m: tuple[float, float]
+    heading_deg: float = 0.0
+    vehicle_class: str = "car"
+    length_m: float | None = None
+    width_m: float | None = None
+    from_s: float = 0.0
+    until_s: float | None = None
+
+
+@dataclass(frozen=True)
+class Trains:
+    """A train passes between the barriers in the middle of every closure.
+
+    The trains alternate direction and track; each is a box ``length_m`` x ``width_m`` x
+    ``height_m`` at ``speed_kmh``, simulated while within ``run_m`` of the crossing centre.
+    """
+
+    length_m: float = 150.0
+    width_m: float = 3.2
+    height_m: float = 4.2
+    speed_kmh: float = 80.0
+    run_m: float = 300.0
+
+
+@dataclass(frozen=True)
 class SceneSpec:
     """What the scene simulates (the ``[scene]`` table of a site file; defaults below)."""
 
@@ -127,6 +154,8 @@ class SceneSpec:
     occlusion: bool = True
     stationary_detections: bool = True
     stalls: tuple[Stall, ...] = ()
+    parked: tuple[Parked, ...] = ()
+    trains: Trains | None = None
 
     def closures(self) -> FloatArray:
         """Barrier closures (K, 2): closing and opening times [s]."""
@@ -157,7 +186,7 @@ def scene_spec(site: Site, **changes: Any) -> SceneSpec:
     else:
         flows = tuple(
             flow
-            for c in site_corridors(site.roads, site.zone_m + site.run_in_m)
+            for c in site.corridors
             if c.second in site.roads
             for flow in (Flow(c.first, c.second, 300.0), Flow(c.second, c.first, 300.0))
         )
@@ -166,11 +195,17 @@ def scene_spec(site: Site, **changes: Any) -> SceneSpec:
         mix = {k: 0.96 * v for k, v in site.traffic_mix.items()}
         mix.update(pedestrian=0.02, cyclist=0.02)
     stalls = tuple(Stall(**s) for s in data.pop("stalls", []))
+    parked = tuple(
+        Parked(**{**p, "position_m": tuple(p["position_m"])}) for p in data.pop("parked", [])
+    )
+    trains = Trains(**data.pop("trains")) if "trains" in data else None
     clutter = tuple(tuple(p) for p in data.pop("static_clutter_m", []))
     spec = SceneSpec(
         flows=flows,
         mix=mix,
         stalls=stalls,
+        parked=parked,
+        trains=trains,
         static_clutter_m=clutter,
         **data,
     )
@@ -200,6 +235,13 @@ def _check_spec(spec: SceneSpec, site: Site) -> None:
     for st in spec.stalls:
         if not any(f.entry == st.entry for f in spec.flows):
             raise ValueError(f"scene stall: no flow enters on road {st.entry!r}")
+    for i, p in enumerate(spec.parked):
+        if p.vehicle_class not in users:
+            raise ValueError(
+                f"scene parked[{i}]: unknown class {p.vehicle_class!r}; known: {', '.join(users)}"
+            )
+    if spec.trains is not None and site.rails is None:
+        raise ValueError("scene trains: the site has no [rails] for them to run on")
 
 
 @dataclass(frozen=True, eq=False)
@@ -260,8 +302,7 @@ def _idm_accel(
 
 def simulate_traffic(site: Site, spec: SceneSpec, rng: np.random.Generator) -> SceneTruth:
     """Move every road user of the scene along its corridor (module docstring)."""
-    length = site.zone_m + site.run_in_m
-    corridors = site_corridors(site.roads, length)
+    corridors = site.corridors
     arrivals = _arrivals(spec, rng)
     n = len(arrivals)
     flow_cor = [_corridor_of(corridors, f.entry, f.exit) for f in spec.flows]
@@ -305,6 +346,12 @@ def simulate_traffic(site: Site, spec: SceneSpec, rng: np.random.Generator) -> S
     lateral = np.where(
         np.isin(classes, ["pedestrian", "cyclist", "motorcycle"]), lateral, lateral + wander
     )
+    lanes = np.array([corridors[c].lanes[0 if d > 0 else 1] for c, d in
+                      zip(corridor, direction, strict=True)], dtype=int)  # fmt: skip
+    if n and lanes.max() > 1:  # several lanes: each user keeps one, drawn evenly
+        lane = rng.integers(0, np.maximum(lanes, 1))
+        lane = np.where(np.isin(classes, ["pedestrian", "cyclist"]), lanes - 1, lane)  # kerb
+        lateral = lateral + lane * 2 * half_lane
     d_side = -direction * lateral  # corridor offset (right of decreasing u)
     # along-corridor distance travelled by the front from the corridor's start of this direction
     x = length_m.copy()  # the whole body is on the corridor when a user appears
@@ -329,7 +376,8 @@ def simulate_traffic(site: Site, spec: SceneSpec, rng: np.random.Generator) -> S
     stall_until = np.full(n, np.inf)
     stall_stop_time = np.full(n, np.nan)
     line_run_time = np.full(n, np.nan)
-    stop_line = x_cross - site.stop_line_m
+    entry_road = [spec.flows[f].entry for f in flow_idx]
+    stop_line = x_cross - np.array([site.stop_line_of(r) for r in entry_road])
     closures = spec.closures()
     steps = math.ceil(spec.duration_s / STEP_S) + 1
     active = np.zeros(n, dtype=bool)
@@ -463,7 +511,59 @@ def simulate_traffic(site: Site, spec: SceneSpec, rng: np.random.Generator) -> S
     stops = pd.DataFrame({"object_id": stalled, "stop_time_s": stall_stop_time[stalled]})
     ran = np.flatnonzero(~np.isnan(line_run_time))
     runs = pd.DataFrame({"object_id": ran, "cross_time_s": line_run_time[ran]})
+    if spec.parked or spec.trains is not None:
+        table, users_t = _standing_and_trains(site, spec, table, users_t)
     return SceneTruth(table, users_t, closures, stops, runs)
+
+
+def _standing_and_trains(
+    site: Site, spec: SceneSpec, table: pd.DataFrame, users: pd.DataFrame
+) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Add the parked road users and the trains of the closures to the truth (ids after)."""
+    known = road_users(site)
+    steps = np.arange(math.ceil(spec.duration_s / STEP_S) + 1) * STEP_S
+    rows, extra = [], []
+    next_id = len(users)
+    for p in spec.parked:
+        cls = known[p.vehicle_class]
+        t = steps[(steps >= p.from_s) & (steps <= (p.until_s or spec.duration_s))]
+        dist = math.hypot(*p.position_m)
+        rows.append(pd.DataFrame({
+            "object_id": next_id, "vehicle_class": p.vehicle_class, "time_s": t,
+            "east_m": p.position_m[0], "north_m": p.position_m[1], "speed_mps": 0.0,
+            "heading_rad": math.radians(p.heading_deg) % (2 * math.pi), "to_crossing_m": dist,
+            "in_zone": dist <= site.zone_m,
+        }))  # fmt: skip
+        extra.append((next_id, p.vehicle_class, p.length_m or cls.length_m,
+                      p.width_m or cls.width_m, np.nan, p.from_s))  # fmt: skip
+        next_id += 1
+    tr = spec.trains
+    if tr is not None and site.rails is not None:
+        rails, v = site.rails, tr.speed_kmh * KMH
+        span = 2 * tr.run_m + tr.length_m  # the front's run [m]
+        for k, (c0, c1) in enumerate(spec.closures()):
+            sign = 1.0 if k % 2 == 0 else -1.0
+            start = 0.5 * (c0 + c1) - 0.5 * span / v
+            t = steps[(steps >= start) & (steps <= start + span / v)]
+            centre_along = sign * (-tr.run_m - 0.5 * tr.length_m + v * (t - start))
+            pos = rails.track_point(k % rails.tracks, centre_along)
+            heading = rails.axis_rad + (0.0 if sign > 0 else math.pi)
+            rows.append(pd.DataFrame({
+                "object_id": next_id, "vehicle_class": "train", "time_s": t,
+                "east_m": pos[:, 0], "north_m": pos[:, 1], "speed_mps": v,
+                "heading_rad": heading % (2 * math.pi), "to_crossing_m": -sign * centre_along,
+                "in_zone": False,
+            }))  # fmt: skip
+            extra.append((next_id, "train", tr.length_m, tr.width_m, tr.height_m, start))
+            next_id += 1
+    if not rows:
+        return table, users
+    table = pd.concat([table, *rows], ignore_index=True)
+    table = table.sort_values(["time_s", "object_id"], kind="stable", ignore_index=True)
+    added = pd.DataFrame(extra, columns=["object_id", "vehicle_class", "length_m", "width_m",
+                                         "height_m", "arrival_s"])  # fmt: skip
+    added = added.assign(corridor=-1, direction=0, lateral_m=0.0)
+    return table, pd.concat([users.assign(height_m=np.nan), added], ignore_index=True)
 
 
 @numba.njit(cache=True)

@@ -21,7 +21,9 @@ from .drawing import (
     blind_polylines,
     draw_blind,
     draw_marks,
+    draw_network,
     draw_site,
+    network_layers,
     site_layers,
     site_marks,
     svg_of,
@@ -64,14 +66,16 @@ def coverage_table(site: Site) -> pd.DataFrame:
 def site_map_svg(site: Site, centre_m: float = 40.0) -> str:
     """Map of the site as inline SVG: the whole site, and its centre within ``centre_m``.
 
-    It shows the lanes, stop lines, barriers, the ends of the controlled zone, the radars
-    with their fields of view, blind zones and the scene's static clutter.
+    It shows every lane, the driven paths (turns included), the rails, stop lines,
+    barriers, the ends of the controlled zone, the radars with their fields of view, blind
+    zones and the scene's static clutter.
     """
     fig, axes = plt.subplots(1, 2, figsize=(14, 7))
     roads, radars = site_layers(site)
     reach = site.zone_m + site.run_in_m
     clutter = np.asarray(site.source.get("scene", {}).get("static_clutter_m", []), float)
     for ax, half in zip(axes, (None, centre_m), strict=True):
+        draw_network(ax, network_layers(site))
         draw_site(ax, roads, radars, reach)
         draw_blind(ax, blind_polylines(site))
         draw_marks(ax, site_marks(site))

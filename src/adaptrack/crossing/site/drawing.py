@@ -93,14 +93,55 @@ def site_marks(site: Site) -> dict[str, list[list[list[float]]]]:
     Label -> segments ``[[x0, y0], [x1, y1]]`` [m] across both lanes.
     """
     out: dict[str, list[list[list[float]]]] = {label: [] for label in MARK_LABELS}
-    for road in site.roads.values():
-        for label, at_m in zip(MARK_LABELS, (site.stop_line_m, site.barrier_m, site.zone_m),
-                               strict=True):  # fmt: skip
+    for name, road in site.roads.items():
+        at = (site.stop_line_of(name), site.barrier_of(name), site.zone_m)
+        w = road.lane_width_m
+        spans = ((0.0, road.lanes_in * w), (-road.lanes_out * w, road.lanes_in * w),
+                 (-road.lanes_out * w, road.lanes_in * w))  # fmt: skip  # stop line: inbound
+        for label, at_m, (lo, hi) in zip(MARK_LABELS, at, spans, strict=True):
             centre, th = road.centreline(np.array([at_m]))
             across = np.array([-math.cos(th[0]), math.sin(th[0])])  # right of inbound
-            ends = centre[0] + np.outer([-1.2, 1.2], across) * road.lane_width_m
+            ends = centre[0] + np.outer([lo - 0.2 * w, hi + 0.2 * w], across)
             out[label].append(ends.tolist())
     return out
+
+
+def network_layers(site: Site) -> dict[str, list[list[list[float]]]]:
+    """Every lane of every road, every corridor's driven lanes, and the rails, as polylines.
+
+    ``lanes``: each lane's centre (towards and away from the crossing end); ``paths``: the
+    lanes of the corridors, turning paths included, in both directions; ``rails``: both rails
+    of every track [m].
+    """
+    lanes = []
+    for road in site.roads.values():
+        s = np.linspace(0.0, road.length_m, 200)
+        w = road.lane_width_m
+        offsets = [k * w for k in range(road.lanes_in)]
+        offsets += [-(k + 1) * w for k in range(road.lanes_out)]
+        lanes += [road.lane_point(s, d).tolist() for d in offsets]
+    paths = []
+    for c in site.corridors:
+        u = np.linspace(0.0, c.path.length_m, 400)
+        w = next(iter(site.roads.values())).lane_width_m
+        paths += [c.path.lane_point(u, d).tolist() for d in (-0.5 * w, 0.5 * w)]
+    rails = []
+    if site.rails is not None:
+        rails = [seg.tolist() for seg in site.rails.rail_lines(site.zone_m + site.run_in_m)]
+    return {"lanes": lanes, "paths": paths, "rails": rails}
+
+
+def draw_network(ax: Any, layers: dict[str, list[list[list[float]]]]) -> None:
+    """Draw :func:`network_layers`: lanes (grey), corridor paths (thin blue), rails (black)."""
+    styles = {"lanes": ("0.75", 2.0, "-"), "paths": ("tab:blue", 0.6, "--"),
+              "rails": ("k", 1.2, "-")}  # fmt: skip
+    names = {"lanes": "every lane", "paths": "driven paths (turns included)", "rails": "rails"}
+    for key, lines in layers.items():
+        colour, width, style = styles[key]
+        for k, pts in enumerate(lines):
+            p = np.asarray(pts)
+            ax.plot(p[:, 0], p[:, 1], color=colour, lw=width, ls=style,
+                    label=names[key] if k == 0 else None)  # fmt: skip
 
 
 def draw_marks(ax: Any, marks: dict[str, list[list[list[float]]]]) -> None:

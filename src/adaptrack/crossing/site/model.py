@@ -15,17 +15,28 @@ import dataclasses
 import hashlib
 import json
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from ..._toml import builtin_names, load_named_toml
-from .road import Road, RoadElement, build_road
+from .corridor import Corridor, site_corridors
+from .network import MEET_TOLERANCE_M, route
+from .rails import Rails
+from .road import Road, RoadElement, build_road, polyline_road
 from .schema import RadarFile, SiteFile, validate_site_mapping
 from .sensor import Curve, FieldOfView, RadarSpec
-from .traffic import VEHICLES, Case, VehicleClass, default_cases, inapplicable_reason
+from .traffic import (
+    VEHICLES,
+    WALKERS_AND_RIDERS,
+    Case,
+    VehicleClass,
+    default_cases,
+    inapplicable_reason,
+)
 
 COVERAGE_STEP_M = 0.5  # sampling of a road's zone when choosing its radar and finding blind parts
 
@@ -54,6 +65,36 @@ class Site:
     run_in_m: float
     lateral_offset_std_m: float
     source: dict[str, Any]
+    stop_lines: dict[str, float] = field(default_factory=dict)
+    barriers: dict[str, float] = field(default_factory=dict)
+    rails: Rails | None = None
+    connections: dict[tuple[str, str], np.ndarray] = field(default_factory=dict)
+
+    @cached_property
+    def corridors(self) -> list[Corridor]:
+        """The paths road users drive: roads in line, then every flow's and connection's route.
+
+        See :func:`~adaptrack.crossing.site.corridor.site_corridors`.
+        """
+        return site_corridors(
+            self.roads, self.zone_m + self.run_in_m, self.routes, self.connections
+        )
+
+    @property
+    def routes(self) -> tuple[tuple[str, str], ...]:
+        """(entry, exit) of every scene flow and connection, in file order."""
+        flows = self.source.get("scene", {}).get("flows", [])
+        pairs = [(f["entry"], f["exit"]) for f in flows] + list(self.connections)
+        pairs += [(c["entry"], c["exit"]) for c in self.source.get("connections", [])]
+        return tuple(dict.fromkeys(pairs))
+
+    def stop_line_of(self, road: str) -> float:
+        """Return where traffic towards the crossing on ``road`` stops [m from its crossing end]."""
+        return self.stop_lines.get(road, self.stop_line_m)
+
+    def barrier_of(self, road: str) -> float:
+        """Return the barrier on ``road`` [m from its crossing end]."""
+        return self.barriers.get(road, self.barrier_m)
 
     @property
     def fingerprint(self) -> str:
@@ -130,12 +171,13 @@ def site_from_mapping(data: dict[str, Any], where: str) -> Site:
         classes = {k: classes[k] for k in mix}
     else:
         mix = {k: 1.0 / len(classes) for k in classes}
+    seen_classes = {**classes, **WALKERS_AND_RIDERS}
     for i, r in enumerate(spec.radars):
         for cls in r.detection_probability:
-            if cls != "default" and cls not in classes:
+            if cls != "default" and cls not in seen_classes:
                 raise ValueError(
                     f"{where}: radars[{i}].detection_probability: unknown class {cls!r}; "
-                    f"classes are {', '.join(classes)} (or 'default')"
+                    f"classes are {', '.join(seen_classes)} (or 'default')"
                 )
     cases = _cases(spec, roads, classes, where)
     stop_line = spec.stop_line_m
@@ -155,7 +197,22 @@ def site_from_mapping(data: dict[str, Any], where: str) -> Site:
                 for f in radar.fields
             )
             raise ValueError(f"{where}: radar {radar.name!r} has no road in view (fields: {view})")
-    return Site(
+    rails = None
+    if spec.rails is not None:
+        rf = spec.rails
+        rails = Rails(math.radians(rf.axis_deg), (rf.centre_m[0], rf.centre_m[1]), rf.tracks,
+                      rf.track_spacing_m, rf.gauge_m)  # fmt: skip
+    connections = {}
+    for i, c in enumerate(spec.connections):
+        for key in ("entry", "exit"):
+            if getattr(c, key) not in roads:
+                raise ValueError(
+                    f"{where}: connections[{i}].{key}: unknown road {getattr(c, key)!r}; roads "
+                    f"are {', '.join(roads)}"
+                )
+        if c.points_m is not None:
+            connections[(c.entry, c.exit)] = np.asarray(c.points_m, dtype=float)
+    site = Site(
         spec.name or Path(where).stem,
         spec.description,
         roads,
@@ -169,8 +226,62 @@ def site_from_mapping(data: dict[str, Any], where: str) -> Site:
         spec.zone_m,
         spec.run_in_m,
         spec.lateral_offset_std_m,
-        spec.model_dump(mode="json", exclude_none=True),
+        _source(spec),
+        {r.name: r.stop_line_m for r in spec.roads if r.stop_line_m is not None},
+        {r.name: r.barrier_m for r in spec.roads if r.barrier_m is not None},
+        rails,
+        connections,
     )
+    _check_routes(site, spec, where)
+    return site
+
+
+ADDED_DEFAULTS: dict[
+    str, dict[str, Any]
+] = {  # keys added after sites were first tuned: left out at their defaults,
+    "roads": {"extend_m": 0.0, "survey_std_m": 0.05, "lanes_in": 1, "lanes_out": 1},
+    "scene": {"parked": []},
+    "": {"connections": []},
+}  # so that the fingerprint of a site that does not use them stays what it was
+
+
+def _source(spec: SiteFile) -> dict[str, Any]:
+    """Return the validated file as plain data, without the added keys at their defaults."""
+    data = spec.model_dump(mode="json", exclude_none=True)
+    tables = [data, *data.get("roads", [])] + ([data["scene"]] if "scene" in data else [])
+    for table in tables:
+        key = "" if table is data else ("scene" if table is data.get("scene") else "roads")
+        for name, default in ADDED_DEFAULTS[key].items():
+            if table.get(name, None) == default:
+                del table[name]
+    return data
+
+
+def _check_routes(site: Site, spec: SiteFile, where: str) -> None:
+    """Every flow and connection has a path; its roads exist (named in the error)."""
+    flows = spec.scene.flows if spec.scene is not None and spec.scene.flows else []
+    for i, f in enumerate(flows):
+        for key in ("entry", "exit"):
+            if getattr(f, key) not in site.roads:
+                raise ValueError(
+                    f"{where}: scene.flows[{i}].{key}: unknown road {getattr(f, key)!r}; roads "
+                    f"are {', '.join(site.roads)}"
+                )
+        if f.entry == f.exit:
+            raise ValueError(f"{where}: scene.flows[{i}]: entry and exit are one road")
+    paths = [(f"scene.flows[{i}]", f.entry, f.exit) for i, f in enumerate(flows)]
+    paths += [(f"connections[{i}]", c.entry, c.exit) for i, c in enumerate(spec.connections)]
+    for place, entry, exit_ in paths:
+        if route(site.roads, entry, exit_) is None:
+            raise ValueError(
+                f"{where}: {place} {entry}->{exit_}: no path joins the roads (roads meet where "
+                f"one starts at another's start or on its centreline, within "
+                f"{MEET_TOLERANCE_M:g} m)"
+            )
+    try:
+        _ = site.corridors
+    except ValueError as exc:
+        raise ValueError(f"{where}: {exc}") from None
 
 
 def _unique(names: list[str], what: str, where: str) -> None:
@@ -184,7 +295,16 @@ def _unique(names: list[str], what: str, where: str) -> None:
 def _roads(spec: SiteFile, where: str) -> dict[str, Road]:
     _unique([r.name for r in spec.roads], "roads", where)
     roads = {}
-    for rd in spec.roads:
+    for i, rd in enumerate(spec.roads):
+        lanes = (rd.lanes_in, rd.lanes_out)
+        if rd.points_m is not None:
+            try:
+                roads[rd.name] = polyline_road(rd.name, rd.points_m, spec.lane_width_m,
+                                               rd.extend_m, lanes, rd.survey_std_m)  # fmt: skip
+            except ValueError as exc:
+                raise ValueError(f"{where}: roads[{i}]: {exc}") from None
+            continue
+        assert rd.elements is not None and rd.heading_deg is not None  # the schema's rule
         elems = tuple(
             RoadElement(
                 e.kind,
@@ -197,7 +317,9 @@ def _roads(spec: SiteFile, where: str) -> dict[str, Road]:
             )
             for e in rd.elements
         )
-        roads[rd.name] = build_road(rd.name, math.radians(rd.heading_deg), spec.lane_width_m, elems)
+        start = (0.0, 0.0) if rd.start_m is None else (rd.start_m[0], rd.start_m[1])
+        roads[rd.name] = build_road(rd.name, math.radians(rd.heading_deg), spec.lane_width_m,
+                                    elems, start, lanes)  # fmt: skip
     return roads
 
 

@@ -1,10 +1,12 @@
-"""Road centrelines made of straights, clothoids and circular arcs.
+"""Road centrelines made of straights, clothoids and circular arcs, or surveyed polylines.
 
-A road starts at the crossing centre (the origin of the local ENU frame) and leaves it with
-azimuth ``heading`` (clockwise from north). ``s`` is the distance along the centreline from the
-crossing [m]. Curvature is positive for a turn to the right (heading increasing). Approaching
-traffic drives towards the crossing (``s`` decreasing) in the lane on its right-hand side,
-centred ``lane_width / 2`` from the centreline.
+A road starts at its crossing end (the crossing centre, the origin of the local ENU frame,
+unless it starts at a junction elsewhere) and leaves it with azimuth ``heading`` (clockwise
+from north). ``s`` is the distance along the centreline from that end [m]. Curvature is
+positive for a turn to the right (heading increasing). Approaching traffic drives towards the
+crossing end (``s`` decreasing) in the ``lanes_in`` lanes on its right-hand side, the first
+centred ``lane_width / 2`` from the centreline, the next ``lane_width`` further; traffic
+leaving drives in the ``lanes_out`` lanes on the other side.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
+from scipy.interpolate import splev, splprep
 from scipy.spatial import cKDTree
 
 from ..._typing import ArrayLike, FloatArray
@@ -49,6 +52,8 @@ class Road:
     xy: FloatArray
     heading: FloatArray
     curvature: FloatArray
+    lanes_in: int = 1
+    lanes_out: int = 1
 
     @property
     def length_m(self) -> float:
@@ -139,9 +144,17 @@ class Road:
 
 
 def build_road(
-    name: str, heading_rad: float, lane_width_m: float, elements: tuple[RoadElement, ...]
+    name: str,
+    heading_rad: float,
+    lane_width_m: float,
+    elements: tuple[RoadElement, ...],
+    start_m: tuple[float, float] = (0.0, 0.0),
+    lanes: tuple[int, int] = (1, 1),
 ) -> Road:
-    """Integrate the curvature of the elements into a sampled centreline."""
+    """Integrate the curvature of the elements into a sampled centreline from ``start_m``.
+
+    ``lanes``: the lanes towards the crossing end and away from it.
+    """
     if not elements:
         raise ValueError(f"road {name!r}: needs at least one element")
     kappa_parts = []
@@ -178,10 +191,61 @@ def build_road(
     # exact chord of a circular step of length ds and turning angle kappa ds
     chord = ds * np.where(np.abs(kappa * ds) > 1e-12, np.sinc(kappa * ds / (2 * math.pi)), 1.0)
     steps = np.stack([chord * np.sin(mid), chord * np.cos(mid)], -1)
-    xy = np.concatenate([[[0.0, 0.0]], np.cumsum(steps, axis=0)])
+    xy = np.concatenate([[[0.0, 0.0]], np.cumsum(steps, axis=0)]) + np.asarray(start_m)
     s = np.concatenate([[0.0], np.cumsum(ds)])
     curv = np.concatenate([kappa[:1], kappa])
-    return Road(name, heading_rad, lane_width_m, elements, s, xy, theta, curv)
+    return Road(name, heading_rad, lane_width_m, elements, s, xy, theta, curv, *lanes)
 
 
-__all__ = ["Road", "RoadElement", "build_road"]
+SURVEY_STD_M = 0.05  # survey points are smoothed to this residual by default (RMS) [m]
+
+
+def polyline_road(
+    name: str,
+    points_m: ArrayLike,
+    lane_width_m: float,
+    extend_m: float = 0.0,
+    lanes: tuple[int, int] = (1, 1),
+    survey_std_m: float = SURVEY_STD_M,
+) -> Road:
+    """Build a road through surveyed centreline points, the first at its crossing end.
+
+    A parametric cubic smoothing spline (FITPACK ``splprep``) with an RMS residual of
+    ``survey_std_m`` per point (0: through the points), sampled every ``STEP_M`` of arc
+    length; heading and curvature come from its derivatives. ``extend_m`` continues it
+    straight beyond the last point.
+    """
+    p = as_float_array(points_m, "points_m")
+    if p.ndim != 2 or p.shape[1] != 2 or len(p) < 2:
+        raise ValueError(f"road {name!r}: points_m needs two or more [east, north] points")
+    chord = np.hypot(*np.diff(p, axis=0).T)
+    if (chord < 1e-3).any():
+        k = int(np.argmax(chord < 1e-3))
+        raise ValueError(f"road {name!r}: points_m[{k}] and [{k + 1}] coincide")
+    degree = min(3, len(p) - 1)
+    tck, _ = splprep(p.T, s=len(p) * survey_std_m**2, k=degree)
+    fine = np.linspace(0.0, 1.0, max(200, int(20 * chord.sum() / STEP_M) // 10))
+    x, y = splev(fine, tck)
+    along = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(x), np.diff(y)))])
+    s = np.arange(0.0, along[-1], STEP_M)
+    if along[-1] - s[-1] > 1e-6:
+        s = np.append(s, along[-1])  # the last surveyed point ends the road
+    u = np.interp(s, along, fine)
+    x, y = splev(u, tck)
+    dx, dy = splev(u, tck, der=1)
+    ddx, ddy = splev(u, tck, der=2)
+    heading = np.unwrap(np.arctan2(dx, dy))
+    speed = np.hypot(dx, dy)
+    curvature = (dy * ddx - dx * ddy) / np.maximum(speed, 1e-12) ** 3  # right turns positive
+    xy = np.stack([x, y], -1)
+    if extend_m > 0:
+        ext = np.arange(STEP_M, extend_m + 1e-9, STEP_M)
+        tangent = np.array([math.sin(heading[-1]), math.cos(heading[-1])])
+        xy = np.concatenate([xy, xy[-1] + ext[:, None] * tangent])
+        s = np.concatenate([s, s[-1] + ext])
+        heading = np.concatenate([heading, np.full(ext.size, heading[-1])])
+        curvature = np.concatenate([curvature, np.zeros(ext.size)])
+    return Road(name, float(heading[0]), lane_width_m, (), s, xy, heading, curvature, *lanes)
+
+
+__all__ = ["Road", "RoadElement", "build_road", "polyline_road"]

@@ -125,13 +125,67 @@ class RoadElementFile(_Strict):
         return self
 
 
+Point = Annotated[list[float], Field(min_length=2, max_length=2)]
+
+
 class RoadFile(_Strict):
-    """An approach road leaving the crossing centre with azimuth ``heading_deg``."""
+    """A road leaving its crossing end, by elements or by surveyed points.
+
+    Elements from ``start_m`` (default: the crossing centre) with ``heading_deg``, or
+    surveyed centreline points ``points_m`` (the first at the crossing end).
+    ``lanes_in``/``lanes_out``: lanes towards the crossing end and away from it;
+    ``stop_line_m``/``barrier_m``: this road's (default: the site's); ``extend_m``: a
+    straight beyond the last surveyed point; ``survey_std_m``: smoothing of the points.
+    """
 
     name: Name
-    heading_deg: float
-    elements: Annotated[list[RoadElementFile], Field(min_length=1)]
+    heading_deg: float | None = None
+    elements: Annotated[list[RoadElementFile], Field(min_length=1)] | None = None
+    start_m: Point | None = None
+    points_m: Annotated[list[Point], Field(min_length=2)] | None = None
+    extend_m: NonNegative = 0.0
+    survey_std_m: NonNegative = 0.05
+    lanes_in: Annotated[int, Field(ge=1, le=8)] = 1
+    lanes_out: Annotated[int, Field(ge=0, le=8)] = 1
+    stop_line_m: NonNegative | None = None
+    barrier_m: NonNegative | None = None
     radar: Name | None = None  # the radar that tracks this road (default: the best coverage)
+
+    @model_validator(mode="after")
+    def _one_form(self) -> RoadFile:
+        if self.points_m is not None:
+            if self.elements is not None or self.heading_deg is not None:
+                raise ValueError("give points_m, or heading_deg with elements; not both")
+            if self.start_m is not None:
+                raise ValueError("start_m is for elements (points_m starts at its first point)")
+        else:
+            if self.elements is None or self.heading_deg is None:
+                raise ValueError("needs heading_deg and elements, or points_m")
+            if "extend_m" in self.model_fields_set or "survey_std_m" in self.model_fields_set:
+                raise ValueError("extend_m and survey_std_m are for points_m")
+        return self
+
+
+class ConnectionFile(_Strict):
+    """A turning path from road ``entry`` onto road ``exit`` through surveyed lane points.
+
+    ``points_m``: the centre of the lane the turning traffic drives, in its direction;
+    without it the path is a smooth turn of the default radius.
+    """
+
+    entry: Name
+    exit: Name
+    points_m: Annotated[list[Point], Field(min_length=2)] | None = None
+
+
+class RailsFile(_Strict):
+    """The railway: its axis through ``centre_m`` with azimuth ``axis_deg``, its tracks."""
+
+    axis_deg: float
+    centre_m: Point = Field(default_factory=lambda: [0.0, 0.0])
+    tracks: Annotated[int, Field(ge=1, le=8)] = 1
+    track_spacing_m: Positive = 4.5
+    gauge_m: Positive = 1.435
 
 
 class FieldFile(_Strict):
@@ -288,6 +342,28 @@ class StallFile(_Strict):
     vehicle_class: Name = "car"
 
 
+class ParkedFile(_Strict):
+    """A road user standing from ``from_s`` to ``until_s`` (a parked car, a fallen load)."""
+
+    position_m: Point
+    heading_deg: float = 0.0
+    vehicle_class: Name = "car"
+    length_m: Positive | None = None
+    width_m: Positive | None = None
+    from_s: NonNegative = 0.0
+    until_s: Positive | None = None
+
+
+class TrainFile(_Strict):
+    """Trains passing between the barriers at every closure (needs the site's rails)."""
+
+    length_m: Positive = 150.0
+    width_m: Positive = 3.2
+    height_m: Positive = 4.2
+    speed_kmh: Positive = 80.0
+    run_m: Positive = 300.0  # each train is simulated this far either side of the centre
+
+
 class SceneFile(_Strict):
     """Mixed traffic for the many-object scene (:mod:`adaptrack.crossing.simulation.scene`).
 
@@ -311,6 +387,8 @@ class SceneFile(_Strict):
     occlusion: bool = True
     stationary_detections: bool = True
     stalls: list[StallFile] = Field(default_factory=list)
+    parked: list[ParkedFile] = Field(default_factory=list)
+    trains: TrainFile | None = None
 
 
 class SiteFile(_Strict):
@@ -330,6 +408,8 @@ class SiteFile(_Strict):
     traffic: TrafficFile | None = None
     cases: Annotated[list[CaseFile], Field(min_length=1)] | None = None
     scene: SceneFile | None = None
+    connections: list[ConnectionFile] = Field(default_factory=list)
+    rails: RailsFile | None = None
 
 
 def validate_site_mapping(data: dict[str, Any], where: str) -> SiteFile:
@@ -390,9 +470,13 @@ def _model_in(annotation: Any) -> type[BaseModel] | None:
 __all__ = [
     "CaseFile",
     "ClassFile",
+    "ConnectionFile",
+    "ParkedFile",
     "RadarFile",
+    "RailsFile",
     "RoadFile",
     "SiteFile",
     "TrafficFile",
+    "TrainFile",
     "validate_site_mapping",
 ]

@@ -62,6 +62,10 @@ VEHICLES = {
     "truck": VehicleClass("truck", 7.1, 2.5, 1.3, 3.0, 7.0, 130.0),
     "bus": VehicleClass("bus", 12.0, 2.55, 1.2, 3.0, 7.0, 100.0),
 }
+WALKERS_AND_RIDERS = {  # road users of every scene besides the site's vehicle classes
+    "pedestrian": VehicleClass("pedestrian", 0.5, 0.5, 1.0, 2.0, 3.0, 8.0, 0.1),
+    "cyclist": VehicleClass("cyclist", 1.8, 0.6, 1.0, 2.5, 4.0, 40.0, 0.3),
+}
 
 
 @dataclass(frozen=True)
@@ -355,6 +359,7 @@ def random_profiles(
 __all__ = [
     "MAX_DECEL_MPS2",
     "VEHICLES",
+    "WALKERS_AND_RIDERS",
     "Case",
     "VehicleClass",
     "along_road_profile",
