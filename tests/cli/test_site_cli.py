@@ -1,6 +1,7 @@
 """``adaptrack site list / new / check`` and ``--version``, run in-process."""
 
 from importlib.metadata import version
+from pathlib import Path
 
 import pytest
 from pydantic import BaseModel
@@ -144,3 +145,46 @@ def test_track_refuses_a_configuration_tuned_for_another_site(cli, tmp_path):
     code, _, err = cli("track", str(det), "--out", str(tmp_path / "est.csv"))
     assert code == 1 and "--site is required" in err
     assert not (tmp_path / "est.csv").exists()
+
+
+MAP = Path(__file__).parents[2] / "examples" / "maps" / "t_junction.osm"
+
+
+def test_site_import_then_check(cli, tmp_path):
+    pytest.importorskip("lanelet2")
+    out = tmp_path / "tj.toml"
+    code, stdout, err = cli("site", "import", MAP, "--crossing", "-40,0", "--out", out)
+    assert code == 0, err
+    assert "--origin -40.00,0.00" in stdout
+    code, stdout, err = cli("site", "check", out, "--out", tmp_path / "chk")
+    assert code == 0, err
+    assert "driven paths: west->east, west->north, east->north" in stdout
+    assert (tmp_path / "chk" / "site_map.svg").stat().st_size > 1000
+    code, _, err = cli("site", "import", MAP, "--crossing", "-40,0", "--out", out)
+    assert code == 1 and "exists; pass --force" in err
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        ((), "give the crossing point"),
+        (("--crossing", "1"), "--crossing takes two numbers A,B; got '1'"),
+        (("--crossing", "0,0", "--crossing-latlon", "0,0"), "give the crossing point"),
+        (("--crossing", "0,60"), "no lane of the map passes within 15 m"),
+    ],
+)
+def test_site_import_errors(cli, tmp_path, args, message):
+    pytest.importorskip("lanelet2")
+    code, _, err = cli("site", "import", MAP, *args, "--out", tmp_path / "x.toml")
+    assert code == 1 and message in err, err
+    assert not (tmp_path / "x.toml").exists()
+
+
+def test_site_import_of_a_file_that_is_no_map(cli, tmp_path):
+    pytest.importorskip("lanelet2")
+    bad = tmp_path / "bad.osm"
+    bad.write_text("<osm version='0.6'></osm>\n", encoding="utf-8")
+    code, _, err = cli("site", "import", bad, "--crossing", "0,0", "--out", tmp_path / "o.toml")
+    assert code == 1 and "holds no lanelet" in err, err
+    code, _, err = cli("site", "import", tmp_path / "none.osm", "--crossing", "0,0")
+    assert code == 1 and "no such map file" in err, err

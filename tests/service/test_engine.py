@@ -1,5 +1,6 @@
 """The live tracker without sockets: same numbers as offline, every detection accounted for."""
 
+import dataclasses
 import json
 
 import numpy as np
@@ -91,7 +92,7 @@ def test_bad_state_files_are_one_line_errors(scene_files, tmp_path):
     with pytest.raises(ValueError, match="not a state snapshot"):
         load_state(junk, scene_files.site)
     other = LiveTracker(scene_files.site)
-    other.site = type(other.site)(**{**other.site.__dict__, "name": "elsewhere"})
+    other.site = dataclasses.replace(other.site, name="elsewhere")
     other.save(tmp_path / "other.pkl")
     with pytest.raises(ValueError, match="snapshot of site 'elsewhere', not 'lx_default'"):
         load_state(tmp_path / "other.pkl", scene_files.site)

@@ -56,7 +56,7 @@ from ..io.tables import (
 from ..models.continuous import ConstantAcceleration
 from .errors import check_outputs as _outputs
 from .errors import fail as _fail
-from .options import SCHEDULER, WORKERS, worker_pool, write_json
+from .options import SCHEDULER, WORKERS, number_pair, worker_pool, write_json
 
 CRITERION = typer.Option(
     "tail",
@@ -428,9 +428,9 @@ def simulate(
         kind = radar_kind or "cluster"
         try:
             transform = MotionTransform(
-                _pair(origin, "--origin") if origin else (0.0, 0.0),
+                number_pair(origin, "--origin") if origin else (0.0, 0.0),
                 rotation,
-                _pair(geodetic_origin, "--geodetic-origin") if geodetic_origin else None,
+                number_pair(geodetic_origin, "--geodetic-origin") if geodetic_origin else None,
             )
             recorded = read_motion(motion, transform)
             rec = simulate_replay(
@@ -482,14 +482,6 @@ def simulate(
     if truth is not None:
         write_table_atomic(pd.concat(truths, ignore_index=True), truth)
     Console().print(f"wrote {out} ({next_id - 1} objects)")
-
-
-def _pair(text: str, option: str) -> tuple[float, float]:
-    try:
-        a, b = (float(v) for v in text.split(","))
-    except ValueError:
-        _fail(f"{option} takes two numbers A,B; got {text!r}")
-    return a, b
 
 
 def _write_recording(

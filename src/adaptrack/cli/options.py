@@ -45,6 +45,15 @@ def worker_pool(workers: int | None, scheduler: str | None) -> Iterator[TaskPool
             _fail(str(exc))
 
 
+def number_pair(text: str, option: str) -> tuple[float, float]:
+    """Parse an option's ``A,B`` into two numbers, or fail naming the option."""
+    try:
+        a, b = (float(v) for v in text.split(","))
+    except ValueError:
+        _fail(f"{option} takes two numbers A,B; got {text!r}")
+    return a, b
+
+
 def write_json(path: Path, payload: object) -> None:
     """Write JSON atomically."""
     write_text_atomic(path, json.dumps(payload, indent=2))

@@ -9,10 +9,13 @@ from rich.console import Console
 from rich.table import Table
 
 from ..crossing.site.authoring import coverage_svg, coverage_table, site_map_svg, site_template
-from ..crossing.site.model import blind_zones, builtin_sites, load_site
+from ..crossing.site.lanelet_map import project_latlon, read_lanelet_map
+from ..crossing.site.map_import import site_from_map, site_toml
+from ..crossing.site.model import blind_zones, builtin_sites, load_site, site_from_mapping
 from ..crossing.site.network import overlaps
 from ..io.tables import write_text_atomic
 from .errors import fail
+from .options import number_pair
 
 site_app = typer.Typer(
     help="Site files: list the built-in sites, write a commented template, check a file.",
@@ -103,4 +106,73 @@ def site_check(
         f"{st.name}: valid ({len(st.roads)} roads, {len(st.radars)} radars, {len(st.cases)} "
         f"cases{', a scene' if 'scene' in st.source else ''}); "
         f"wrote {out / 'site_map.svg'} and {out / 'coverage.svg'}"
+    )
+
+
+@site_app.command("import")
+def site_import(
+    map_file: Path = typer.Argument(..., help="A Lanelet2 map (OSM XML)."),
+    crossing: str = typer.Option(
+        None, "--crossing", help="The crossing point X,Y in the map's metric frame [m]."
+    ),
+    crossing_latlon: str = typer.Option(
+        None, "--crossing-latlon", help="The crossing point LAT,LON [deg] instead of X,Y."
+    ),
+    map_origin: str = typer.Option(
+        "0,0", "--map-origin", help="LAT,LON of the map projection's origin (INTERACTION: 0,0)."
+    ),
+    out: Path = typer.Option(Path("site.toml"), "--out", help="The site file to write."),
+    name: str = typer.Option(None, "--name", help="The site's name (default: the file's stem)."),
+    junction_radius: float = typer.Option(
+        15.0,
+        "--junction-radius",
+        help="Roads whose lanes pass this near the point start there [m].",
+    ),
+    rails_deg: float = typer.Option(
+        None, "--rails-deg", help="Lay rails through the crossing point at this azimuth [deg]."
+    ),
+    zone: float = typer.Option(150.0, "--zone", help="The controlled zone [m]."),
+    vehicles_per_h: float = typer.Option(
+        30.0, "--vehicles-per-h", help="Traffic of each flow of the scene written [1/h]."
+    ),
+    force: bool = typer.Option(False, "--force", help="Overwrite an existing file."),
+) -> None:
+    """Import a Lanelet2 map into a site file: roads, lanes, stop lines, turns, flows, radars.
+
+    The crossing point becomes the site's origin; replay motion recorded in the map's frame
+    with ``adaptrack simulate SITE --motion FILE --origin X,Y`` (the point printed).
+    """
+    if out.exists() and not force:
+        fail(f"{out} exists; pass --force to overwrite it")
+    if (crossing is None) == (crossing_latlon is None):
+        fail("give the crossing point: --crossing X,Y or --crossing-latlon LAT,LON")
+    origin = number_pair(map_origin, "--map-origin")
+    try:
+        lmap = read_lanelet_map(map_file, origin)
+        if crossing is not None:
+            point = number_pair(crossing, "--crossing")
+        else:
+            xy = project_latlon(number_pair(crossing_latlon, "--crossing-latlon"), origin)
+            point = (float(xy[0]), float(xy[1]))
+        mapping = site_from_map(
+            lmap, point, name or map_file.stem, junction_radius, zone,
+            rails_deg=rails_deg, vehicles_per_h=vehicles_per_h,
+        )  # fmt: skip
+        site_from_mapping(mapping, str(out))
+    except ValueError as exc:
+        fail(str(exc))
+    header = (
+        f"Imported by `adaptrack site import {map_file.name}`: its lanes, stop lines, turns.\n"
+        f"The crossing point ({point[0]:.2f}, {point[1]:.2f}) of the map's frame is the origin;\n"
+        f"replay motion recorded in that frame with --origin {point[0]:.2f},{point[1]:.2f}.\n"
+        "Radars, noise and flows are typical values: edit them to the site's."
+    )
+    write_text_atomic(out, site_toml(mapping, header))
+    roads = ", ".join(
+        f"{r['name']} ({r['lanes_in']} in, {r['lanes_out']} out)" for r in mapping["roads"]
+    )
+    Console().print(
+        f"wrote {out}: roads {roads}; {len(mapping.get('connections', []))} turns from the map, "
+        f"{len(mapping['radars'])} radars; next: adaptrack site check {out}\n"
+        f"replay motion of the map's frame with: --origin {point[0]:.2f},{point[1]:.2f}"
     )

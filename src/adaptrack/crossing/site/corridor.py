@@ -126,7 +126,7 @@ def route_corridor(
             _, s_b = _nearest(rb, lane_pts[-1])
             cut_out[k] = min(abs(a.s_to - s_a), 0.9 * abs(a.s_to - a.s_from))
             cut_in[k + 1] = min(abs(b.s_from - s_b), 0.9 * abs(b.s_to - b.s_from))
-            joins[k] = _left_of(lane_pts, 0.5 * ra.lane_width_m)
+            joins[k] = left_of(lane_pts, 0.5 * ra.lane_width_m)
             continue
         ta, tb = _travel(ra, a.s_to, a.inbound), _travel(rb, b.s_from, b.inbound)
         turn = float(np.arccos(np.clip(ta @ tb, -1.0, 1.0)))
@@ -177,7 +177,7 @@ def _nearest(road: Road, point: np.ndarray) -> tuple[float, float]:
     return float(d[i]), float(road.s[i])
 
 
-def _left_of(points: np.ndarray, offset_m: float) -> np.ndarray:
+def left_of(points: np.ndarray, offset_m: float) -> np.ndarray:
     """Points (K, 2) moved ``offset_m`` to the left of their direction of travel."""
     d = np.gradient(points, axis=0)
     d /= np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-12)[:, None]
@@ -255,4 +255,4 @@ def site_corridors(
     return out
 
 
-__all__ = ["Corridor", "build_corridor", "nearest_corridor", "site_corridors"]
+__all__ = ["Corridor", "build_corridor", "left_of", "nearest_corridor", "site_corridors"]

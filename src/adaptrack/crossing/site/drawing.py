@@ -90,15 +90,20 @@ MARK_LABELS = ("stop line", "barrier", "end of the controlled zone")
 def site_marks(site: Site) -> dict[str, list[list[list[float]]]]:
     """Cross-sections of every road's carriageway: stop line, barrier, end of the zone.
 
-    Label -> segments ``[[x0, y0], [x1, y1]]`` [m] across both lanes.
+    Label -> segments ``[[x0, y0], [x1, y1]]`` [m] across both lanes. A road that starts at
+    a junction away from the crossing centre has its stop line and barrier on the road that
+    leads on to the crossing: only its zone end is drawn.
     """
     out: dict[str, list[list[list[float]]]] = {label: [] for label in MARK_LABELS}
     for name, road in site.roads.items():
         at = (site.stop_line_of(name), site.barrier_of(name), site.zone_m)
+        at_centre = float(np.hypot(*road.xy[0])) < 1.0
         w = road.lane_width_m
         spans = ((0.0, road.lanes_in * w), (-road.lanes_out * w, road.lanes_in * w),
                  (-road.lanes_out * w, road.lanes_in * w))  # fmt: skip  # stop line: inbound
         for label, at_m, (lo, hi) in zip(MARK_LABELS, at, spans, strict=True):
+            if not at_centre and label != MARK_LABELS[-1]:
+                continue
             centre, th = road.centreline(np.array([at_m]))
             across = np.array([-math.cos(th[0]), math.sin(th[0])])  # right of inbound
             ends = centre[0] + np.outer([lo - 0.2 * w, hi + 0.2 * w], across)
