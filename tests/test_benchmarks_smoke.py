@@ -122,3 +122,53 @@ def test_recorded_imm_linear_filter_bound_of_a_parked_car_is_the_running_mean():
         tracks.append(ri.Track("parked", times, truth + rng.standard_normal((n, 3)) * std, truth))
     expected = np.sqrt(np.sum(std**2) / taps)
     assert ri.linear_filter_rmse(*tracks, taps) == pytest.approx(expected, rel=0.04)
+
+
+def test_point_cloud_stats_of_a_known_cloud():
+    """Frame statistics against a cloud built with known counts, spreads and Doppler steps."""
+    import numpy as np
+    import pandas as pd
+    from benchmarks.point_cloud_stats import frame_stats
+
+    rng = np.random.default_rng(3)
+    counts = np.tile([10, 30], 200)  # mean 20, variance 100
+    frame = np.repeat(np.arange(counts.size), counts)
+    n = frame.size
+    v = 0.44 * rng.integers(-3, 4, n)  # quantised, 1/7 of them zero
+    pts = pd.DataFrame({"frame": frame, "a": rng.normal(0, 0.2, n), "d": rng.normal(0, 0.1, n),
+                        "h": rng.normal(0, 0.5, n), "v": v})  # fmt: skip
+    s = frame_stats(pts, "a", "d", "h")
+    assert (s["points q10"], s["points median"], s["points q90"]) == (10, 20, 30)
+    assert s["points mean"] == 20 and s["points var/mean"] == pytest.approx(100 / 20, rel=0.01)
+    assert s["doppler step [m/s]"] == pytest.approx(0.44, abs=1e-4)
+    assert s["zero doppler [%]"] == pytest.approx(100 / 7, abs=1.5)  # binomial, 8000 points
+    # sample std per frame: median over frames within a few per cent of the true sigma
+    assert s["spread along [m]"] == pytest.approx(0.2, rel=0.05)
+    assert s["spread depth [m]"] == pytest.approx(0.1, rel=0.05)
+    assert s["spread vertical [m]"] == pytest.approx(0.5, rel=0.05)
+
+
+def test_point_cloud_stats_fits_and_reports_a_synthetic_recording(tmp_path, capsys, monkeypatch):
+    """The script end to end on a recording in the TI layout written here (no shared data)."""
+    import sys
+
+    import numpy as np
+    import pandas as pd
+    from benchmarks import point_cloud_stats as pcs
+
+    rng = np.random.default_rng(5)
+    rows = []
+    for k in range(120):  # a person 2.5 m from the sensor walking to and fro along z
+        z = -3.0 + 6.0 * abs((k * 0.1 * 1.2 / 6.0) % 2 - 1)
+        for _ in range(rng.poisson(15) + 1):
+            rows.append((k, rng.normal(0, 0.4), 2.5 + rng.normal(0, 0.15),
+                         z + rng.normal(0, 0.15), 0.44 * rng.integers(-2, 3)))  # fmt: skip
+    table = pd.DataFrame(rows, columns=["frameNumber", "x", "y", "z", "v"])
+    table.to_csv(tmp_path / "ti_awr1843_man_walk.csv", index=False)
+    table.to_csv(tmp_path / "ti_awr1843_man_run.csv", index=False)
+    monkeypatch.setattr(sys, "argv", ["point_cloud_stats", str(tmp_path)])
+    pcs.main()
+    out = capsys.readouterr().out
+    assert "fitted on man_walk" in out and "man_run (held out" in out
+    mean = [line for line in out.splitlines() if "points mean" in line][0].split()
+    assert float(mean[-1]) == pytest.approx(float(mean[-3]), rel=0.15)  # the fitted mean

@@ -66,18 +66,20 @@ FACES = 5  # front, rear, right, left, roof
 class FaceRadar:
     """The face model's radar kind and its parameters (module docstring).
 
-    Defaults of the point cloud are fitted to a real 77 GHz TI AWR1843 recording of a person
-    walking (``benchmarks/point_cloud_stats.py``); the other recordings check them.
+    The point cloud's density, count shape and elevation noise are fitted (rounded) to a real
+    77 GHz TI AWR1843 recording of a person walking by ``python -m
+    benchmarks.point_cloud_stats DATA_DIR``, which checks them on a person running and an
+    e-scooter passing.
     """
 
     kind: RadarKind = "cluster"
     mount_height_m: float | None = None
     cluster_points_per_m: float = 0.6
     cluster_max_points: int = 4
-    cloud_points_per_m2: float = 22.0
-    cloud_count_shape: float = 1.5
+    cloud_points_per_m2: float = 18.0
+    cloud_count_shape: float = 1.8
     cloud_full_range_m: float = 10.0
-    elevation_std_deg: float = 12.0
+    elevation_std_deg: float = 6.0
     doppler_step_mps: float | None = None
 
     def __post_init__(self) -> None:
