@@ -137,7 +137,8 @@ def simulated_cloud(
     north = radar.position_m[1] + horizontal * np.cos(det["azimuth_rad"])
     return pd.DataFrame({
         "frame": np.rint(det["time_s"] / FRAME_S).astype(int), "along": north,
-        "depth": radar.position_m[0] - east, "vertical": det["range_m"] * np.sin(det["elevation_rad"]),
+        "depth": radar.position_m[0] - east,
+        "vertical": det["range_m"] * np.sin(det["elevation_rad"]),
         "v": det["radial_speed_mps"],
     })  # fmt: skip
 

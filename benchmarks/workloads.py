@@ -419,9 +419,11 @@ def crossing(quick: bool, workers: int) -> list[Result]:
 def scene(quick: bool) -> list[Result]:
     """``lx_default`` mixed traffic with a barrier closure: the scene tracker and Stone Soup.
 
-    Both track the identical raw detections (no ids) and are scored by the same GOSPA code
-    (c = 5 m, p = 2, every 0.5 s) before their times per scan are kept; a scene tracker
-    that misses the vehicles (car coverage < 0.9) fails the workload.
+    Stone Soup as three trackers (``benchmarks/scene_peer.py``: the moving-target GNN, and
+    GNN and JPDA that keep stopped vehicles). All track the identical raw detections (no
+    ids) and are scored by the same GOSPA code (c = 5 m, p = 2, every 0.5 s) before their
+    times per scan are kept; a scene tracker that misses the vehicles (car coverage < 0.9)
+    fails the workload.
     """
     from adaptrack.crossing.scene.tracker import track_scene
     from adaptrack.crossing.simulation.scene import scene_spec, simulate_scene
@@ -437,12 +439,21 @@ def scene(quick: bool) -> list[Result]:
         stalls=(),
     )  # fmt: skip
     rec = simulate_scene(site, spec, 1)
+    fa = spec.false_alarms_per_scan
     n_scans = rec.detections.groupby(["radar", "time_s"]).ngroups
     track_scene(site, rec.detections)  # compilation (or loading) of every kernel it calls
     impls = {  # name: (run, repeats); the peer's minutes-long run varies by a few per cent
         "adaptrack": (lambda: track_scene(site, rec.detections)[0], 1 if quick else 3),
         "stonesoup (GNN 2-D, EKF CV, same gate)": (
-            lambda: stonesoup_scene(site, rec.detections),
+            lambda: stonesoup_scene(site, rec.detections, "moving"),
+            1,
+        ),
+        "stonesoup GNN (stopped kept, site noise, same coasting)": (
+            lambda: stonesoup_scene(site, rec.detections, "gnn", false_alarms_per_scan=fa),
+            1,
+        ),
+        "stonesoup JPDA (stopped kept, site noise, same coasting)": (
+            lambda: stonesoup_scene(site, rec.detections, "jpda", false_alarms_per_scan=fa),
             1,
         ),
     }

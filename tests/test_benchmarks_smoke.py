@@ -28,6 +28,8 @@ def test_benchmarks_quick_run_writes_json(tmp_path, capsys):
     ):
         assert (workload, "adaptrack") in impls
     assert ("scene", "stonesoup (GNN 2-D, EKF CV, same gate)") in impls
+    for peer in ("GNN", "JPDA"):
+        assert ("scene", f"stonesoup {peer} (stopped kept, site noise, same coasting)") in impls
     assert ("radar_ekf", "filterpy") in impls and ("radar_imm", "filterpy") in impls
     timed = [r for r in out["results"] if r["workload"] not in ("lx_mc", "memory")]
     assert all(r["per_step_us"] > 0 and r["track_steps_per_s"] > 0 for r in timed)
@@ -170,5 +172,5 @@ def test_point_cloud_stats_fits_and_reports_a_synthetic_recording(tmp_path, caps
     pcs.main()
     out = capsys.readouterr().out
     assert "fitted on man_walk" in out and "man_run (held out" in out
-    mean = [line for line in out.splitlines() if "points mean" in line][0].split()
+    mean = next(line for line in out.splitlines() if "points mean" in line).split()
     assert float(mean[-1]) == pytest.approx(float(mean[-3]), rel=0.15)  # the fitted mean
