@@ -26,6 +26,7 @@ the centre of its body.
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -40,6 +41,7 @@ from ...angles import wrap, wrapped
 from ..site.corridor import Corridor
 from ..site.geometry import radial_geometry
 from ..site.model import Site
+from ..site.road import polyline_road
 from ..site.sensor import RadarSpec
 from ..site.traffic import KMH, WALKERS_AND_RIDERS, VehicleClass
 
@@ -122,6 +124,28 @@ class Parked:
     until_s: float | None = None
 
 
+SCRIPT_STEP_M = 1.0  # a scripted path is sampled this finely ...
+SCRIPT_ROUNDING_M = 0.1  # ... and smoothed this much: its corners are rounded
+
+
+@dataclass(frozen=True)
+class Scripted:
+    """A road user driven along ``path_m`` [m] by ``speed_profile`` from ``start_s`` [s].
+
+    ``speed_profile``: ``(time_s, speed_mps)`` knots from 0, linear between them; the user
+    travels the path from its first point, facing backwards while the speed is negative
+    (reversing); it leaves after the last knot or at the end of the path. Size the class's
+    unless given [m].
+    """
+
+    path_m: tuple[tuple[float, float], ...]
+    speed_profile: tuple[tuple[float, float], ...]
+    start_s: float = 0.0
+    vehicle_class: str = "car"
+    length_m: float | None = None
+    width_m: float | None = None
+
+
 @dataclass(frozen=True)
 class Trains:
     """A train passes between the barriers in the middle of every closure.
@@ -155,6 +179,7 @@ class SceneSpec:
     stationary_detections: bool = True
     stalls: tuple[Stall, ...] = ()
     parked: tuple[Parked, ...] = ()
+    scripted: tuple[Scripted, ...] = ()
     trains: Trains | None = None
 
     def closures(self) -> FloatArray:
@@ -198,6 +223,13 @@ def scene_spec(site: Site, **changes: Any) -> SceneSpec:
     parked = tuple(
         Parked(**{**p, "position_m": tuple(p["position_m"])}) for p in data.pop("parked", [])
     )
+    scripted = tuple(
+        Scripted(
+            **{**p, "path_m": tuple(tuple(q) for q in p["path_m"]),
+               "speed_profile": tuple((t, v * KMH) for t, v in p["speed_profile"])}
+        )
+        for p in data.pop("scripted", [])
+    )  # fmt: skip
     trains = Trains(**data.pop("trains")) if "trains" in data else None
     clutter = tuple(tuple(p) for p in data.pop("static_clutter_m", []))
     spec = SceneSpec(
@@ -205,6 +237,7 @@ def scene_spec(site: Site, **changes: Any) -> SceneSpec:
         mix=mix,
         stalls=stalls,
         parked=parked,
+        scripted=scripted,
         trains=trains,
         static_clutter_m=clutter,
         **data,
@@ -235,11 +268,11 @@ def _check_spec(spec: SceneSpec, site: Site) -> None:
     for st in spec.stalls:
         if not any(f.entry == st.entry for f in spec.flows):
             raise ValueError(f"scene stall: no flow enters on road {st.entry!r}")
-    for i, p in enumerate(spec.parked):
-        if p.vehicle_class not in users:
-            raise ValueError(
-                f"scene parked[{i}]: unknown class {p.vehicle_class!r}; known: {', '.join(users)}"
-            )
+    added = [("parked", i, p.vehicle_class) for i, p in enumerate(spec.parked)]
+    added += [("scripted", i, p.vehicle_class) for i, p in enumerate(spec.scripted)]
+    for key, i, name in added:
+        if name not in users:
+            raise ValueError(f"scene {key}[{i}]: unknown class {name!r}; known: {', '.join(users)}")
     if spec.trains is not None and site.rails is None:
         raise ValueError("scene trains: the site has no [rails] for them to run on")
 
@@ -511,15 +544,19 @@ def simulate_traffic(site: Site, spec: SceneSpec, rng: np.random.Generator) -> S
     stops = pd.DataFrame({"object_id": stalled, "stop_time_s": stall_stop_time[stalled]})
     ran = np.flatnonzero(~np.isnan(line_run_time))
     runs = pd.DataFrame({"object_id": ran, "cross_time_s": line_run_time[ran]})
-    if spec.parked or spec.trains is not None:
-        table, users_t = _standing_and_trains(site, spec, table, users_t)
+    if spec.parked or spec.scripted or spec.trains is not None:
+        table, users_t = _added_users(site, spec, table, users_t)
     return SceneTruth(table, users_t, closures, stops, runs)
 
 
-def _standing_and_trains(
+def _added_users(
     site: Site, spec: SceneSpec, table: pd.DataFrame, users: pd.DataFrame
 ) -> tuple[pd.DataFrame, pd.DataFrame]:
-    """Add the parked road users and the trains of the closures to the truth (ids after)."""
+    """Add the parked and scripted road users and the closures' trains to the truth (ids after).
+
+    With scripted users every row carries its velocity (``east_speed_mps``,
+    ``north_speed_mps``: a reversing body moves against its heading).
+    """
     known = road_users(site)
     steps = np.arange(math.ceil(spec.duration_s / STEP_S) + 1) * STEP_S
     rows, extra = [], []
@@ -536,6 +573,12 @@ def _standing_and_trains(
         }))  # fmt: skip
         extra.append((next_id, p.vehicle_class, p.length_m or cls.length_m,
                       p.width_m or cls.width_m, np.nan, p.from_s))  # fmt: skip
+        next_id += 1
+    for sc in spec.scripted:
+        cls = known[sc.vehicle_class]
+        rows.append(_scripted_rows(sc, next_id, steps, site.zone_m))
+        extra.append((next_id, sc.vehicle_class, sc.length_m or cls.length_m,
+                      sc.width_m or cls.width_m, np.nan, sc.start_s))  # fmt: skip
         next_id += 1
     tr = spec.trains
     if tr is not None and site.rails is not None:
@@ -559,11 +602,58 @@ def _standing_and_trains(
     if not rows:
         return table, users
     table = pd.concat([table, *rows], ignore_index=True)
+    if "east_speed_mps" in table.columns:
+        hd, speed = table["heading_rad"].to_numpy(), table["speed_mps"].to_numpy()
+        for col, part in (("east_speed_mps", np.sin(hd)), ("north_speed_mps", np.cos(hd))):
+            table[col] = table[col].fillna(pd.Series(speed * part, index=table.index))
     table = table.sort_values(["time_s", "object_id"], kind="stable", ignore_index=True)
     added = pd.DataFrame(extra, columns=["object_id", "vehicle_class", "length_m", "width_m",
                                          "height_m", "arrival_s"])  # fmt: skip
     added = added.assign(corridor=-1, direction=0, lateral_m=0.0)
     return table, pd.concat([users.assign(height_m=np.nan), added], ignore_index=True)
+
+
+def _scripted_rows(sc: Scripted, object_id: int, steps: FloatArray, zone_m: float) -> pd.DataFrame:
+    """Truth rows of a scripted road user on the traffic model's steps (see ``Scripted``).
+
+    The path is the polyline of ``path_m`` with its corners rounded (a smoothing spline
+    through points every metre of it); the user travels it at the profile's speed, facing
+    backwards while the speed is negative.
+    """
+    pts = np.asarray(sc.path_m, dtype=float)
+    dense = [pts[:1]]
+    for p, q in itertools.pairwise(pts):
+        n = max(2, math.ceil(math.hypot(*(q - p)) / SCRIPT_STEP_M) + 1)
+        dense.append(p + np.linspace(0.0, 1.0, n)[1:, None] * (q - p))
+    path = polyline_road("scripted", np.concatenate(dense), 1.0, survey_std_m=SCRIPT_ROUNDING_M)
+    knots_t = np.array([k[0] for k in sc.speed_profile])
+    knots_v = np.array([k[1] for k in sc.speed_profile])
+    t = steps[(steps >= sc.start_s) & (steps <= sc.start_s + knots_t[-1])]
+    v = np.interp(t - sc.start_s, knots_t, knots_v)
+    # distance travelled: the exact integral of |speed| (piecewise linear, split at zeros)
+    grid = np.union1d(knots_t, t - sc.start_s)
+    cross = [a[0] + (b[0] - a[0]) * a[1] / (a[1] - b[1])
+             for a, b in itertools.pairwise(sc.speed_profile)
+             if a[1] * b[1] < 0]  # fmt: skip
+    grid = np.union1d(grid, cross)
+    vg = np.abs(np.interp(grid, knots_t, knots_v))
+    along = np.concatenate([[0.0], np.cumsum(0.5 * (vg[1:] + vg[:-1]) * np.diff(grid))])
+    s = np.interp(t - sc.start_s, grid, along)
+    keep = s <= path.length_m  # it leaves at the end of the path
+    t, v, s = t[keep], v[keep], s[keep]
+    xy, heading = path.centreline(s)
+    vel = np.abs(v)[:, None] * np.stack([np.sin(heading), np.cos(heading)], -1)
+    heading = np.where(v < 0.0, heading + math.pi, heading)
+    dist = np.hypot(xy[:, 0], xy[:, 1])
+    closing = -(xy * vel).sum(axis=1)  # a standing user keeps the sign it had (or gets)
+    sign = pd.Series(np.where(np.abs(closing) > 1e-9, np.sign(closing), np.nan)).ffill().bfill()
+    return pd.DataFrame({
+        "object_id": object_id, "vehicle_class": sc.vehicle_class, "time_s": t,
+        "east_m": xy[:, 0], "north_m": xy[:, 1], "speed_mps": np.abs(v),
+        "heading_rad": np.mod(heading, 2 * math.pi),
+        "to_crossing_m": sign.fillna(1.0).to_numpy() * dist, "in_zone": dist <= zone_m,
+        "east_speed_mps": vel[:, 0], "north_speed_mps": vel[:, 1],
+    })  # fmt: skip
 
 
 @numba.njit(cache=True)
@@ -641,10 +731,10 @@ def scan_states(truth: SceneTruth, scans: FloatArray) -> ScanStates:
     obj = rows["object_id"].to_numpy()
     hd = rows["heading_rad"].to_numpy()
     fwd = np.stack([np.sin(hd), np.cos(hd)], -1)
-    if "east_speed_mps" in rows.columns:  # recorded motion: the velocity as recorded
-        vel = rows[["east_speed_mps", "north_speed_mps"]].to_numpy(dtype=float)
-    else:
-        vel = rows["speed_mps"].to_numpy()[:, None] * fwd
+    vel = rows["speed_mps"].to_numpy()[:, None] * fwd
+    if "east_speed_mps" in rows.columns:  # recorded or scripted motion: its velocity
+        given = rows[["east_speed_mps", "north_speed_mps"]].to_numpy(dtype=float)
+        vel = np.where(np.isnan(given), vel, given)
     ahead_s = scans[scan_of] - k[at] * STEP_S
     height = (
         users.loc[obj, "height_m"].to_numpy(dtype=float)

@@ -240,7 +240,7 @@ ADDED_DEFAULTS: dict[
     str, dict[str, Any]
 ] = {  # keys added after sites were first tuned: left out at their defaults,
     "roads": {"extend_m": 0.0, "survey_std_m": 0.05, "lanes_in": 1, "lanes_out": 1},
-    "scene": {"parked": []},
+    "scene": {"parked": [], "scripted": []},
     "": {"connections": []},
 }  # so that the fingerprint of a site that does not use them stays what it was
 

@@ -233,7 +233,7 @@ def polyline_road(
     u = np.interp(s, along, fine)
     x, y = splev(u, tck)
     dx, dy = splev(u, tck, der=1)
-    ddx, ddy = splev(u, tck, der=2)
+    ddx, ddy = splev(u, tck, der=2) if degree >= 2 else (np.zeros_like(u), np.zeros_like(u))
     heading = np.unwrap(np.arctan2(dx, dy))
     speed = np.hypot(dx, dy)
     curvature = (dy * ddx - dx * ddy) / np.maximum(speed, 1e-12) ** 3  # right turns positive

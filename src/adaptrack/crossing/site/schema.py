@@ -354,6 +354,42 @@ class ParkedFile(_Strict):
     until_s: Positive | None = None
 
 
+def _check_scripted_profile(points: CurvePoints) -> CurvePoints:
+    if len(points) < 2 or points[0][0] != 0.0:
+        raise ValueError("needs at least two [time_s, speed_kmh] knots, the first at time 0")
+    if any(b[0] <= a[0] for a, b in itertools.pairwise(points)):
+        raise ValueError("knot times must be strictly increasing")
+    if any(not math.isfinite(v) for _, v in points):
+        raise ValueError("speeds must be finite")
+    for a, b in itertools.pairwise(points):
+        accel = abs(b[1] - a[1]) / 3.6 / (b[0] - a[0])
+        if accel > MAX_DECEL_MPS2:
+            raise ValueError(
+                f"{accel:.3g} m/s^2 between {a[0]:g} s and {b[0]:g} s; at most "
+                f"{MAX_DECEL_MPS2:g} m/s^2"
+            )
+    return points
+
+
+class ScriptedFile(_Strict):
+    """A road user driven along ``path_m`` by ``speed_profile`` from ``start_s``.
+
+    ``speed_profile``: ``[[time_s, speed_kmh], ...]`` from 0, linear between knots; the user
+    travels the path from its first point, facing backwards while the speed is negative
+    (reversing); it leaves the scene after its last knot or at the end of the path.
+    Emergency stops, overtaking, U-turns and reversing off the crossing are such scripts.
+    """
+
+    path_m: Annotated[list[Point], Field(min_length=2)]
+    speed_profile: Annotated[
+        CurvePoints, BeforeValidator(_to_points), AfterValidator(_check_scripted_profile)
+    ]
+    start_s: NonNegative = 0.0
+    vehicle_class: Name = "car"
+    length_m: Positive | None = None
+    width_m: Positive | None = None
+
+
 class TrainFile(_Strict):
     """Trains passing between the barriers at every closure (needs the site's rails)."""
 
@@ -388,6 +424,7 @@ class SceneFile(_Strict):
     stationary_detections: bool = True
     stalls: list[StallFile] = Field(default_factory=list)
     parked: list[ParkedFile] = Field(default_factory=list)
+    scripted: list[ScriptedFile] = Field(default_factory=list)
     trains: TrainFile | None = None
 
 
@@ -475,6 +512,7 @@ __all__ = [
     "RadarFile",
     "RailsFile",
     "RoadFile",
+    "ScriptedFile",
     "SiteFile",
     "TrafficFile",
     "TrainFile",
