@@ -15,7 +15,7 @@ BLOCK = re.compile(r"^```python\n(.*?)^```", re.S | re.M)
 
 
 def test_every_tutorial_is_tested():
-    assert len(PAGES) == 5 and all(BLOCK.search(p.read_text()) for p in PAGES)
+    assert len(PAGES) == 6 and all(BLOCK.search(p.read_text()) for p in PAGES)
 
 
 @pytest.mark.parametrize("page", PAGES, ids=lambda p: p.stem)

@@ -266,13 +266,14 @@ class TrafficFile(_Strict):
         return self
 
 
-def _check_profile(points: CurvePoints) -> CurvePoints:
+def _check_knots(points: CurvePoints) -> None:
+    """Speed knots ``[time_s, speed_kmh]``: from time 0, increasing, at most MAX_DECEL apart."""
     if len(points) < 2 or points[0][0] != 0.0:
         raise ValueError("needs at least two [time_s, speed_kmh] knots, the first at time 0")
     if any(b[0] <= a[0] for a, b in itertools.pairwise(points)):
         raise ValueError("knot times must be strictly increasing")
-    if any(v < 0 or not math.isfinite(v) for _, v in points):
-        raise ValueError("speeds must be finite and >= 0")
+    if any(not math.isfinite(v) for _, v in points):
+        raise ValueError("speeds must be finite")
     for a, b in itertools.pairwise(points):
         accel = abs(b[1] - a[1]) / 3.6 / (b[0] - a[0])
         if accel > MAX_DECEL_MPS2:
@@ -280,6 +281,12 @@ def _check_profile(points: CurvePoints) -> CurvePoints:
                 f"{accel:.3g} m/s^2 between {a[0]:g} s and {b[0]:g} s; at most "
                 f"{MAX_DECEL_MPS2:g} m/s^2"
             )
+
+
+def _check_profile(points: CurvePoints) -> CurvePoints:
+    _check_knots(points)
+    if any(v < 0 for _, v in points):
+        raise ValueError("speeds must be >= 0")
     if points[0][1] <= 0:
         raise ValueError("the first knot's speed must be > 0 (the vehicle approaches)")
     return points
@@ -355,19 +362,7 @@ class ParkedFile(_Strict):
 
 
 def _check_scripted_profile(points: CurvePoints) -> CurvePoints:
-    if len(points) < 2 or points[0][0] != 0.0:
-        raise ValueError("needs at least two [time_s, speed_kmh] knots, the first at time 0")
-    if any(b[0] <= a[0] for a, b in itertools.pairwise(points)):
-        raise ValueError("knot times must be strictly increasing")
-    if any(not math.isfinite(v) for _, v in points):
-        raise ValueError("speeds must be finite")
-    for a, b in itertools.pairwise(points):
-        accel = abs(b[1] - a[1]) / 3.6 / (b[0] - a[0])
-        if accel > MAX_DECEL_MPS2:
-            raise ValueError(
-                f"{accel:.3g} m/s^2 between {a[0]:g} s and {b[0]:g} s; at most "
-                f"{MAX_DECEL_MPS2:g} m/s^2"
-            )
+    _check_knots(points)
     return points
 
 
