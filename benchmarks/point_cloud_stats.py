@@ -200,7 +200,6 @@ def main() -> None:
         f"{fitted.elevation_std_deg:.1f} (defaults {base.cloud_points_per_m2:g}, "
         f"{base.cloud_count_shape:g}, {base.elevation_std_deg:g}); mount {args.mount_height} m"
     )
-    rows = []
     for name, (pts, motion) in recordings.items():
         real = frame_stats(pts, "along", "depth", "vertical")
         sim = frame_stats(simulated_cloud(motion, cls(name), fitted, args.seed), "along",
@@ -211,7 +210,6 @@ def main() -> None:
             f"{motion['lateral_m']:.1f} m, {motion['to_m'] - motion['from_m']:.1f} m span)"
         )
         for stat in STATS:
-            rows.append((name, stat, real[stat], sim[stat]))
             print(f"  {stat:22s} real {real[stat]:8.2f}   model {sim[stat]:8.2f}")
 
 

@@ -6,13 +6,15 @@ lines 15 m either side of x = -40 m. With the crossing at (-40, 0) the site's we
 roads start at the origin, the north road at (70, 0) on the east road.
 """
 
+import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 import tomllib
 
-pytest.importorskip("lanelet2")
+if sys.platform != "linux":  # on Linux the test extra installs it: a missing one fails here
+    pytest.skip("lanelet2 publishes Linux wheels only", allow_module_level=True)
 
 from adaptrack.crossing.site.lanelet_map import read_lanelet_map
 from adaptrack.crossing.site.map_import import site_from_map, site_toml

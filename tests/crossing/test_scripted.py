@@ -87,6 +87,14 @@ def test_radial_speeds_follow_the_motion_not_the_heading():
         ({"path_m": [[0, 0], [0, 9]], "speed_profile": [[1, 0], [2, 5]]}, "the first at time 0"),
         ({"path_m": [[0, 0]], "speed_profile": [[0, 0], [2, 5]]}, "scene.scripted[0].path_m"),
         (
+            {"path_m": [[0, float("nan")], [0, 9]], "speed_profile": [[0, 5], [2, 5]]},
+            "scene.scripted[0].path_m[0][1]: Input should be a finite number (got nan)",
+        ),
+        (
+            {"path_m": [[0, 0], [0, 9]], "speed_profile": [[0, 5], [2, float("inf")]]},
+            "speeds must be finite",
+        ),
+        (
             {
                 "path_m": [[0, 0], [0, 9]],
                 "speed_profile": [[0, 5], [2, 5]],

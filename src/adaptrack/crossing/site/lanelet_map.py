@@ -12,6 +12,7 @@ routing graph (vehicles, no lane changes).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -37,9 +38,17 @@ class LaneletMap:
     stop_lines: tuple[FloatArray, ...]
     origin_latlon: tuple[float, float]
 
+    @cached_property
+    def _predecessors(self) -> dict[int, list[int]]:
+        out: dict[int, list[int]] = {k: [] for k in self.lanes}
+        for k, lane in self.lanes.items():
+            for n in lane.successors:
+                out[n].append(k)
+        return out
+
     def predecessors(self, lane_id: int) -> list[int]:
         """Ids of the lanes that lead into ``lane_id``."""
-        return [k for k, lane in self.lanes.items() if lane_id in lane.successors]
+        return self._predecessors[lane_id]
 
 
 def _lanelet2():  # type: ignore[no-untyped-def]

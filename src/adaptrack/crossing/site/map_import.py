@@ -76,8 +76,8 @@ def _end_direction(c: FloatArray, end: bool) -> FloatArray:
     return _unit(c[-1] - c[-2]) if end else _unit(c[1] - c[0])
 
 
-def _mouths(lmap: LaneletMap) -> tuple[list[tuple[int, bool, FloatArray]], FloatArray]:
-    """Lane ends on the map's outline: ``(lane id, inbound, point)``, and the map's centroid."""
+def _mouths(lmap: LaneletMap) -> list[tuple[int, bool, FloatArray]]:
+    """Lane ends on the map's outline: ``(lane id, inbound, point)``."""
     pts = np.concatenate([lane.centre for lane in lmap.lanes.values()])
     hull = ConvexHull(pts)
     eq = hull.equations  # a x + b y + c <= 0 inside
@@ -93,7 +93,7 @@ def _mouths(lmap: LaneletMap) -> tuple[list[tuple[int, bool, FloatArray]], Float
             mouths.append((k, True, lane.centre[0]))
         if not lane.successors and on_edge(lane.centre[-1]):
             mouths.append((k, False, lane.centre[-1]))
-    return mouths, pts.mean(0)
+    return mouths
 
 
 def _follow(lmap: LaneletMap, first: int, direction: FloatArray, forward: bool) -> tuple[int, ...]:
@@ -120,7 +120,7 @@ def _follow(lmap: LaneletMap, first: int, direction: FloatArray, forward: bool) 
 
 
 def _arms(lmap: LaneletMap) -> list[_Arm]:
-    mouths, _ = _mouths(lmap)
+    mouths = _mouths(lmap)
     if not mouths:
         raise ValueError("the map has no lane that starts or ends on its outline (no arm)")
     points = np.array([m[2] for m in mouths])

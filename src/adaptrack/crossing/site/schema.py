@@ -125,7 +125,8 @@ class RoadElementFile(_Strict):
         return self
 
 
-Point = Annotated[list[float], Field(min_length=2, max_length=2)]
+Coordinate = Annotated[float, Field(allow_inf_nan=False)]
+Point = Annotated[list[Coordinate], Field(min_length=2, max_length=2)]
 
 
 class RoadFile(_Strict):
