@@ -22,6 +22,7 @@ from ..crossing.studies.scene_metrics import (
     HAZARD_COLUMNS,
     TRACK_COLUMNS,
     TRUTH_COLUMNS,
+    USER_COVERAGE,
     SceneScore,
     event_outcomes,
     score_scene,
@@ -65,6 +66,7 @@ def _summary(score: SceneScore) -> dict[str, object]:
         "epochs": score.n_epochs, "hours": score.hours, "false_tracks": score.false_tracks,
         "confirm_delays_s": [float(d) for d in score.confirm_delays_s],
         "never_confirmed": score.never_confirmed, "classes": classes,
+        "users_meeting": score.users_meeting(), "users": len(score.users),
     }  # fmt: skip
 
 
@@ -131,6 +133,10 @@ def score(
     console.print(
         f"false tracks: {result.false_tracks}{rate}; time to confirm: {confirm}, "
         f"{result.never_confirmed} never confirmed"
+    )
+    console.print(
+        f"road users within 0.7 m / 2 km/h RMS at >= {USER_COVERAGE:.0%} coverage: "
+        f"{result.users_meeting()} of {len(result.users)}"
     )
     table = Table(title="accuracy per class through association (95 % upper bounds)")
     for col in ("class", "users", "epochs", "coverage", "position RMS [m]", "speed RMS [km/h]",

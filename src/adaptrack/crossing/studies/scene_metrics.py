@@ -28,6 +28,9 @@ from .compliance import CONFIDENCE, POSITION_LIMIT_M, SPEED_LIMIT_KMH, bound_lev
 TRUTH_COLUMNS = ["object_id", "vehicle_class", "time_s", "east_m", "north_m", "speed_mps",
                  "in_zone"]  # fmt: skip  # what scoring reads of the truth (`simulate --truth`)
 HAZARD_COLUMNS = ["to_crossing_m"]  # and what the stopped-between-the-barriers events need
+USER_COLUMNS = ["object_id", "vehicle_class", "position_rms_m", "speed_rms_kmh", "coverage",
+                "epochs"]  # fmt: skip  # SceneScore.users
+USER_COVERAGE = 0.9  # a road user counts as tracked when paired at this share of its epochs
 UNREPORTED = ("static", "tentative")  # track statuses that are not road users
 TRACK_COLUMNS = ["track_id", "time_s", "east_m", "north_m", "speed_mps", "east_speed_mps",
                  "north_speed_mps", "from_crossing_m", "status"]  # fmt: skip  # and of tracks
@@ -50,6 +53,15 @@ class SceneScore:
     hours: float = 0.0  # the scoring epochs' span [h]
     confirm_delays_s: FloatArray = field(default_factory=lambda: np.zeros(0))  # per user
     never_confirmed: int = 0  # road users in the zone never paired with a track
+    users: pd.DataFrame = field(default_factory=pd.DataFrame)  # per road user: USER_COLUMNS
+
+    def users_meeting(self, coverage: float = USER_COVERAGE) -> int:
+        """Road users within 0.7 m and 2 km/h RMS, paired at ``coverage`` of their zone epochs."""
+        if not len(self.users):
+            return 0
+        u = self.users
+        return int(((u["position_rms_m"] <= POSITION_LIMIT_M) & (u["speed_rms_kmh"]
+                    <= SPEED_LIMIT_KMH) & (u["coverage"] >= coverage)).sum())  # fmt: skip
 
 
 def score_scene(
@@ -152,6 +164,7 @@ def score_scene(
                 "vehicles": len(per_vehicle),
             }
         )
+    users = _per_user(pl, tab[(k_truth % stride == 0) & tab["in_zone"].to_numpy()])
     ident = identity_counts(assignments)
     paired_ids = {t for a in assignments for t in a.values()}
     delays = np.array([first_paired[o] - first_in_zone[o] for o in first_paired])
@@ -169,7 +182,27 @@ def score_scene(
         float(s["time_s"].iloc[-1] - s["time_s"].iloc[0]) / 3600.0 if len(s) else 0.0,
         delays,
         len(first_in_zone) - len(first_paired),
+        users,
     )
+
+
+def _per_user(pairs: pd.DataFrame, zone_rows: pd.DataFrame) -> pd.DataFrame:
+    """Each road user's RMS errors over its paired epochs and its share of zone epochs paired."""
+    epochs = zone_rows.groupby("object_id").agg(
+        vehicle_class=("vehicle_class", "first"), zone_epochs=("time_s", "size")
+    )
+    got = pairs.assign(p2=pairs["pos_err"] ** 2, s2=(3.6 * pairs["speed_err"]) ** 2).groupby(
+        "object_id"
+    ).agg(p2=("p2", "mean"), s2=("s2", "mean"), epochs=("p2", "size"))
+    table = epochs.join(got, how="left")
+    return pd.DataFrame({
+        "object_id": table.index.to_numpy(),
+        "vehicle_class": table["vehicle_class"].to_numpy(),
+        "position_rms_m": np.sqrt(table["p2"].to_numpy(float)),
+        "speed_rms_kmh": np.sqrt(table["s2"].to_numpy(float)),
+        "coverage": table["epochs"].fillna(0).to_numpy(float) / table["zone_epochs"].to_numpy(),
+        "epochs": table["epochs"].fillna(0).to_numpy(np.int64),
+    })  # fmt: skip
 
 
 def _table_of(truth: SceneTruth | pd.DataFrame) -> pd.DataFrame:

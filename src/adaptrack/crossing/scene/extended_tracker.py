@@ -1,0 +1,548 @@
+"""A scene tracker of free 2-D motion with box extents and existence probabilities.
+
+Where :mod:`.tracker` follows road users along the site's corridors with hand-set rules,
+this one takes its behaviour from three models:
+
+- **Motion**: a nearly-coordinated turn in the plane (:class:`~adaptrack.models.turn.
+  CoordinatedTurn`, state ``x, y, vx, vy, omega``), so turns, lane changes, U-turns and
+  pedestrians crossing anywhere are followed; the site's lanes enter only as a prior on a
+  new track's direction of motion (along the nearest lane, either way, within
+  ``lane_prior_m``), never as a path a track must keep.
+- **Extent**: each track is a box (length, width, heading: the velocity's direction once the
+  speed is known, else the last one or the lane's). A radar's reflections of it lie on the
+  faces it sees (:func:`.box_view.face_moments`): a detection is predicted at the visible
+  faces' mean, with their spread, so the estimate is the box centre whichever faces reflect.
+  The detections a track takes in a scan (each to the track that explains it best, within a
+  chi-square gate over position and radial speed) update it as one measurement: their mean
+  ground point and mean radial speed, the radial speed carrying the turn rate through the
+  points' lever arms. Length and width follow the detections' spread along and across
+  (moment matching, rate ``extent_learning_rate``) where a scan gives three or more.
+- **Existence**: every track carries the probability that an object stands behind it
+  (:mod:`adaptrack.tracking.existence`): a scan that should have seen it (the radar's P_D at
+  its range, less the share hidden behind nearer tracks in 3-D from the antenna's height)
+  and did not lowers it, a detection raises it by its likelihood against the clutter density
+  that each radar's :class:`~adaptrack.tracking.ClutterMap` learns online from the detections
+  no track explains. A group of unexplained detections (single link within
+  ``cluster_gap_m``) opens a track at the birth / (birth + clutter) share. A track is
+  reported once its existence reaches ``report_existence``, kept through standstills and
+  occlusions of any length while it is not contradicted, and dropped below
+  ``drop_existence`` or once its position is known worse than ``lost_position_std_m``.
+
+Two tracks on one body (one's centre within the other's box, velocities alike within
+``same_body_sigmas``) are one object: the younger is dropped. Every detection is accounted for
+(:class:`ExtendedLog`). Status: confirmed (detected within ``COASTING_S``), coasting, or
+stopped (slower than ``stopped_speed_mps``); ``moved`` once faster than ``moved_speed_mps``.
+This tracker is NumPy, one scan per call.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, fields
+
+import numpy as np
+import pandas as pd
+from scipy.spatial import cKDTree
+
+from ..._typing import FloatArray
+from ...models.turn import CoordinatedTurn
+from ...tracking import cluster_points, gate_threshold
+from ...tracking.clutter_map import ClutterMap
+from ...tracking.existence import after_hit, after_miss, at_birth, survive
+from ..site.model import Site
+from ..site.sensor import RadarSpec
+from .box_view import face_moments
+from .tracker import ROW_COLUMNS, STATUS_NAMES, scan_arrays
+
+N_STATE = 5  # x, y, vx, vy, omega
+COASTING_S = 0.2  # a reported track without a detection for longer is coasting [s]
+_CONFIRMED, _COASTING, _STOPPED = (STATUS_NAMES.index(s) for s in ("confirmed", "coasting",
+                                                                    "stopped"))  # fmt: skip
+
+
+@dataclass(frozen=True)
+class ExtendedTrackerConfig:
+    """Settings of :class:`ExtendedTracker`; each is a model parameter (units in the names)."""
+
+    accel_psd: float = 2.0  # white acceleration PSD, each axis [m^2/s^3]
+    turn_psd: float = 0.05  # turn-rate random walk PSD [rad^2/s^3]
+    gate_probability: float = 0.9999  # a detection of a track falls in its gate this often
+    shape_model_std_m: float = 0.25  # the box model's own error on a scan's mean point [m]
+    body_doppler_std_mps: float = 0.3  # radial-speed scatter over a body (wheels, limbs) [m/s]
+    birth_density: float = 1e-7  # new objects per m^2 per scan
+    clutter_prior_density: float = 1e-5  # unexplained detection groups per m^2 per scan ...
+    clutter_doppler_span_mps: float = 80.0  # ... spread evenly over this radial-speed span
+    clutter_cell_m: float = 5.0
+    clutter_memory_scans: float = 20000.0
+    lifetime_s: float = 3600.0  # mean time an object stays in the scene [s]
+    report_existence: float = 0.99
+    drop_existence: float = 1e-4
+    lost_position_std_m: float = 5.0
+    cluster_gap_m: float = 1.5  # a body's detections lie closer than this to a neighbour [m]
+    lane_prior_m: float = 6.0  # a new track this near a lane's centreline moves along it ...
+    lane_speed_std_mps: float = 12.0  # ... with this speed sigma along and ...
+    lane_across_std_mps: float = 1.0  # ... this across [m/s]; elsewhere:
+    initial_speed_std_mps: float = 8.0  # sigma of each velocity component [m/s]
+    initial_turn_std_radps: float = 0.3
+    prior_length_m: float = 4.5  # a new track's box (a car) ...
+    prior_width_m: float = 1.8
+    min_extent_m: float = 0.3
+    max_extent_m: float = 20.0
+    extent_learning_rate: float = 0.05
+    body_height_m: float = 1.5  # an occluder's height [m] (the antenna sees over it)
+    antenna_height_m: float | None = None  # above the road (None: the radar's height_m + 0.5)
+    same_body_sigmas: float = 3.0
+    stopped_speed_mps: float = 0.5
+    moved_speed_mps: float = 1.0
+
+    def __post_init__(self) -> None:
+        """Reject settings no tracker can run on, naming the field."""
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if value is None:
+                continue
+            if f.name in ("gate_probability", "report_existence", "drop_existence"):
+                ok, want = 0 < value < 1, "in (0, 1)"
+            elif f.name == "extent_learning_rate":
+                ok, want = 0 < value <= 1, "in (0, 1]"
+            else:
+                ok, want = 0 < value < np.inf, "finite and > 0"
+            if not ok:
+                raise ValueError(f"ExtendedTrackerConfig.{f.name} must be {want}; got {value}")
+        if not self.drop_existence < self.report_existence:
+            raise ValueError("ExtendedTrackerConfig.drop_existence must be < report_existence")
+
+
+@dataclass
+class ExtendedLog:
+    """What became of the detections: counts by outcome (every detection is in one)."""
+
+    updated: int = 0
+    opened: int = 0
+    joined_new: int = 0
+    rejected_outside_view: int = 0
+
+    @property
+    def total(self) -> int:
+        """Detections accounted for."""
+        return self.updated + self.opened + self.joined_new + self.rejected_outside_view
+
+
+_TRACK_FIELDS = (
+    "track_id", "x", "p", "time_s", "existence", "length_m", "width_m", "heading_rad",
+    "born_s", "last_hit_s", "hits", "moved", "reported",
+)  # fmt: skip
+
+
+class ExtendedTracker:
+    """Incremental tracker of one site (module docstring): ``step`` a scan, ``rows`` after."""
+
+    def __init__(self, site: Site, config: ExtendedTrackerConfig | None = None) -> None:
+        self.site = site
+        self.config = cfg = config or ExtendedTrackerConfig()
+        self.motion = CoordinatedTurn(accel_psd=cfg.accel_psd, turn_psd=cfg.turn_psd)
+        self.log = ExtendedLog()
+        self._radars = {r.name: r for r in site.radars}
+        self._last_stamp = dict.fromkeys(self._radars, -np.inf)
+        self._clutter = {
+            name: ClutterMap(cfg.clutter_prior_density, cfg.clutter_cell_m,
+                             cfg.clutter_memory_scans)
+            for name in self._radars
+        }  # fmt: skip
+        self._gate = gate_threshold(3, cfg.gate_probability)
+        self._next_id = 1
+        self._t = _empty_tracks()
+        lanes = [(c.path.xy, c.path.heading) for c in site.corridors]
+        self._lane_xy = np.concatenate([xy for xy, _ in lanes]) if lanes else np.zeros((0, 2))
+        # corridor headings are azimuths (clockwise from north): as a direction (east, north)
+        az = np.concatenate([h for _, h in lanes]) if lanes else np.zeros(0)
+        self._lane_dir = np.stack([np.sin(az), np.cos(az)], -1)
+        self._lane_tree = cKDTree(self._lane_xy) if len(self._lane_xy) else None
+
+    # -- one scan -------------------------------------------------------------------------
+    def step(self, radar_name: str, time_s: float, z: FloatArray) -> None:
+        """Process the detections ``z`` (n, 3: range m, azimuth rad, radial speed m/s) of a scan."""
+        radar = self._radars.get(radar_name)
+        if radar is None:
+            raise ValueError(f"unknown radar {radar_name!r}; the site has {sorted(self._radars)}")
+        if not time_s > self._last_stamp[radar_name]:
+            raise ValueError(
+                f"radar {radar_name!r}: scan at {time_s} s is not after its previous scan at "
+                f"{self._last_stamp[radar_name]} s"
+            )
+        z = np.asarray(z, float).reshape(-1, 3)
+        if not np.isfinite(z).all():
+            raise ValueError(f"radar {radar_name!r} at {time_s} s: a detection is not finite")
+        self._last_stamp[radar_name] = time_s
+        t_scan = float(radar.measured_at(time_s))
+        cfg, t = self.config, self._t
+        self._predict(t_scan)
+        in_field = radar.in_view(z[:, 0], z[:, 1])
+        self.log.rejected_outside_view += int((~in_field).sum())
+        z = z[in_field]
+        g, g_cov, a, v_var = _ground_points(radar, z)
+        n_t = t["x"].shape[0]
+        seen = self._in_view(radar)
+        owner = np.full(z.shape[0], -1)
+        if n_t and z.shape[0]:
+            offset, spread = face_moments(t["x"][:, :2], t["heading_rad"], t["length_m"],
+                                          t["width_m"], np.asarray(radar.position_m))  # fmt: skip
+            cost = self._point_costs(radar, g, g_cov, a, v_var, z[:, 2], offset, spread)
+            cost[~seen] = np.inf
+            best = np.argmin(cost, axis=0)
+            ok = np.isfinite(cost[best, np.arange(z.shape[0])])
+            owner[ok] = best[ok]
+        else:
+            offset = spread = None
+        hit = np.zeros(n_t, bool)
+        pd = self._detection_probability(radar, seen) if n_t else np.zeros(0)
+        clutter = self._clutter[radar_name]
+        for i in np.unique(owner[owner >= 0]):
+            mine = owner == i
+            assert offset is not None and spread is not None
+            ratio = self._update(i, radar, g[mine], g_cov[mine], a[mine], v_var[mine],
+                                 z[mine, 2], offset[i], spread[i], clutter)  # fmt: skip
+            t["existence"][i] = after_hit(t["existence"][i], pd[i], ratio)
+            t["last_hit_s"][i] = t_scan
+            t["hits"][i] += 1
+            hit[i] = True
+        self.log.updated += int((owner >= 0).sum())
+        missed = seen & ~hit
+        t["existence"][missed] = after_miss(t["existence"][missed], pd[missed])
+        left = np.flatnonzero(owner < 0)
+        groups = cluster_points(g[left], cfg.cluster_gap_m) if left.size else np.zeros(0, int)
+        centres = np.array([g[left[groups == k]].mean(axis=0) for k in np.unique(groups)])
+        if left.size:
+            density = clutter.density(centres) / cfg.clutter_doppler_span_mps
+            for k, centre_density in zip(np.unique(groups), density, strict=True):
+                rows = left[groups == k]
+                self._open(radar, t_scan, g[rows], g_cov[rows], a[rows], v_var[rows], z[rows, 2],
+                           float(at_birth(cfg.birth_density / cfg.clutter_doppler_span_mps,
+                                          centre_density)))  # fmt: skip
+                self.log.opened += 1
+                self.log.joined_new += rows.size - 1
+        clutter.end_scan(centres if left.size else np.zeros((0, 2)))
+        self._prune()
+
+    def _predict(self, t_scan: float) -> None:
+        """Predict every track to the scan time (motion and survival)."""
+        t = self._t
+        if not t["x"].shape[0]:
+            return
+        dt = np.maximum(t_scan - t["time_s"], 0.0)
+        x, f = self.motion.propagate(t["x"], dt)
+        p = f @ t["p"] @ np.swapaxes(f, -1, -2) + self.motion.process_cov(dt)
+        t["x"], t["p"] = x, 0.5 * (p + np.swapaxes(p, -1, -2))
+        t["time_s"] = np.full(dt.shape, t_scan)
+        t["existence"] = survive(t["existence"], dt, self.config.lifetime_s)
+        speed = np.hypot(x[:, 2], x[:, 3])
+        speed_var = np.einsum("ni,nij,nj->n", _unit(x[:, 2:4]), p[:, 2:4, 2:4], _unit(x[:, 2:4]))
+        known = speed > 2.0 * np.sqrt(speed_var) + 0.3
+        t["heading_rad"] = np.where(known, np.arctan2(x[:, 3], x[:, 2]), t["heading_rad"])
+
+    def _in_view(self, radar: RadarSpec) -> np.ndarray:
+        """Tracks whose centre the radar covers (bool per track)."""
+        if not self._t["x"].shape[0]:
+            return np.zeros(0, bool)
+        return np.asarray(radar.covers(self._t["x"][:, :2]), bool)
+
+    def _detection_probability(self, radar: RadarSpec, seen: np.ndarray) -> FloatArray:
+        """Each track's P_D in this scan: the radar's at its range, less its hidden share."""
+        t, cfg = self._t, self.config
+        xy = t["x"][:, :2]
+        rng, az = radar.polar(xy)
+        pd = np.where(seen, radar.detection_curve("default")(rng), 0.0)
+        antenna = _antenna_height(radar, cfg)
+        rel = xy - np.asarray(radar.position_m)
+        ground = np.linalg.norm(rel, axis=1)
+        half = np.arctan2(0.5 * np.hypot(t["length_m"], t["width_m"]), np.maximum(ground, 1e-6))
+        hidden = np.zeros(xy.shape[0])
+        idx = np.flatnonzero(seen)
+        for i in idx:
+            for j in idx:
+                if ground[j] >= ground[i] or j == i:
+                    continue
+                lap = half[i] + half[j] - abs(math.remainder(az[i] - az[j], 2 * math.pi))
+                if lap <= 0:
+                    continue
+                share = min(lap / (2 * half[i]), 1.0)
+                # the sight line over the occluder's top meets the ground-standing body at
+                # this height: below it is hidden
+                line = antenna - (antenna - cfg.body_height_m) * ground[i] / max(ground[j], 1e-6)
+                depth = float(np.clip(line / cfg.body_height_m, 0.0, 1.0))
+                hidden[i] = max(hidden[i], share * depth)
+        return pd * (1.0 - hidden)
+
+    def _point_costs(self, radar, g, g_cov, a, v_var, vr, offset, spread):  # type: ignore[no-untyped-def]
+        """Chi-square plus log-determinant of each detection for each track (T, n); inf out of gate."""
+        t, cfg = self._t, self.config
+        x, p = t["x"], t["p"]
+        e = g[None, :, :] - (x[:, None, :2] + offset[:, None, :])
+        s = p[:, None, :2, :2] + spread[:, None] + g_cov[None] + cfg.shape_model_std_m**2 * np.eye(2)
+        det = s[..., 0, 0] * s[..., 1, 1] - s[..., 0, 1] ** 2
+        d2 = (s[..., 1, 1] * e[..., 0] ** 2 - 2 * s[..., 0, 1] * e[..., 0] * e[..., 1]
+              + s[..., 0, 0] * e[..., 1] ** 2) / det  # fmt: skip
+        lever = g[None, :, :] - x[:, None, :2]
+        predicted = (np.einsum("nj,tnj->tn", a, x[:, None, 2:4]
+                               + x[:, None, 4:5] * np.stack([-lever[..., 1], lever[..., 0]], -1)))
+        dv = _unfold(vr[None, :] - predicted, radar)
+        sv = np.einsum("nj,tjk,nk->tn", a, p[:, 2:4, 2:4], a) + v_var[None] + cfg.body_doppler_std_mps**2
+        chi = d2 + dv**2 / sv
+        return np.where(chi <= self._gate, chi + np.log(det * sv), np.inf)
+
+    def _update(self, i, radar, g, g_cov, a, v_var, vr, offset, spread, clutter):  # type: ignore[no-untyped-def]
+        """Update track ``i`` with its detections of a scan; return their likelihood ratio."""
+        t, cfg = self._t, self.config
+        x, p = t["x"][i], t["p"][i]
+        n = g.shape[0]
+        lever = g - x[:2]
+        arm = np.stack([-lever[:, 1], lever[:, 0]], -1)
+        h = np.zeros((3, N_STATE))
+        h[0, 0] = h[1, 1] = 1.0
+        h[2, 2:4] = a.mean(axis=0)
+        h[2, 4] = np.einsum("nj,nj->n", a, arm).mean()
+        predicted = np.array([x[0] + offset[0], x[1] + offset[1], h[2] @ x])
+        zbar = np.array([*g.mean(axis=0), vr.mean()])
+        r = np.zeros((3, 3))
+        r[:2, :2] = g_cov.sum(axis=0) / n**2 + spread / n + cfg.shape_model_std_m**2 * np.eye(2)
+        r[2, 2] = v_var.mean() / n + cfg.body_doppler_std_mps**2
+        innov = zbar - predicted
+        innov[2] = _unfold(innov[2], radar)
+        s = h @ p @ h.T + r
+        s_inv = np.linalg.inv(s)
+        k = p @ h.T @ s_inv
+        t["x"][i] = x + k @ innov
+        ikh = np.eye(N_STATE) - k @ h
+        post = ikh @ p @ ikh.T + k @ r @ k.T  # Joseph form
+        t["p"][i] = 0.5 * (post + post.T)
+        if n >= 3:
+            self._learn_extent(i, g, g_cov, np.asarray(radar.position_m))
+        speed = math.hypot(t["x"][i, 2], t["x"][i, 3])
+        t["moved"][i] |= speed > cfg.moved_speed_mps and t["p"][i, 2, 2] + t["p"][i, 3, 3] < 1.0
+        density = clutter.density(zbar[None, :2])[0] / cfg.clutter_doppler_span_mps
+        g_z = math.exp(-0.5 * innov @ s_inv @ innov) / math.sqrt((2 * math.pi) ** 3
+                                                                 * np.linalg.det(s))  # fmt: skip
+        return g_z / density
+
+    def _learn_extent(self, i, g, g_cov, radar_xy):  # type: ignore[no-untyped-def]
+        """Move the box's length and width towards the detections' spread along and across."""
+        t, cfg = self._t, self.config
+        h = t["heading_rad"][i]
+        axes = np.array([[math.cos(h), math.sin(h)], [-math.sin(h), math.cos(h)]])
+        local = (g - g.mean(axis=0)) @ axes.T
+        noise = np.einsum("ai,nij,aj->a", axes, g_cov, axes) / g.shape[0]
+        observed = np.maximum(local.var(axis=0, ddof=1) - noise, 0.0)
+        _, model_cov = face_moments(t["x"][i : i + 1, :2], np.array([h]), t["length_m"][i : i + 1],
+                                    t["width_m"][i : i + 1], radar_xy)  # fmt: skip
+        expected = np.einsum("ai,ij,aj->a", axes, model_cov[0], axes)
+        rate = cfg.extent_learning_rate
+        for name, k in (("length_m", 0), ("width_m", 1)):
+            # an axis is learnt where a face along it is in view: its reflections' variance
+            # is then that of a uniform spread over the face, proportional to its square
+            if expected[k] >= 0.25 * t[name][i] ** 2 / 12.0:
+                square = t[name][i] ** 2 * (1.0 + rate * (observed[k] / expected[k] - 1.0))
+                t[name][i] = min(max(math.sqrt(max(square, 0.0)), cfg.min_extent_m),
+                                 cfg.max_extent_m)  # fmt: skip
+
+    def _open(self, radar, t_scan, g, g_cov, a, v_var, vr, existence):  # type: ignore[no-untyped-def]
+        """Open a track on a group of unexplained detections (lane prior on its motion)."""
+        cfg = self.config
+        centre = g.mean(axis=0)
+        direction = None
+        if self._lane_tree is not None:
+            dist, k = self._lane_tree.query(centre)
+            if dist <= cfg.lane_prior_m:
+                direction = self._lane_dir[k]
+        heading = math.atan2(direction[1], direction[0]) if direction is not None else math.atan2(
+            *(np.asarray(radar.position_m) - centre)[::-1])  # fmt: skip
+        offset, spread = face_moments(centre[None], np.array([heading]),
+                                      np.array([cfg.prior_length_m]),
+                                      np.array([cfg.prior_width_m]),
+                                      np.asarray(radar.position_m))  # fmt: skip
+        x = np.zeros(N_STATE)
+        x[:2] = centre - offset[0]
+        p = np.zeros((N_STATE, N_STATE))
+        n = g.shape[0]
+        p[:2, :2] = g_cov.sum(axis=0) / n**2 + spread[0] + cfg.shape_model_std_m**2 * np.eye(2)
+        if direction is not None:
+            along = np.outer(direction, direction)
+            p[2:4, 2:4] = cfg.lane_speed_std_mps**2 * along + cfg.lane_across_std_mps**2 * (
+                np.eye(2) - along)
+        else:
+            p[2:4, 2:4] = cfg.initial_speed_std_mps**2 * np.eye(2)
+        p[4, 4] = cfg.initial_turn_std_radps**2
+        # the radial speeds: a one-dimensional update of the velocity
+        h = np.zeros(N_STATE)
+        h[2:4] = a.mean(axis=0)
+        s = h @ p @ h + v_var.mean() / n + cfg.body_doppler_std_mps**2
+        k = p @ h / s
+        x = x + k * (vr.mean() - h @ x)
+        p = p - np.outer(k, k) * s
+        speed = math.hypot(x[2], x[3])
+        if speed > 1.0:
+            heading = math.atan2(x[3], x[2])
+        new = {
+            "track_id": np.array([self._next_id]), "x": x[None], "p": 0.5 * (p + p.T)[None],
+            "time_s": np.array([t_scan]), "existence": np.array([existence]),
+            "length_m": np.array([cfg.prior_length_m]), "width_m": np.array([cfg.prior_width_m]),
+            "heading_rad": np.array([heading]), "born_s": np.array([t_scan]),
+            "last_hit_s": np.array([t_scan]), "hits": np.array([1]),
+            "moved": np.array([False]), "reported": np.array([False]),
+        }  # fmt: skip
+        self._next_id += 1
+        for name in _TRACK_FIELDS:
+            self._t[name] = np.concatenate([self._t[name], new[name]])
+
+    def _prune(self) -> None:
+        """Drop tracks gone (existence), lost (position sigma) or duplicating another's body."""
+        t, cfg = self._t, self.config
+        if not t["x"].shape[0]:
+            return
+        t["reported"] |= t["existence"] >= cfg.report_existence
+        pos_std = np.sqrt(t["p"][:, 0, 0] + t["p"][:, 1, 1])
+        keep = (t["existence"] >= cfg.drop_existence) & (pos_std <= cfg.lost_position_std_m)
+        keep &= ~self._duplicates()
+        for name in _TRACK_FIELDS:
+            t[name] = t[name][keep]
+
+    def _duplicates(self) -> np.ndarray:
+        """Tracks whose box overlaps an older track's, moving alike (bool per track).
+
+        Two bodies cannot overlap: two such tracks follow one body (parts of a long vehicle,
+        the far end of a lorry opening a track of its own). Their velocities agree within
+        ``same_body_sigmas`` of both estimates and of a rigid body's turn (turn rate times
+        length). The older keeps its identity; the younger is dropped.
+        """
+        t, cfg = self._t, self.config
+        x = t["x"]
+        n = x.shape[0]
+        out = np.zeros(n, bool)
+        if n < 2:
+            return out
+        reach = float(t["length_m"].max())
+        for i, j in cKDTree(x[:, :2]).query_pairs(reach, output_type="ndarray").tolist():
+            older, younger = (i, j) if t["born_s"][i] <= t["born_s"][j] else (j, i)
+            if out[older] or out[younger]:
+                continue
+            h = t["heading_rad"][older]
+            axis = np.array([math.cos(h), math.sin(h)])
+            d = x[younger, :2] - x[older, :2]
+            along, across = d @ axis, -d[0] * axis[1] + d[1] * axis[0]
+            half_o, half_y = 0.5 * t["length_m"][older], 0.5 * t["length_m"][younger]
+            if (abs(along) >= half_o + half_y
+                    or abs(across) >= 0.5 * (t["width_m"][older] + t["width_m"][younger])):  # fmt: skip
+                continue
+            dv = x[younger, 2:4] - x[older, 2:4]
+            turn = (abs(x[older, 4]) * 2.0 * max(half_o, half_y)) ** 2 + cfg.body_doppler_std_mps**2
+            sv = t["p"][younger, 2:4, 2:4] + t["p"][older, 2:4, 2:4] + turn * np.eye(2)
+            if dv @ np.linalg.solve(sv, dv) > cfg.same_body_sigmas**2:
+                continue
+            out[younger] = True
+        return out
+
+    # -- output ---------------------------------------------------------------------------
+    def columns(self, time_s: float) -> dict[str, np.ndarray]:
+        """The reported tracks at ``time_s`` (after the scan): the columns of the track table."""
+        t, cfg = self._t, self.config
+        rows = np.flatnonzero(t["reported"] & (t["existence"] >= cfg.report_existence))
+        x, p = t["x"][rows], t["p"][rows]
+        speed = np.hypot(x[:, 2], x[:, 3])
+        u = _unit(x[:, 2:4])
+        status = np.where(
+            speed < cfg.stopped_speed_mps, _STOPPED,
+            np.where(time_s - t["last_hit_s"][rows] > COASTING_S, _COASTING, _CONFIRMED),
+        )  # fmt: skip
+        return {
+            "track_id": t["track_id"][rows], "time_s": np.full(rows.size, time_s),
+            "east_m": x[:, 0], "north_m": x[:, 1], "speed_mps": speed,
+            "east_speed_mps": x[:, 2], "north_speed_mps": x[:, 3],
+            "from_crossing_m": np.hypot(x[:, 0], x[:, 1]), "status": status,
+            "moved": t["moved"][rows],
+            "position_std_m": np.sqrt(p[:, 0, 0] + p[:, 1, 1]),
+            "speed_std_mps": np.sqrt(np.einsum("ni,nij,nj->n", u, p[:, 2:4, 2:4], u)),
+            "existence": t["existence"][rows], "length_m": t["length_m"][rows],
+            "width_m": t["width_m"][rows], "heading_rad": t["heading_rad"][rows],
+        }  # fmt: skip
+
+
+EXTRA_COLUMNS = ("existence", "length_m", "width_m", "heading_rad")
+
+
+def _empty_tracks() -> dict[str, np.ndarray]:
+    kinds = {"track_id": np.int64, "hits": np.int64, "moved": bool, "reported": bool}
+    out = {name: np.zeros(0, kinds.get(name, float)) for name in _TRACK_FIELDS}
+    out["x"], out["p"] = np.zeros((0, N_STATE)), np.zeros((0, N_STATE, N_STATE))
+    return out
+
+
+def _unit(v: FloatArray) -> FloatArray:
+    """Unit vectors of rows of ``v`` (a zero row gives east)."""
+    norm = np.linalg.norm(v, axis=-1, keepdims=True)
+    return np.where(norm > 1e-9, v / np.maximum(norm, 1e-9), np.array([1.0, 0.0]))
+
+
+def _antenna_height(radar: RadarSpec, cfg: ExtendedTrackerConfig) -> float:
+    """The antenna's height above the road [m]."""
+    return cfg.antenna_height_m if cfg.antenna_height_m is not None else radar.height_m + 0.5
+
+
+def _unfold(dv: FloatArray, radar: RadarSpec) -> FloatArray:
+    """Radial-speed residuals folded into +-v_max of a folding radar (else unchanged)."""
+    v_max = radar.max_unambiguous_speed_mps
+    if not v_max:
+        return dv
+    return (np.asarray(dv) + v_max) % (2 * v_max) - v_max
+
+
+def _ground_points(radar: RadarSpec, z: FloatArray):  # type: ignore[no-untyped-def]
+    """Ground points (n, 2), their covariance (n, 2, 2), radial-speed directions (n, 2), variance.
+
+    The radial speed of a ground point moving at ``v`` is ``a . v`` (``a``: the horizontal
+    unit vector towards it times the cosine of the depression angle).
+    """
+    rng, az = z[:, 0], z[:, 1]
+    rho = np.sqrt(np.maximum(rng**2 - radar.height_m**2, 0.01))
+    s, c = np.sin(az), np.cos(az)
+    g = np.asarray(radar.position_m) + np.stack([rho * s, rho * c], -1)
+    sr, sa, sv = radar.noise_std(rng, az)
+    d_range = (rng / rho)[:, None] * np.stack([s, c], -1)
+    d_az = rho[:, None] * np.stack([c, -s], -1)
+    cov = (sr**2)[:, None, None] * d_range[:, :, None] * d_range[:, None, :] + (sa**2)[
+        :, None, None
+    ] * d_az[:, :, None] * d_az[:, None, :]
+    a = (rho / rng)[:, None] * np.stack([s, c], -1)
+    return g, cov, a, np.broadcast_to(np.asarray(sv, float) ** 2, rng.shape).copy()
+
+
+def track_scene_extended(
+    site: Site,
+    detections: pd.DataFrame,
+    config: ExtendedTrackerConfig | None = None,
+    on_scan: Callable[[int, int], None] | None = None,
+) -> tuple[pd.DataFrame, ExtendedLog]:
+    """Track a detection table scan by scan; return the reported tracks of every scan and the log.
+
+    Columns as :func:`.tracker.track_scene`'s (``status`` named) and :data:`EXTRA_COLUMNS`.
+    """
+    tracker = ExtendedTracker(site, config)
+    names, radar, stamps, starts, z, _ = scan_arrays(
+        detections, {r.name: r.latency_s for r in site.radars}
+    )
+    out: list[dict[str, np.ndarray]] = []
+    n_scans = stamps.size
+    for k in range(n_scans):
+        tracker.step(names[radar[k]], float(stamps[k]), z[starts[k] : starts[k + 1]])
+        t_scan = float(tracker._radars[names[radar[k]]].measured_at(stamps[k]))
+        out.append(tracker.columns(t_scan))
+        if on_scan is not None and (k + 1) % 1000 == 0:
+            on_scan(k + 1, n_scans)
+    keys = [*ROW_COLUMNS, *EXTRA_COLUMNS]
+    table = {k: np.concatenate([o[k] for o in out]) if out else np.zeros(0) for k in keys}
+    frame = pd.DataFrame(table)
+    frame["status"] = pd.Categorical.from_codes(frame["status"].astype(int), categories=STATUS_NAMES)
+    return frame, tracker.log
+
+
+__all__ = ["EXTRA_COLUMNS", "ExtendedLog", "ExtendedTracker", "ExtendedTrackerConfig",
+           "track_scene_extended"]  # fmt: skip
