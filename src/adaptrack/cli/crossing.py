@@ -20,7 +20,8 @@ from ..crossing.measurements_io import (
     read_scene_detections,
     read_warnings,
 )
-from ..crossing.scene.tracker import load_scene_config, track_scene
+from ..crossing.scene.extended_tracker import track_scene_extended
+from ..crossing.scene.tracker import EVENT_COLUMNS, load_scene_config, track_scene
 from ..crossing.simulation.faces import RADAR_KINDS, FaceRadar, face_returns_of
 from ..crossing.simulation.motion import MotionTransform, read_motion, simulate_replay
 from ..crossing.simulation.object_list import object_list_ids
@@ -564,6 +565,12 @@ def track(
         help="An object list's object_id: 'hint' (the scene tracker, ids as association "
         "hints) or 'truth' (one track per id with the site's road estimator).",
     ),
+    tracker: str = typer.Option(
+        "corridor",
+        "--tracker",
+        help="Scene tracker: 'corridor' (along the site's corridors, compiled) or 'extended' "
+        "(free 2-D motion, box extents, existence probabilities; NumPy).",
+    ),
 ) -> None:
     """Track radar detections at a site; write the estimates.
 
@@ -585,6 +592,14 @@ def track(
         _fail(str(exc))
     if ids not in ("hint", "truth"):
         _fail(f"--ids must be 'hint' or 'truth'; got {ids!r}")
+    if tracker not in ("corridor", "extended"):
+        _fail(f"--tracker must be 'corridor' or 'extended'; got {tracker!r}")
+    if tracker == "extended":
+        if ids != "hint" or warnings is not None or config is not None:
+            _fail("--tracker extended takes raw detections only (no --ids truth, --warnings "
+                  "or --config)")  # fmt: skip
+        _track_extended_file(measurements, st, out, events)
+        return
     if ids == "hint":
         _track_scene_file(measurements, st, out, events, warnings, config)
         return
@@ -604,6 +619,30 @@ def track(
     table = track_objects(objects, st, estimator)
     write_table_atomic(table, out)
     Console().print(f"wrote {out} ({len(objects)} objects)")
+
+
+def _track_extended_file(measurements: Path, st: Site, out: Path, events: Path | None) -> None:
+    """Track a detection file with the extended-object tracker; write tracks and (no) events."""
+    try:
+        det = read_scene_detections(measurements, st)
+    except (ValueError, OSError) as exc:
+        _fail(str(exc))
+    with progress(Console(), "tracking (scans)") as bar:
+        try:
+            tracks, log = track_scene_extended(
+                st, det, on_scan=lambda done, total: bar.set(done, total)
+            )
+        except ValueError as exc:
+            _fail(f"{measurements}: {exc}")
+    write_table_atomic(tracks.astype({"status": str}), out)
+    ev_path = events or out.with_name(out.stem + ".events.csv")
+    write_table_atomic(pd.DataFrame(columns=EVENT_COLUMNS), ev_path)
+    Console().print(
+        f"wrote {out} ({tracks['track_id'].nunique()} tracks) and {ev_path}; detections: "
+        f"{log.updated} updated tracks, {log.opened + log.joined_new} opened tracks, "
+        f"{log.rejected_outside_view} rejected (outside every field of view), {log.total} of "
+        f"{len(det)}"
+    )
 
 
 def _track_scene_file(

@@ -11,12 +11,22 @@ probability ``pd``) either brings a measurement ``z`` or nothing:
 
 A new track opened on a measurement nothing explains starts at
 ``birth / (birth + clutter)``: the share of the measurement density at that point that new
-objects make. Vectorised over tracks (axis 0).
+objects make.
+
+An extended object gives a number of detections per scan: with a gamma-distributed rate of
+mean ``rate`` and shape ``shape`` (the scan-to-scan fluctuation of its radar cross-section)
+the count is negative binomial, while a clutter group holds one detection, rarely more
+(geometric of mean ``clutter_mean``). :func:`count_ratio` is the ratio of the two for a
+count ``n >= 1``, a factor of the likelihood ratio of a hit: a lone detection where an object
+gives tens (a multipath ghost beside a body seen by a point-cloud radar) is clutter-like, and
+for an object list (one detection per object) the count tells nothing. Vectorised over
+tracks (axis 0).
 """
 
 from __future__ import annotations
 
 import numpy as np
+from scipy.special import gammaln
 
 from .._typing import FloatArray
 
@@ -40,7 +50,8 @@ def after_hit(
     r = np.asarray(existence, float)
     pd = np.asarray(detection_probability, float)
     gain = 1.0 - pd + pd * np.asarray(likelihood_ratio, float)
-    return r * gain / (1.0 - r + r * gain)
+    with np.errstate(divide="ignore"):
+        return r / (r + (1.0 - r) / gain)  # an infinite ratio gives 1
 
 
 def at_birth(birth_density: FloatArray, clutter_density: FloatArray) -> FloatArray:
@@ -49,4 +60,24 @@ def at_birth(birth_density: FloatArray, clutter_density: FloatArray) -> FloatArr
     return b / (b + np.asarray(clutter_density, float))
 
 
-__all__ = ["after_hit", "after_miss", "at_birth", "survive"]
+def count_ratio(
+    count: FloatArray, rate: FloatArray, shape: float, clutter_mean: FloatArray
+) -> FloatArray:
+    """Likelihood ratio object / clutter of ``count`` >= 1 detections in one group.
+
+    Object: negative binomial of mean ``rate`` and ``shape``, given at least one detection;
+    clutter: geometric on 1, 2, ... of mean ``clutter_mean`` (>= 1).
+    """
+    n = np.asarray(count, float)
+    mu = np.maximum(np.asarray(rate, float), 1e-9)
+    k = float(shape)
+    log_nb = (gammaln(n + k) - gammaln(k) - gammaln(n + 1) + k * np.log(k / (k + mu))
+              + n * np.log(mu / (k + mu)))  # fmt: skip
+    log_zero = k * np.log(k / (k + mu))
+    log_object = log_nb - np.log1p(-np.exp(log_zero))
+    q = 1.0 - 1.0 / np.maximum(np.asarray(clutter_mean, float), 1.0 + 1e-9)
+    log_clutter = np.log1p(-q) + (n - 1) * np.log(q)
+    return np.exp(np.minimum(log_object - log_clutter, 700.0))
+
+
+__all__ = ["after_hit", "after_miss", "at_birth", "count_ratio", "survive"]

@@ -24,7 +24,10 @@ this one takes its behaviour from three models:
   that each radar's :class:`~adaptrack.tracking.ClutterMap` learns online from the detections
   no track explains. A group of unexplained detections (single link within
   ``cluster_gap_m``) opens a track at the birth / (birth + clutter) share. A track is
-  reported once its existence reaches ``report_existence``, kept through standstills and
+  reported once its existence reaches ``report_existence`` and its speed is known to
+``report_speed_std_mps`` (along its velocity; the worst axis when slower than 1 m/s),
+and while it stays above
+``keep_existence``, kept through standstills and
   occlusions of any length while it is not contradicted, and dropped below
   ``drop_existence`` or once its position is known worse than ``lost_position_std_m``.
 
@@ -39,7 +42,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 import pandas as pd
@@ -49,16 +52,20 @@ from ..._typing import FloatArray
 from ...models.turn import CoordinatedTurn
 from ...tracking import cluster_points, gate_threshold
 from ...tracking.clutter_map import ClutterMap
-from ...tracking.existence import after_hit, after_miss, at_birth, survive
+from ...tracking.existence import after_hit, after_miss, at_birth, count_ratio, survive
 from ..site.model import Site
 from ..site.sensor import RadarSpec
+from .background import BackgroundMap
 from .box_view import face_moments
 from .tracker import ROW_COLUMNS, STATUS_NAMES, scan_arrays
 
-N_STATE = 5  # x, y, vx, vy, omega
+N_STATE = 7  # x, y, vx, vy, omega, length, width
+LENGTH, WIDTH = 5, 6
+STEP_M = 0.01  # finite step of the face offsets in length and width [m]
 COASTING_S = 0.2  # a reported track without a detection for longer is coasting [s]
-_CONFIRMED, _COASTING, _STOPPED = (STATUS_NAMES.index(s) for s in ("confirmed", "coasting",
-                                                                    "stopped"))  # fmt: skip
+_CONFIRMED, _COASTING, _STOPPED, _STATIC = (
+    STATUS_NAMES.index(s) for s in ("confirmed", "coasting", "stopped", "static")
+)
 
 
 @dataclass(frozen=True)
@@ -76,7 +83,9 @@ class ExtendedTrackerConfig:
     clutter_cell_m: float = 5.0
     clutter_memory_scans: float = 20000.0
     lifetime_s: float = 3600.0  # mean time an object stays in the scene [s]
-    report_existence: float = 0.99
+    report_existence: float = 0.99  # a track is first reported at this existence ...
+    report_speed_std_mps: float = 1.0  # ... once its velocity is known this well (each axis) ...
+    keep_existence: float = 0.5  # ... and kept reported while more likely than not
     drop_existence: float = 1e-4
     lost_position_std_m: float = 5.0
     cluster_gap_m: float = 1.5  # a body's detections lie closer than this to a neighbour [m]
@@ -87,12 +96,18 @@ class ExtendedTrackerConfig:
     initial_turn_std_radps: float = 0.3
     prior_length_m: float = 4.5  # a new track's box (a car) ...
     prior_width_m: float = 1.8
+    prior_length_std_m: float = 2.5  # ... and how little that is known
+    prior_width_std_m: float = 0.5
+    extent_psd: float = 1e-4  # random walk of length and width [m^2/s]
     min_extent_m: float = 0.3
     max_extent_m: float = 20.0
     extent_learning_rate: float = 0.05
+    count_shape: float = 2.0  # gamma shape of a body's detection rate (its RCS fluctuation)
+    count_learning_rate: float = 0.1  # a track's detections per scan, moving average
     body_height_m: float = 1.5  # an occluder's height [m] (the antenna sees over it)
     antenna_height_m: float | None = None  # above the road (None: the radar's height_m + 0.5)
     same_body_sigmas: float = 3.0
+    background_sigmas: float = 3.0  # a standing track out-counting the background this much
     stopped_speed_mps: float = 0.5
     moved_speed_mps: float = 1.0
 
@@ -102,16 +117,18 @@ class ExtendedTrackerConfig:
             value = getattr(self, f.name)
             if value is None:
                 continue
-            if f.name in ("gate_probability", "report_existence", "drop_existence"):
+            if f.name in ("gate_probability", "report_existence", "keep_existence",
+                          "drop_existence"):
                 ok, want = 0 < value < 1, "in (0, 1)"
-            elif f.name == "extent_learning_rate":
+            elif f.name in ("extent_learning_rate", "count_learning_rate"):
                 ok, want = 0 < value <= 1, "in (0, 1]"
             else:
                 ok, want = 0 < value < np.inf, "finite and > 0"
             if not ok:
                 raise ValueError(f"ExtendedTrackerConfig.{f.name} must be {want}; got {value}")
-        if not self.drop_existence < self.report_existence:
-            raise ValueError("ExtendedTrackerConfig.drop_existence must be < report_existence")
+        if not self.drop_existence < self.keep_existence <= self.report_existence:
+            raise ValueError("ExtendedTrackerConfig: drop_existence < keep_existence <= "
+                             "report_existence is required")
 
 
 @dataclass
@@ -130,16 +147,23 @@ class ExtendedLog:
 
 
 _TRACK_FIELDS = (
-    "track_id", "x", "p", "time_s", "existence", "length_m", "width_m", "heading_rad",
-    "born_s", "last_hit_s", "hits", "moved", "reported",
+    "track_id", "x", "p", "time_s", "existence", "heading_rad",
+    "born_s", "last_hit_s", "hits", "moved", "reported", "rate", "seen_count",
+    "background_count",
 )  # fmt: skip
 
 
 class ExtendedTracker:
     """Incremental tracker of one site (module docstring): ``step`` a scan, ``rows`` after."""
 
-    def __init__(self, site: Site, config: ExtendedTrackerConfig | None = None) -> None:
+    def __init__(
+        self,
+        site: Site,
+        config: ExtendedTrackerConfig | None = None,
+        background: BackgroundMap | None = None,
+    ) -> None:
         self.site = site
+        self.background = background
         self.config = cfg = config or ExtendedTrackerConfig()
         self.motion = CoordinatedTurn(accel_psd=cfg.accel_psd, turn_psd=cfg.turn_psd)
         self.log = ExtendedLog()
@@ -152,7 +176,9 @@ class ExtendedTracker:
         }  # fmt: skip
         self._gate = gate_threshold(3, cfg.gate_probability)
         self._next_id = 1
-        self._t = _empty_tracks()
+        self._radar_index = {name: k for k, name in enumerate(self._radars)}
+        self._counts = {name: _Counts() for name in self._radars}
+        self._t = _empty_tracks(len(self._radars))
         lanes = [(c.path.xy, c.path.heading) for c in site.corridors]
         self._lane_xy = np.concatenate([xy for xy, _ in lanes]) if lanes else np.zeros((0, 2))
         # corridor headings are azimuths (clockwise from north): as a direction (east, north)
@@ -186,23 +212,33 @@ class ExtendedTracker:
         seen = self._in_view(radar)
         owner = np.full(z.shape[0], -1)
         if n_t and z.shape[0]:
-            offset, spread = face_moments(t["x"][:, :2], t["heading_rad"], t["length_m"],
-                                          t["width_m"], np.asarray(radar.position_m))  # fmt: skip
-            cost = self._point_costs(radar, g, g_cov, a, v_var, z[:, 2], offset, spread)
+            offset, spread, h_pos = self._faces(radar)
+            cost = self._point_costs(radar, g, g_cov, a, v_var, z[:, 2], offset, spread, h_pos)
             cost[~seen] = np.inf
             best = np.argmin(cost, axis=0)
             ok = np.isfinite(cost[best, np.arange(z.shape[0])])
             owner[ok] = best[ok]
         else:
-            offset = spread = None
+            offset = spread = h_pos = None
         hit = np.zeros(n_t, bool)
         pd = self._detection_probability(radar, seen) if n_t else np.zeros(0)
         clutter = self._clutter[radar_name]
+        r_index = self._radar_index[radar_name]
+        counts = self._counts[radar_name]
         for i in np.unique(owner[owner >= 0]):
             mine = owner == i
-            assert offset is not None and spread is not None
+            assert offset is not None and spread is not None and h_pos is not None
             ratio = self._update(i, radar, g[mine], g_cov[mine], a[mine], v_var[mine],
-                                 z[mine, 2], offset[i], spread[i], clutter)  # fmt: skip
+                                 z[mine, 2], offset[i], spread[i], h_pos[i], clutter)  # fmt: skip
+            n_mine = int(mine.sum())
+            rate = t["rate"][i, r_index]
+            ground = float(np.hypot(*(t["x"][i, :2] - radar.position_m)))
+            ratio *= count_ratio(n_mine, counts.rate_at(ground) if np.isnan(rate) else rate,
+                                 cfg.count_shape, counts.clutter_mean)  # fmt: skip
+            t["rate"][i, r_index] = n_mine if np.isnan(rate) else rate + cfg.count_learning_rate * (
+                n_mine - rate)  # fmt: skip
+            if t["reported"][i]:
+                counts.learn_object(n_mine, ground, cfg.count_learning_rate)
             t["existence"][i] = after_hit(t["existence"][i], pd[i], ratio)
             t["last_hit_s"][i] = t_scan
             t["hits"][i] += 1
@@ -210,6 +246,13 @@ class ExtendedTracker:
         self.log.updated += int((owner >= 0).sum())
         missed = seen & ~hit
         t["existence"][missed] = after_miss(t["existence"][missed], pd[missed])
+        if self.background is not None:
+            for i in np.flatnonzero(seen & ~t["moved"]):
+                t["seen_count"][i] += int((owner == i).sum())
+                t["background_count"][i] += self.background.expected(
+                    radar_name, t["x"][i, :2], float(t["heading_rad"][i]),
+                    float(t["x"][i, LENGTH]), float(t["x"][i, WIDTH]),
+                )  # fmt: skip
         left = np.flatnonzero(owner < 0)
         groups = cluster_points(g[left], cfg.cluster_gap_m) if left.size else np.zeros(0, int)
         centres = np.array([g[left[groups == k]].mean(axis=0) for k in np.unique(groups)])
@@ -217,9 +260,14 @@ class ExtendedTracker:
             density = clutter.density(centres) / cfg.clutter_doppler_span_mps
             for k, centre_density in zip(np.unique(groups), density, strict=True):
                 rows = left[groups == k]
+                r0 = float(at_birth(cfg.birth_density / cfg.clutter_doppler_span_mps,
+                                    centre_density))  # fmt: skip
+                ground = float(np.hypot(*(centres[k] - radar.position_m)))
+                odds = r0 / (1.0 - r0) * float(count_ratio(
+                    rows.size, counts.rate_at(ground), cfg.count_shape, counts.clutter_mean))
                 self._open(radar, t_scan, g[rows], g_cov[rows], a[rows], v_var[rows], z[rows, 2],
-                           float(at_birth(cfg.birth_density / cfg.clutter_doppler_span_mps,
-                                          centre_density)))  # fmt: skip
+                           odds / (1.0 + odds))  # fmt: skip
+                counts.learn_clutter(rows.size, cfg.count_learning_rate)
                 self.log.opened += 1
                 self.log.joined_new += rows.size - 1
         clutter.end_scan(centres if left.size else np.zeros((0, 2)))
@@ -231,8 +279,14 @@ class ExtendedTracker:
         if not t["x"].shape[0]:
             return
         dt = np.maximum(t_scan - t["time_s"], 0.0)
-        x, f = self.motion.propagate(t["x"], dt)
-        p = f @ t["p"] @ np.swapaxes(f, -1, -2) + self.motion.process_cov(dt)
+        x = t["x"].copy()
+        x[:, :5], f5 = self.motion.propagate(t["x"][:, :5], dt)
+        f = np.broadcast_to(np.eye(N_STATE), (dt.size, N_STATE, N_STATE)).copy()
+        f[:, :5, :5] = f5
+        q = np.zeros_like(f)
+        q[:, :5, :5] = self.motion.process_cov(dt)
+        q[:, LENGTH, LENGTH] = q[:, WIDTH, WIDTH] = self.config.extent_psd * dt
+        p = f @ t["p"] @ np.swapaxes(f, -1, -2) + q
         t["x"], t["p"] = x, 0.5 * (p + np.swapaxes(p, -1, -2))
         t["time_s"] = np.full(dt.shape, t_scan)
         t["existence"] = survive(t["existence"], dt, self.config.lifetime_s)
@@ -256,7 +310,8 @@ class ExtendedTracker:
         antenna = _antenna_height(radar, cfg)
         rel = xy - np.asarray(radar.position_m)
         ground = np.linalg.norm(rel, axis=1)
-        half = np.arctan2(0.5 * np.hypot(t["length_m"], t["width_m"]), np.maximum(ground, 1e-6))
+        half = np.arctan2(0.5 * np.hypot(t["x"][:, LENGTH], t["x"][:, WIDTH]),
+                          np.maximum(ground, 1e-6))  # fmt: skip
         hidden = np.zeros(xy.shape[0])
         idx = np.flatnonzero(seen)
         for i in idx:
@@ -274,12 +329,30 @@ class ExtendedTracker:
                 hidden[i] = max(hidden[i], share * depth)
         return pd * (1.0 - hidden)
 
-    def _point_costs(self, radar, g, g_cov, a, v_var, vr, offset, spread):  # type: ignore[no-untyped-def]
+    def _faces(self, radar: RadarSpec) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Each track's face offset (T, 2), spread (T, 2, 2) and the offset point's Jacobian.
+
+        The Jacobian (T, 2, N_STATE) of centre plus offset: the identity on the position and
+        the offset's change with length and width (finite steps of ``STEP_M``).
+        """
+        x, heading = self._t["x"], self._t["heading_rad"]
+        where = np.asarray(radar.position_m)
+        offset, spread = face_moments(x[:, :2], heading, x[:, LENGTH], x[:, WIDTH], where)
+        longer, _ = face_moments(x[:, :2], heading, x[:, LENGTH] + STEP_M, x[:, WIDTH], where)
+        wider, _ = face_moments(x[:, :2], heading, x[:, LENGTH], x[:, WIDTH] + STEP_M, where)
+        h_pos = np.zeros((x.shape[0], 2, N_STATE))
+        h_pos[:, 0, 0] = h_pos[:, 1, 1] = 1.0
+        h_pos[:, :, LENGTH] = (longer - offset) / STEP_M
+        h_pos[:, :, WIDTH] = (wider - offset) / STEP_M
+        return offset, spread, h_pos
+
+    def _point_costs(self, radar, g, g_cov, a, v_var, vr, offset, spread, h_pos):  # type: ignore[no-untyped-def]
         """Chi-square plus log-determinant of each detection for each track (T, n); inf out of gate."""
         t, cfg = self._t, self.config
         x, p = t["x"], t["p"]
         e = g[None, :, :] - (x[:, None, :2] + offset[:, None, :])
-        s = p[:, None, :2, :2] + spread[:, None] + g_cov[None] + cfg.shape_model_std_m**2 * np.eye(2)
+        point_cov = h_pos @ p @ np.swapaxes(h_pos, -1, -2)
+        s = point_cov[:, None] + spread[:, None] + g_cov[None] + cfg.shape_model_std_m**2 * np.eye(2)
         det = s[..., 0, 0] * s[..., 1, 1] - s[..., 0, 1] ** 2
         d2 = (s[..., 1, 1] * e[..., 0] ** 2 - 2 * s[..., 0, 1] * e[..., 0] * e[..., 1]
               + s[..., 0, 0] * e[..., 1] ** 2) / det  # fmt: skip
@@ -291,7 +364,7 @@ class ExtendedTracker:
         chi = d2 + dv**2 / sv
         return np.where(chi <= self._gate, chi + np.log(det * sv), np.inf)
 
-    def _update(self, i, radar, g, g_cov, a, v_var, vr, offset, spread, clutter):  # type: ignore[no-untyped-def]
+    def _update(self, i, radar, g, g_cov, a, v_var, vr, offset, spread, h_pos, clutter):  # type: ignore[no-untyped-def]
         """Update track ``i`` with its detections of a scan; return their likelihood ratio."""
         t, cfg = self._t, self.config
         x, p = t["x"][i], t["p"][i]
@@ -299,7 +372,7 @@ class ExtendedTracker:
         lever = g - x[:2]
         arm = np.stack([-lever[:, 1], lever[:, 0]], -1)
         h = np.zeros((3, N_STATE))
-        h[0, 0] = h[1, 1] = 1.0
+        h[:2] = h_pos
         h[2, 2:4] = a.mean(axis=0)
         h[2, 4] = np.einsum("nj,nj->n", a, arm).mean()
         predicted = np.array([x[0] + offset[0], x[1] + offset[1], h[2] @ x])
@@ -316,6 +389,8 @@ class ExtendedTracker:
         ikh = np.eye(N_STATE) - k @ h
         post = ikh @ p @ ikh.T + k @ r @ k.T  # Joseph form
         t["p"][i] = 0.5 * (post + post.T)
+        for axis in (LENGTH, WIDTH):
+            t["x"][i, axis] = min(max(t["x"][i, axis], cfg.min_extent_m), cfg.max_extent_m)
         if n >= 3:
             self._learn_extent(i, g, g_cov, np.asarray(radar.position_m))
         speed = math.hypot(t["x"][i, 2], t["x"][i, 3])
@@ -333,17 +408,19 @@ class ExtendedTracker:
         local = (g - g.mean(axis=0)) @ axes.T
         noise = np.einsum("ai,nij,aj->a", axes, g_cov, axes) / g.shape[0]
         observed = np.maximum(local.var(axis=0, ddof=1) - noise, 0.0)
-        _, model_cov = face_moments(t["x"][i : i + 1, :2], np.array([h]), t["length_m"][i : i + 1],
-                                    t["width_m"][i : i + 1], radar_xy)  # fmt: skip
+        _, model_cov = face_moments(t["x"][i : i + 1, :2], np.array([h]),
+                                    t["x"][i : i + 1, LENGTH], t["x"][i : i + 1, WIDTH],
+                                    radar_xy)  # fmt: skip
         expected = np.einsum("ai,ij,aj->a", axes, model_cov[0], axes)
         rate = cfg.extent_learning_rate
-        for name, k in (("length_m", 0), ("width_m", 1)):
+        for axis, k in ((LENGTH, 0), (WIDTH, 1)):
             # an axis is learnt where a face along it is in view: its reflections' variance
             # is then that of a uniform spread over the face, proportional to its square
-            if expected[k] >= 0.25 * t[name][i] ** 2 / 12.0:
-                square = t[name][i] ** 2 * (1.0 + rate * (observed[k] / expected[k] - 1.0))
-                t[name][i] = min(max(math.sqrt(max(square, 0.0)), cfg.min_extent_m),
-                                 cfg.max_extent_m)  # fmt: skip
+            size = t["x"][i, axis]
+            if expected[k] >= 0.25 * size**2 / 12.0:
+                square = size**2 * (1.0 + rate * (observed[k] / expected[k] - 1.0))
+                t["x"][i, axis] = min(max(math.sqrt(max(square, 0.0)), cfg.min_extent_m),
+                                      cfg.max_extent_m)  # fmt: skip
 
     def _open(self, radar, t_scan, g, g_cov, a, v_var, vr, existence):  # type: ignore[no-untyped-def]
         """Open a track on a group of unexplained detections (lane prior on its motion)."""
@@ -362,7 +439,9 @@ class ExtendedTracker:
                                       np.asarray(radar.position_m))  # fmt: skip
         x = np.zeros(N_STATE)
         x[:2] = centre - offset[0]
+        x[LENGTH], x[WIDTH] = cfg.prior_length_m, cfg.prior_width_m
         p = np.zeros((N_STATE, N_STATE))
+        p[LENGTH, LENGTH], p[WIDTH, WIDTH] = cfg.prior_length_std_m**2, cfg.prior_width_std_m**2
         n = g.shape[0]
         p[:2, :2] = g_cov.sum(axis=0) / n**2 + spread[0] + cfg.shape_model_std_m**2 * np.eye(2)
         if direction is not None:
@@ -385,10 +464,11 @@ class ExtendedTracker:
         new = {
             "track_id": np.array([self._next_id]), "x": x[None], "p": 0.5 * (p + p.T)[None],
             "time_s": np.array([t_scan]), "existence": np.array([existence]),
-            "length_m": np.array([cfg.prior_length_m]), "width_m": np.array([cfg.prior_width_m]),
             "heading_rad": np.array([heading]), "born_s": np.array([t_scan]),
             "last_hit_s": np.array([t_scan]), "hits": np.array([1]),
             "moved": np.array([False]), "reported": np.array([False]),
+            "rate": np.full((1, len(self._radars)), np.nan), "seen_count": np.zeros(1),
+            "background_count": np.zeros(1),
         }  # fmt: skip
         self._next_id += 1
         for name in _TRACK_FIELDS:
@@ -399,7 +479,9 @@ class ExtendedTracker:
         t, cfg = self._t, self.config
         if not t["x"].shape[0]:
             return
-        t["reported"] |= t["existence"] >= cfg.report_existence
+        t["reported"] |= (t["existence"] >= cfg.report_existence) & (
+            _speed_variance(t["x"], t["p"]) <= cfg.report_speed_std_mps**2
+        )
         pos_std = np.sqrt(t["p"][:, 0, 0] + t["p"][:, 1, 1])
         keep = (t["existence"] >= cfg.drop_existence) & (pos_std <= cfg.lost_position_std_m)
         keep &= ~self._duplicates()
@@ -420,7 +502,8 @@ class ExtendedTracker:
         out = np.zeros(n, bool)
         if n < 2:
             return out
-        reach = float(t["length_m"].max())
+        length, width = t["x"][:, LENGTH], t["x"][:, WIDTH]
+        reach = float(length.max())
         for i, j in cKDTree(x[:, :2]).query_pairs(reach, output_type="ndarray").tolist():
             older, younger = (i, j) if t["born_s"][i] <= t["born_s"][j] else (j, i)
             if out[older] or out[younger]:
@@ -429,9 +512,9 @@ class ExtendedTracker:
             axis = np.array([math.cos(h), math.sin(h)])
             d = x[younger, :2] - x[older, :2]
             along, across = d @ axis, -d[0] * axis[1] + d[1] * axis[0]
-            half_o, half_y = 0.5 * t["length_m"][older], 0.5 * t["length_m"][younger]
+            half_o, half_y = 0.5 * length[older], 0.5 * length[younger]
             if (abs(along) >= half_o + half_y
-                    or abs(across) >= 0.5 * (t["width_m"][older] + t["width_m"][younger])):  # fmt: skip
+                    or abs(across) >= 0.5 * (width[older] + width[younger])):  # fmt: skip
                 continue
             dv = x[younger, 2:4] - x[older, 2:4]
             turn = (abs(x[older, 4]) * 2.0 * max(half_o, half_y)) ** 2 + cfg.body_doppler_std_mps**2
@@ -441,11 +524,24 @@ class ExtendedTracker:
             out[younger] = True
         return out
 
+    def _is_background(self, rows: np.ndarray) -> np.ndarray:
+        """Tracks that never moved and gave no more detections than the background in their box.
+
+        A one-sided Poisson test: an object stands there once its detections exceed the
+        background's expected count by ``background_sigmas`` of it.
+        """
+        t, cfg = self._t, self.config
+        if self.background is None:
+            return np.zeros(rows.size, bool)
+        bg = t["background_count"][rows]
+        excess = t["seen_count"][rows] - bg
+        return (~t["moved"][rows]) & (bg > 0) & (excess <= cfg.background_sigmas * np.sqrt(bg))
+
     # -- output ---------------------------------------------------------------------------
     def columns(self, time_s: float) -> dict[str, np.ndarray]:
         """The reported tracks at ``time_s`` (after the scan): the columns of the track table."""
         t, cfg = self._t, self.config
-        rows = np.flatnonzero(t["reported"] & (t["existence"] >= cfg.report_existence))
+        rows = np.flatnonzero(t["reported"] & (t["existence"] >= cfg.keep_existence))
         x, p = t["x"][rows], t["p"][rows]
         speed = np.hypot(x[:, 2], x[:, 3])
         u = _unit(x[:, 2:4])
@@ -453,6 +549,7 @@ class ExtendedTracker:
             speed < cfg.stopped_speed_mps, _STOPPED,
             np.where(time_s - t["last_hit_s"][rows] > COASTING_S, _COASTING, _CONFIRMED),
         )  # fmt: skip
+        status = np.where(self._is_background(rows), _STATIC, status)
         return {
             "track_id": t["track_id"][rows], "time_s": np.full(rows.size, time_s),
             "east_m": x[:, 0], "north_m": x[:, 1], "speed_mps": speed,
@@ -461,19 +558,56 @@ class ExtendedTracker:
             "moved": t["moved"][rows],
             "position_std_m": np.sqrt(p[:, 0, 0] + p[:, 1, 1]),
             "speed_std_mps": np.sqrt(np.einsum("ni,nij,nj->n", u, p[:, 2:4, 2:4], u)),
-            "existence": t["existence"][rows], "length_m": t["length_m"][rows],
-            "width_m": t["width_m"][rows], "heading_rad": t["heading_rad"][rows],
+            "existence": t["existence"][rows], "length_m": x[:, LENGTH], "width_m": x[:, WIDTH],
+            "heading_rad": t["heading_rad"][rows],
         }  # fmt: skip
 
 
 EXTRA_COLUMNS = ("existence", "length_m", "width_m", "heading_rad")
 
 
-def _empty_tracks() -> dict[str, np.ndarray]:
+@dataclass
+class _Counts:
+    """A radar's detections per group: of a reported object by range (mean), of clutter (mean).
+
+    A body's count falls with range (its echo power) and varies with its aspect; the mean per
+    ``RANGE_BIN_M`` of ground range is learnt from the reported tracks' hits.
+    """
+
+    object_rate: FloatArray = field(default_factory=lambda: np.ones(RANGE_BINS))
+    clutter_mean: float = 1.1
+
+    def rate_at(self, ground_m: float) -> float:
+        """Mean detections of an object at this ground range [m]."""
+        return float(self.object_rate[min(int(ground_m / RANGE_BIN_M), RANGE_BINS - 1)])
+
+    def learn_object(self, n: int, ground_m: float, rate: float) -> None:
+        k = min(int(ground_m / RANGE_BIN_M), RANGE_BINS - 1)
+        self.object_rate[k] += rate * 0.1 * (n - self.object_rate[k])
+
+    def learn_clutter(self, n: int, rate: float) -> None:
+        self.clutter_mean = max(self.clutter_mean + rate * 0.1 * (n - self.clutter_mean), 1.01)
+
+
+RANGE_BIN_M = 10.0
+RANGE_BINS = 40
+
+
+def _empty_tracks(n_radars: int) -> dict[str, np.ndarray]:
     kinds = {"track_id": np.int64, "hits": np.int64, "moved": bool, "reported": bool}
     out = {name: np.zeros(0, kinds.get(name, float)) for name in _TRACK_FIELDS}
+    out["rate"] = np.zeros((0, n_radars))
     out["x"], out["p"] = np.zeros((0, N_STATE)), np.zeros((0, N_STATE, N_STATE))
     return out
+
+
+def _speed_variance(x: FloatArray, p: FloatArray) -> FloatArray:
+    """Variance of the speed [m^2/s^2]: along the velocity, or its worst axis when slow."""
+    v_cov = p[:, 2:4, 2:4]
+    u = _unit(x[:, 2:4])
+    along = np.einsum("ni,nij,nj->n", u, v_cov, u)
+    worst = np.linalg.eigvalsh(v_cov)[:, -1] if len(x) else np.zeros(0)
+    return np.where(np.hypot(x[:, 2], x[:, 3]) > 1.0, along, worst)
 
 
 def _unit(v: FloatArray) -> FloatArray:
@@ -520,12 +654,13 @@ def track_scene_extended(
     detections: pd.DataFrame,
     config: ExtendedTrackerConfig | None = None,
     on_scan: Callable[[int, int], None] | None = None,
+    background: BackgroundMap | None = None,
 ) -> tuple[pd.DataFrame, ExtendedLog]:
     """Track a detection table scan by scan; return the reported tracks of every scan and the log.
 
     Columns as :func:`.tracker.track_scene`'s (``status`` named) and :data:`EXTRA_COLUMNS`.
     """
-    tracker = ExtendedTracker(site, config)
+    tracker = ExtendedTracker(site, config, background)
     names, radar, stamps, starts, z, _ = scan_arrays(
         detections, {r.name: r.latency_s for r in site.radars}
     )

@@ -1,0 +1,124 @@
+"""The background of an empty site: where each radar sees standing reflectors when nothing is there.
+
+Learnt at commissioning from a recording made while the crossing is known to be clear (no road
+user in the zone): the stationary detections (radial speed within ``static_speed_mps``) of
+each radar are counted per ground cell of ``cell_m`` and divided by that radar's scans, so
+each cell holds the mean number of detections a scan gives there (a barrier post, a sign, the
+rails). The extended tracker compares a standing track's detections with what the background
+alone would give inside its box: a track that never moved and gives no more than that is the
+background (reported ``static``); a stalled car or a fallen load over the rails gives more
+and is an obstacle. Saved as a NumPy ``.npz`` beside the site file.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from ..._typing import FloatArray
+from ..site.model import Site
+
+
+@dataclass(frozen=True, eq=False)
+class BackgroundMap:
+    """Mean stationary detections per scan and ground cell, per radar (module docstring)."""
+
+    radars: tuple[str, ...]
+    origin_m: tuple[float, float]  # east, north of cell (0, 0)'s corner [m]
+    cell_m: float
+    rates: FloatArray  # (radars, east cells, north cells) [detections per scan]
+    scans: np.ndarray  # (radars,) scans learnt from
+
+    def expected(self, radar: str, centre: FloatArray, heading_rad: float, length_m: float,
+                 width_m: float) -> float:  # fmt: skip
+        """Detections per scan the background gives inside a box (cells whose centre is in it)."""
+        if radar not in self.radars:
+            return 0.0
+        k = self.radars.index(radar)
+        reach = 0.5 * float(np.hypot(length_m, width_m)) + self.cell_m
+        lo = np.floor((np.asarray(centre) - reach - self.origin_m) / self.cell_m).astype(int)
+        hi = np.ceil((np.asarray(centre) + reach - self.origin_m) / self.cell_m).astype(int)
+        lo = np.maximum(lo, 0)
+        hi = np.minimum(hi, self.rates.shape[1:])
+        if np.any(hi <= lo):
+            return 0.0
+        block = self.rates[k, lo[0] : hi[0], lo[1] : hi[1]]
+        ex = self.origin_m[0] + (np.arange(lo[0], hi[0]) + 0.5) * self.cell_m - centre[0]
+        ny = self.origin_m[1] + (np.arange(lo[1], hi[1]) + 0.5) * self.cell_m - centre[1]
+        de, dn = np.meshgrid(ex, ny, indexing="ij")
+        c, s = np.cos(heading_rad), np.sin(heading_rad)
+        along, across = de * c + dn * s, -de * s + dn * c
+        # the box grown by half a cell: a reflector's detections scatter about its cell
+        inside = (np.abs(along) <= 0.5 * length_m + 0.5 * self.cell_m) & (
+            np.abs(across) <= 0.5 * width_m + 0.5 * self.cell_m
+        )
+        return float(block[inside].sum())
+
+    def save(self, path: str | Path) -> None:
+        """Write the map as ``.npz``."""
+        np.savez_compressed(
+            Path(path), radars=np.array(self.radars), origin_m=np.array(self.origin_m),
+            cell_m=np.array(self.cell_m), rates=self.rates, scans=self.scans,
+        )  # fmt: skip
+
+    @classmethod
+    def load(cls, path: str | Path) -> BackgroundMap:
+        """Read a map written by :meth:`save`; a file of another layout is an error naming it."""
+        try:
+            with np.load(Path(path), allow_pickle=False) as data:
+                return cls(
+                    tuple(str(r) for r in data["radars"]),
+                    (float(data["origin_m"][0]), float(data["origin_m"][1])),
+                    float(data["cell_m"]), np.asarray(data["rates"], float),
+                    np.asarray(data["scans"], np.int64),
+                )  # fmt: skip
+        except (KeyError, ValueError, OSError) as exc:
+            raise ValueError(f"{path}: not a background map ({exc})") from None
+
+
+def learn_background(
+    site: Site,
+    detections: pd.DataFrame,
+    *,
+    cell_m: float = 1.0,
+    static_speed_mps: float = 0.5,
+) -> BackgroundMap:
+    """Learn the background from detections of the empty site (columns as ``adaptrack track``)."""
+    if not (np.isfinite(cell_m) and cell_m > 0):
+        raise ValueError(f"cell_m must be finite and > 0; got {cell_m}")
+    radars = {r.name: r for r in site.radars}
+    unknown = sorted(set(detections["radar"].astype(str)) - set(radars))
+    if unknown:
+        raise ValueError(f"detections of radars the site does not have: {unknown}")
+    reach = max(r.max_range_m for r in site.radars)
+    centre = np.array([np.mean([r.position_m[0] for r in site.radars]),
+                       np.mean([r.position_m[1] for r in site.radars])])  # fmt: skip
+    origin = centre - reach
+    n = int(np.ceil(2 * reach / cell_m))
+    rates = np.zeros((len(radars), n, n))
+    scans = np.zeros(len(radars), np.int64)
+    for k, (name, radar) in enumerate(radars.items()):
+        mine = detections[detections["radar"].astype(str) == name]
+        t = mine["time_s"].to_numpy(float)
+        # scans with no detection leave no row: count them from the scan period
+        scans[k] = round((t.max() - t.min()) / radar.period_s) + 1 if t.size else 0
+        still = mine[np.abs(mine["radial_speed_mps"].to_numpy(float)) <= static_speed_mps]
+        rng = still["range_m"].to_numpy(float)
+        az = still["azimuth_rad"].to_numpy(float)
+        rho = np.sqrt(np.maximum(rng**2 - radar.height_m**2, 0.0))
+        east = radar.position_m[0] + rho * np.sin(az)
+        north = radar.position_m[1] + rho * np.cos(az)
+        i = np.floor((east - origin[0]) / cell_m).astype(int)
+        j = np.floor((north - origin[1]) / cell_m).astype(int)
+        ok = (i >= 0) & (i < n) & (j >= 0) & (j < n)
+        np.add.at(rates[k], (i[ok], j[ok]), 1.0)
+        if scans[k]:
+            rates[k] /= scans[k]
+    return BackgroundMap(tuple(radars), (float(origin[0]), float(origin[1])), float(cell_m),
+                         rates, scans)  # fmt: skip
+
+
+__all__ = ["BackgroundMap", "learn_background"]
