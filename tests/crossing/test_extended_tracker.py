@@ -75,7 +75,7 @@ def motion(tmp_path_factory):
 def test_every_road_user_meets_the_requirement_and_nothing_else_is_reported(motion, kind):
     site = load_site("lx_default")
     rec = simulate_replay(site, motion, seed=7, radar=FaceRadar.of_kind(kind))
-    tracks, log = track_scene_extended(site, rec.detections)
+    tracks, events, log = track_scene_extended(site, rec.detections)
     assert log.total == len(rec.detections)  # every detection accounted for
     score = score_scene(rec.truth, tracks, site.zone_m)
     users = score.users.set_index("object_id")

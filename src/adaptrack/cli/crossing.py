@@ -20,8 +20,9 @@ from ..crossing.measurements_io import (
     read_scene_detections,
     read_warnings,
 )
+from ..crossing.scene.background import BackgroundMap
 from ..crossing.scene.extended_tracker import track_scene_extended
-from ..crossing.scene.tracker import EVENT_COLUMNS, load_scene_config, track_scene
+from ..crossing.scene.tracker import load_scene_config, track_scene
 from ..crossing.simulation.faces import RADAR_KINDS, FaceRadar, face_returns_of
 from ..crossing.simulation.motion import MotionTransform, read_motion, simulate_replay
 from ..crossing.simulation.object_list import object_list_ids
@@ -571,6 +572,18 @@ def track(
         help="Scene tracker: 'corridor' (along the site's corridors, compiled) or 'extended' "
         "(free 2-D motion, box extents, existence probabilities; NumPy).",
     ),
+    background: Path | None = typer.Option(
+        None,
+        "--background",
+        help="The empty site's background map of 'adaptrack site background' (extended "
+        "tracker): standing tracks no busier than it are reported static.",
+    ),
+    trains: Path | None = typer.Option(
+        None,
+        "--trains",
+        help="When the controller has a train due (start_s, end_s; extended tracker): the "
+        "train on the rails does not make the crossing 'not clear'.",
+    ),
 ) -> None:
     """Track radar detections at a site; write the estimates.
 
@@ -598,8 +611,10 @@ def track(
         if ids != "hint" or warnings is not None or config is not None:
             _fail("--tracker extended takes raw detections only (no --ids truth, --warnings "
                   "or --config)")  # fmt: skip
-        _track_extended_file(measurements, st, out, events)
+        _track_extended_file(measurements, st, out, events, background, trains)
         return
+    if background is not None or trains is not None:
+        _fail("--background and --trains apply to --tracker extended")
     if ids == "hint":
         _track_scene_file(measurements, st, out, events, warnings, config)
         return
@@ -621,24 +636,35 @@ def track(
     Console().print(f"wrote {out} ({len(objects)} objects)")
 
 
-def _track_extended_file(measurements: Path, st: Site, out: Path, events: Path | None) -> None:
-    """Track a detection file with the extended-object tracker; write tracks and (no) events."""
+def _track_extended_file(
+    measurements: Path,
+    st: Site,
+    out: Path,
+    events: Path | None,
+    background: Path | None,
+    trains: Path | None,
+) -> None:
+    """Track a detection file with the extended-object tracker; write tracks and events."""
     try:
         det = read_scene_detections(measurements, st)
+        bg = BackgroundMap.load(background) if background is not None else None
+        intervals = read_warnings(trains) if trains is not None else None
     except (ValueError, OSError) as exc:
         _fail(str(exc))
     with progress(Console(), "tracking (scans)") as bar:
         try:
-            tracks, log = track_scene_extended(
-                st, det, on_scan=lambda done, total: bar.set(done, total)
-            )
+            tracks, events_frame, log = track_scene_extended(
+                st, det, on_scan=lambda done, total: bar.set(done, total), background=bg,
+                train_intervals=intervals,
+            )  # fmt: skip
         except ValueError as exc:
             _fail(f"{measurements}: {exc}")
-    write_table_atomic(tracks.astype({"status": str}), out)
+    write_table_atomic(tracks.astype({"status": str, "class": str}), out)
     ev_path = events or out.with_name(out.stem + ".events.csv")
-    write_table_atomic(pd.DataFrame(columns=EVENT_COLUMNS), ev_path)
+    write_table_atomic(events_frame, ev_path)
     Console().print(
-        f"wrote {out} ({tracks['track_id'].nunique()} tracks) and {ev_path}; detections: "
+        f"wrote {out} ({tracks['track_id'].nunique()} tracks) and {ev_path} "
+        f"({len(events_frame)} events); detections: "
         f"{log.updated} updated tracks, {log.opened + log.joined_new} opened tracks, "
         f"{log.rejected_outside_view} rejected (outside every field of view), {log.total} of "
         f"{len(det)}"

@@ -1,4 +1,4 @@
-"""The ``adaptrack site`` commands: list the built-in sites, write a template, check a file."""
+"""The ``adaptrack site`` commands: list, template, check, import a map, learn the background."""
 
 from __future__ import annotations
 
@@ -8,6 +8,8 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
+from ..crossing.measurements_io import read_scene_detections
+from ..crossing.scene.background import learn_background
 from ..crossing.site.authoring import coverage_svg, coverage_table, site_map_svg, site_template
 from ..crossing.site.lanelet_map import project_latlon, read_lanelet_map
 from ..crossing.site.map_import import site_from_map, site_toml
@@ -175,4 +177,36 @@ def site_import(
         f"wrote {out}: roads {roads}; {len(mapping.get('connections', []))} turns from the map, "
         f"{len(mapping['radars'])} radars; next: adaptrack site check {out}\n"
         f"replay motion of the map's frame with: --origin {point[0]:.2f},{point[1]:.2f}"
+    )
+
+
+@site_app.command("background")
+def site_background(
+    detections: Path = typer.Argument(
+        ..., help="Detections of the site while it is known to be clear (CSV or Parquet)."
+    ),
+    site: str = typer.Option(..., "--site", help="Built-in site name or a .toml."),
+    out: Path = typer.Option(..., "--out", help="The background map to write (.npz)."),
+    cell: float = typer.Option(0.5, "--cell", help="Ground cell size [m]."),
+    min_rate: float = typer.Option(
+        0.05, "--min-rate", help="A cell is a reflector at this many detections per scan."
+    ),
+    static_speed: float = typer.Option(
+        0.5, "--static-speed", help="Detections this slow (|radial speed|) are stationary [m/s]."
+    ),
+) -> None:
+    """Learn the empty site's background (standing reflectors) for `track --background`."""
+    try:
+        st = load_site(site)
+        det = read_scene_detections(detections, st)
+        background = learn_background(st, det, cell_m=cell, static_speed_mps=static_speed,
+                                      min_rate=min_rate)
+    except (ValueError, OSError) as exc:
+        fail(str(exc))
+    out.parent.mkdir(parents=True, exist_ok=True)
+    background.save(out)
+    busy = int((background.rates > 0).sum())
+    Console().print(
+        f"wrote {out}: {busy} cells of {cell:g} m with a standing reflector (>= {min_rate:g} detections "
+        f"per scan) over {int(background.scans.sum())} scans of {len(background.radars)} radars"
     )

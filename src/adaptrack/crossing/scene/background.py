@@ -4,10 +4,14 @@ Learnt at commissioning from a recording made while the crossing is known to be 
 user in the zone): the stationary detections (radial speed within ``static_speed_mps``) of
 each radar are counted per ground cell of ``cell_m`` and divided by that radar's scans, so
 each cell holds the mean number of detections a scan gives there (a barrier post, a sign, the
-rails). The extended tracker compares a standing track's detections with what the background
-alone would give inside its box: a track that never moved and gives no more than that is the
-background (reported ``static``); a stalled car or a fallen load over the rails gives more
-and is an obstacle. Saved as a NumPy ``.npz`` beside the site file.
+rails); a cell seen in fewer than ``min_rate`` of the scans, with no such cell beside it,
+holds no reflector (a false alarm falls in a given cell in about one scan in 10^5). The extended tracker takes a stationary
+detection for the background's where the background there is likelier than every track
+(:meth:`BackgroundMap.density`), so no track grows on a post, while the detections of a
+stalled car or a fallen load beside it, off the reflector's cells, make a track of their own.
+An object standing exactly on a reflector's cell, seen as one point, is not told from it
+(a test of the cell's detection count against its rate would). Saved as a NumPy ``.npz``
+beside the site file.
 """
 
 from __future__ import annotations
@@ -17,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from scipy.ndimage import maximum_filter
 
 from ..._typing import FloatArray
 from ..site.model import Site
@@ -31,37 +36,25 @@ class BackgroundMap:
     cell_m: float
     rates: FloatArray  # (radars, east cells, north cells) [detections per scan]
     scans: np.ndarray  # (radars,) scans learnt from
+    static_speed_mps: float = 0.5  # a detection this slow (|radial speed|) can be background
 
-    def expected(self, radar: str, centre: FloatArray, heading_rad: float, length_m: float,
-                 width_m: float) -> float:  # fmt: skip
-        """Detections per scan the background gives inside a box (cells whose centre is in it)."""
+    def density(self, radar: str, xy: FloatArray) -> FloatArray:
+        """The background's stationary detections per m^2 and scan at ground points (N, 2)."""
+        pts = np.asarray(xy, float).reshape(-1, 2)
         if radar not in self.radars:
-            return 0.0
-        k = self.radars.index(radar)
-        reach = 0.5 * float(np.hypot(length_m, width_m)) + self.cell_m
-        lo = np.floor((np.asarray(centre) - reach - self.origin_m) / self.cell_m).astype(int)
-        hi = np.ceil((np.asarray(centre) + reach - self.origin_m) / self.cell_m).astype(int)
-        lo = np.maximum(lo, 0)
-        hi = np.minimum(hi, self.rates.shape[1:])
-        if np.any(hi <= lo):
-            return 0.0
-        block = self.rates[k, lo[0] : hi[0], lo[1] : hi[1]]
-        ex = self.origin_m[0] + (np.arange(lo[0], hi[0]) + 0.5) * self.cell_m - centre[0]
-        ny = self.origin_m[1] + (np.arange(lo[1], hi[1]) + 0.5) * self.cell_m - centre[1]
-        de, dn = np.meshgrid(ex, ny, indexing="ij")
-        c, s = np.cos(heading_rad), np.sin(heading_rad)
-        along, across = de * c + dn * s, -de * s + dn * c
-        # the box grown by half a cell: a reflector's detections scatter about its cell
-        inside = (np.abs(along) <= 0.5 * length_m + 0.5 * self.cell_m) & (
-            np.abs(across) <= 0.5 * width_m + 0.5 * self.cell_m
-        )
-        return float(block[inside].sum())
+            return np.zeros(pts.shape[0])
+        ij = np.floor((pts - self.origin_m) / self.cell_m).astype(int)
+        ok = (ij >= 0).all(axis=1) & (ij < self.rates.shape[1:]).all(axis=1)
+        out = np.zeros(pts.shape[0])
+        out[ok] = self.rates[self.radars.index(radar), ij[ok, 0], ij[ok, 1]] / self.cell_m**2
+        return out
 
     def save(self, path: str | Path) -> None:
         """Write the map as ``.npz``."""
         np.savez_compressed(
             Path(path), radars=np.array(self.radars), origin_m=np.array(self.origin_m),
             cell_m=np.array(self.cell_m), rates=self.rates, scans=self.scans,
+            static_speed_mps=np.array(self.static_speed_mps),
         )  # fmt: skip
 
     @classmethod
@@ -73,7 +66,7 @@ class BackgroundMap:
                     tuple(str(r) for r in data["radars"]),
                     (float(data["origin_m"][0]), float(data["origin_m"][1])),
                     float(data["cell_m"]), np.asarray(data["rates"], float),
-                    np.asarray(data["scans"], np.int64),
+                    np.asarray(data["scans"], np.int64), float(data["static_speed_mps"]),
                 )  # fmt: skip
         except (KeyError, ValueError, OSError) as exc:
             raise ValueError(f"{path}: not a background map ({exc})") from None
@@ -83,10 +76,16 @@ def learn_background(
     site: Site,
     detections: pd.DataFrame,
     *,
-    cell_m: float = 1.0,
+    cell_m: float = 0.5,
     static_speed_mps: float = 0.5,
+    min_rate: float = 0.05,
 ) -> BackgroundMap:
-    """Learn the background from detections of the empty site (columns as ``adaptrack track``)."""
+    """Learn the background from detections of the empty site (columns as ``adaptrack track``).
+
+    A cell is a reflector when it gives a stationary detection in at least ``min_rate`` of
+    the scans (a false alarm falls in a given cell in about one scan in 10^5); the others are
+    zero.
+    """
     if not (np.isfinite(cell_m) and cell_m > 0):
         raise ValueError(f"cell_m must be finite and > 0; got {cell_m}")
     radars = {r.name: r for r in site.radars}
@@ -117,8 +116,10 @@ def learn_background(
         np.add.at(rates[k], (i[ok], j[ok]), 1.0)
         if scans[k]:
             rates[k] /= scans[k]
+        # a reflector's cells and their neighbours (its scatter's tails) are kept
+        rates[k][~maximum_filter(rates[k] >= min_rate, size=3)] = 0.0
     return BackgroundMap(tuple(radars), (float(origin[0]), float(origin[1])), float(cell_m),
-                         rates, scans)  # fmt: skip
+                         rates, scans, float(static_speed_mps))  # fmt: skip
 
 
 __all__ = ["BackgroundMap", "learn_background"]

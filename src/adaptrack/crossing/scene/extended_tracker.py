@@ -57,14 +57,17 @@ from ..site.model import Site
 from ..site.sensor import RadarSpec
 from .background import BackgroundMap
 from .box_view import face_moments
-from .tracker import ROW_COLUMNS, STATUS_NAMES, scan_arrays
+from .occupancy import ClearanceMonitor
+from .road_user_class import class_names, class_probabilities
+from .tracker import EVENT_COLUMNS, ROW_COLUMNS, STATUS_NAMES, scan_arrays
 
 N_STATE = 7  # x, y, vx, vy, omega, length, width
 LENGTH, WIDTH = 5, 6
 STEP_M = 0.01  # finite step of the face offsets in length and width [m]
+BACKGROUND = -2  # owner of a detection the background explains
 COASTING_S = 0.2  # a reported track without a detection for longer is coasting [s]
-_CONFIRMED, _COASTING, _STOPPED, _STATIC = (
-    STATUS_NAMES.index(s) for s in ("confirmed", "coasting", "stopped", "static")
+_CONFIRMED, _COASTING, _STOPPED = (
+    STATUS_NAMES.index(s) for s in ("confirmed", "coasting", "stopped")
 )
 
 
@@ -107,7 +110,6 @@ class ExtendedTrackerConfig:
     body_height_m: float = 1.5  # an occluder's height [m] (the antenna sees over it)
     antenna_height_m: float | None = None  # above the road (None: the radar's height_m + 0.5)
     same_body_sigmas: float = 3.0
-    background_sigmas: float = 3.0  # a standing track out-counting the background this much
     stopped_speed_mps: float = 0.5
     moved_speed_mps: float = 1.0
 
@@ -139,17 +141,18 @@ class ExtendedLog:
     opened: int = 0
     joined_new: int = 0
     rejected_outside_view: int = 0
+    background: int = 0  # stationary, on a reflector of the empty site's background map
 
     @property
     def total(self) -> int:
         """Detections accounted for."""
-        return self.updated + self.opened + self.joined_new + self.rejected_outside_view
+        return (self.updated + self.opened + self.joined_new + self.rejected_outside_view
+                + self.background)  # fmt: skip
 
 
 _TRACK_FIELDS = (
     "track_id", "x", "p", "time_s", "existence", "heading_rad",
-    "born_s", "last_hit_s", "hits", "moved", "reported", "rate", "seen_count",
-    "background_count",
+    "born_s", "last_hit_s", "hits", "moved", "reported", "rate", "top_speed_mps",
 )  # fmt: skip
 
 
@@ -161,9 +164,11 @@ class ExtendedTracker:
         site: Site,
         config: ExtendedTrackerConfig | None = None,
         background: BackgroundMap | None = None,
+        train_intervals: FloatArray | None = None,
     ) -> None:
         self.site = site
         self.background = background
+        self.clearance = ClearanceMonitor(site, train_intervals)
         self.config = cfg = config or ExtendedTrackerConfig()
         self.motion = CoordinatedTurn(accel_psd=cfg.accel_psd, turn_psd=cfg.turn_psd)
         self.log = ExtendedLog()
@@ -179,6 +184,7 @@ class ExtendedTracker:
         self._radar_index = {name: k for k, name in enumerate(self._radars)}
         self._counts = {name: _Counts() for name in self._radars}
         self._t = _empty_tracks(len(self._radars))
+        self.last_columns = self.columns(-np.inf)  # the reported tracks after the last scan
         lanes = [(c.path.xy, c.path.heading) for c in site.corridors]
         self._lane_xy = np.concatenate([xy for xy, _ in lanes]) if lanes else np.zeros((0, 2))
         # corridor headings are azimuths (clockwise from north): as a direction (east, north)
@@ -211,6 +217,7 @@ class ExtendedTracker:
         n_t = t["x"].shape[0]
         seen = self._in_view(radar)
         owner = np.full(z.shape[0], -1)
+        cost = np.zeros((n_t, z.shape[0]))
         if n_t and z.shape[0]:
             offset, spread, h_pos = self._faces(radar)
             cost = self._point_costs(radar, g, g_cov, a, v_var, z[:, 2], offset, spread, h_pos)
@@ -218,6 +225,9 @@ class ExtendedTracker:
             best = np.argmin(cost, axis=0)
             ok = np.isfinite(cost[best, np.arange(z.shape[0])])
             owner[ok] = best[ok]
+        if self.background is not None and z.shape[0]:
+            owner[self._background_explains(radar_name, g, z[:, 2], owner, cost)] = BACKGROUND
+
         else:
             offset = spread = h_pos = None
         hit = np.zeros(n_t, bool)
@@ -244,16 +254,10 @@ class ExtendedTracker:
             t["hits"][i] += 1
             hit[i] = True
         self.log.updated += int((owner >= 0).sum())
+        self.log.background += int((owner == BACKGROUND).sum())
         missed = seen & ~hit
         t["existence"][missed] = after_miss(t["existence"][missed], pd[missed])
-        if self.background is not None:
-            for i in np.flatnonzero(seen & ~t["moved"]):
-                t["seen_count"][i] += int((owner == i).sum())
-                t["background_count"][i] += self.background.expected(
-                    radar_name, t["x"][i, :2], float(t["heading_rad"][i]),
-                    float(t["x"][i, LENGTH]), float(t["x"][i, WIDTH]),
-                )  # fmt: skip
-        left = np.flatnonzero(owner < 0)
+        left = np.flatnonzero(owner == -1)
         groups = cluster_points(g[left], cfg.cluster_gap_m) if left.size else np.zeros(0, int)
         centres = np.array([g[left[groups == k]].mean(axis=0) for k in np.unique(groups)])
         if left.size:
@@ -272,6 +276,17 @@ class ExtendedTracker:
                 self.log.joined_new += rows.size - 1
         clutter.end_scan(centres if left.size else np.zeros((0, 2)))
         self._prune()
+        self.last_columns = self.columns(t_scan)
+        # occupancy needs an object's presence and place, not its speed: every track as
+        # likely as a reported one, reported or not yet
+        t = self._t
+        present = (t["existence"] >= cfg.report_existence) | (
+            t["reported"] & (t["existence"] >= cfg.keep_existence)
+        )
+        rows = np.flatnonzero(present)
+        self.clearance.update(t_scan, t["track_id"][rows], t["x"][rows, :2],
+                              t["heading_rad"][rows], t["x"][rows, LENGTH],
+                              t["x"][rows, WIDTH])  # fmt: skip
 
     def _predict(self, t_scan: float) -> None:
         """Predict every track to the scan time (motion and survival)."""
@@ -394,7 +409,10 @@ class ExtendedTracker:
         if n >= 3:
             self._learn_extent(i, g, g_cov, np.asarray(radar.position_m))
         speed = math.hypot(t["x"][i, 2], t["x"][i, 3])
-        t["moved"][i] |= speed > cfg.moved_speed_mps and t["p"][i, 2, 2] + t["p"][i, 3, 3] < 1.0
+        known = t["p"][i, 2, 2] + t["p"][i, 3, 3] < 1.0
+        t["moved"][i] |= speed > cfg.moved_speed_mps and known
+        if known and t["reported"][i]:
+            t["top_speed_mps"][i] = max(t["top_speed_mps"][i], speed)
         density = clutter.density(zbar[None, :2])[0] / cfg.clutter_doppler_span_mps
         g_z = math.exp(-0.5 * innov @ s_inv @ innov) / math.sqrt((2 * math.pi) ** 3
                                                                  * np.linalg.det(s))  # fmt: skip
@@ -433,15 +451,16 @@ class ExtendedTracker:
                 direction = self._lane_dir[k]
         heading = math.atan2(direction[1], direction[0]) if direction is not None else math.atan2(
             *(np.asarray(radar.position_m) - centre)[::-1])  # fmt: skip
-        offset, spread = face_moments(centre[None], np.array([heading]),
-                                      np.array([cfg.prior_length_m]),
-                                      np.array([cfg.prior_width_m]),
+        length, width = cfg.prior_length_m, cfg.prior_width_m
+        length_sd, width_sd = cfg.prior_length_std_m, cfg.prior_width_std_m
+        offset, spread = face_moments(centre[None], np.array([heading]), np.array([length]),
+                                      np.array([width]),
                                       np.asarray(radar.position_m))  # fmt: skip
         x = np.zeros(N_STATE)
         x[:2] = centre - offset[0]
-        x[LENGTH], x[WIDTH] = cfg.prior_length_m, cfg.prior_width_m
+        x[LENGTH], x[WIDTH] = length, width
         p = np.zeros((N_STATE, N_STATE))
-        p[LENGTH, LENGTH], p[WIDTH, WIDTH] = cfg.prior_length_std_m**2, cfg.prior_width_std_m**2
+        p[LENGTH, LENGTH], p[WIDTH, WIDTH] = length_sd**2, width_sd**2
         n = g.shape[0]
         p[:2, :2] = g_cov.sum(axis=0) / n**2 + spread[0] + cfg.shape_model_std_m**2 * np.eye(2)
         if direction is not None:
@@ -467,8 +486,7 @@ class ExtendedTracker:
             "heading_rad": np.array([heading]), "born_s": np.array([t_scan]),
             "last_hit_s": np.array([t_scan]), "hits": np.array([1]),
             "moved": np.array([False]), "reported": np.array([False]),
-            "rate": np.full((1, len(self._radars)), np.nan), "seen_count": np.zeros(1),
-            "background_count": np.zeros(1),
+            "rate": np.full((1, len(self._radars)), np.nan), "top_speed_mps": np.zeros(1),
         }  # fmt: skip
         self._next_id += 1
         for name in _TRACK_FIELDS:
@@ -524,18 +542,22 @@ class ExtendedTracker:
             out[younger] = True
         return out
 
-    def _is_background(self, rows: np.ndarray) -> np.ndarray:
-        """Tracks that never moved and gave no more detections than the background in their box.
+    def _background_explains(self, radar_name, g, vr, owner, cost):  # type: ignore[no-untyped-def]
+        """Stationary detections on a background reflector likelier its than their track's.
 
-        A one-sided Poisson test: an object stands there once its detections exceed the
-        background's expected count by ``background_sigmas`` of it.
+        The background's density (stationary detections per m^2 and scan, spread evenly over
+        +- its static speed) against the best track's density of the detection.
         """
-        t, cfg = self._t, self.config
-        if self.background is None:
-            return np.zeros(rows.size, bool)
-        bg = t["background_count"][rows]
-        excess = t["seen_count"][rows] - bg
-        return (~t["moved"][rows]) & (bg > 0) & (excess <= cfg.background_sigmas * np.sqrt(bg))
+        bg = self.background
+        assert bg is not None
+        span = bg.static_speed_mps
+        own = bg.density(radar_name, g) / (2.0 * span)
+        track = np.zeros(g.shape[0])
+        mine = owner >= 0
+        if mine.any():
+            track[mine] = np.exp(-0.5 * cost[owner[mine], np.flatnonzero(mine)]) / (
+                2 * math.pi) ** 1.5  # fmt: skip
+        return (np.abs(vr) <= span) & (own > 0) & (own > track)
 
     # -- output ---------------------------------------------------------------------------
     def columns(self, time_s: float) -> dict[str, np.ndarray]:
@@ -549,7 +571,10 @@ class ExtendedTracker:
             speed < cfg.stopped_speed_mps, _STOPPED,
             np.where(time_s - t["last_hit_s"][rows] > COASTING_S, _COASTING, _CONFIRMED),
         )  # fmt: skip
-        status = np.where(self._is_background(rows), _STATIC, status)
+        names, chance = class_names(class_probabilities(
+            x[:, LENGTH], p[:, LENGTH, LENGTH], x[:, WIDTH], p[:, WIDTH, WIDTH],
+            t["top_speed_mps"][rows],
+        ))  # fmt: skip
         return {
             "track_id": t["track_id"][rows], "time_s": np.full(rows.size, time_s),
             "east_m": x[:, 0], "north_m": x[:, 1], "speed_mps": speed,
@@ -559,11 +584,13 @@ class ExtendedTracker:
             "position_std_m": np.sqrt(p[:, 0, 0] + p[:, 1, 1]),
             "speed_std_mps": np.sqrt(np.einsum("ni,nij,nj->n", u, p[:, 2:4, 2:4], u)),
             "existence": t["existence"][rows], "length_m": x[:, LENGTH], "width_m": x[:, WIDTH],
-            "heading_rad": t["heading_rad"][rows],
+            "heading_rad": t["heading_rad"][rows], "class": names,
+            "class_probability": chance,
         }  # fmt: skip
 
 
-EXTRA_COLUMNS = ("existence", "length_m", "width_m", "heading_rad")
+EXTRA_COLUMNS = ("existence", "length_m", "width_m", "heading_rad", "class",
+                 "class_probability")  # fmt: skip
 
 
 @dataclass
@@ -655,12 +682,13 @@ def track_scene_extended(
     config: ExtendedTrackerConfig | None = None,
     on_scan: Callable[[int, int], None] | None = None,
     background: BackgroundMap | None = None,
-) -> tuple[pd.DataFrame, ExtendedLog]:
+    train_intervals: FloatArray | None = None,
+) -> tuple[pd.DataFrame, pd.DataFrame, ExtendedLog]:
     """Track a detection table scan by scan; return the reported tracks of every scan and the log.
 
     Columns as :func:`.tracker.track_scene`'s (``status`` named) and :data:`EXTRA_COLUMNS`.
     """
-    tracker = ExtendedTracker(site, config, background)
+    tracker = ExtendedTracker(site, config, background, train_intervals)
     names, radar, stamps, starts, z, _ = scan_arrays(
         detections, {r.name: r.latency_s for r in site.radars}
     )
@@ -668,15 +696,14 @@ def track_scene_extended(
     n_scans = stamps.size
     for k in range(n_scans):
         tracker.step(names[radar[k]], float(stamps[k]), z[starts[k] : starts[k + 1]])
-        t_scan = float(tracker._radars[names[radar[k]]].measured_at(stamps[k]))
-        out.append(tracker.columns(t_scan))
+        out.append(tracker.last_columns)
         if on_scan is not None and (k + 1) % 1000 == 0:
             on_scan(k + 1, n_scans)
     keys = [*ROW_COLUMNS, *EXTRA_COLUMNS]
     table = {k: np.concatenate([o[k] for o in out]) if out else np.zeros(0) for k in keys}
     frame = pd.DataFrame(table)
     frame["status"] = pd.Categorical.from_codes(frame["status"].astype(int), categories=STATUS_NAMES)
-    return frame, tracker.log
+    return frame, pd.DataFrame(tracker.clearance.events, columns=EVENT_COLUMNS), tracker.log
 
 
 __all__ = ["EXTRA_COLUMNS", "ExtendedLog", "ExtendedTracker", "ExtendedTrackerConfig",
