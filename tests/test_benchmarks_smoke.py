@@ -174,3 +174,13 @@ def test_point_cloud_stats_fits_and_reports_a_synthetic_recording(tmp_path, caps
     assert "fitted on man_walk" in out and "man_run (held out" in out
     mean = next(line for line in out.splitlines() if "points mean" in line).split()
     assert float(mean[-1]) == pytest.approx(float(mean[-3]), rel=0.15)  # the fitted mean
+
+
+def test_crossing_clearance_runs_its_trials(capsys):
+    from benchmarks.crossing_clearance import main
+
+    main(["--trials", "2", "--empty-s", "20"])
+    out = capsys.readouterr().out
+    assert "placed" in out and "stalled" in out and "false 'not clear'" in out
+    rows = [line.split() for line in out.splitlines() if line.startswith(("placed", "stalled"))]
+    assert all(row[1] == "2" and row[2] == "2" for row in rows)  # both raised within 1 s

@@ -61,10 +61,9 @@ from .occupancy import ClearanceMonitor
 from .road_user_class import class_names, class_probabilities
 from .tracker import EVENT_COLUMNS, ROW_COLUMNS, STATUS_NAMES, scan_arrays
 
-N_STATE = 7  # x, y, vx, vy, omega, length, width
-LENGTH, WIDTH = 5, 6
-STEP_M = 0.01  # finite step of the face offsets in length and width [m]
+N_STATE = 5  # x, y, vx, vy, omega
 BACKGROUND = -2  # owner of a detection the background explains
+EXTENT_FLOOR_M = 0.3  # what a box's learnt length and width stay uncertain by, at best [m]
 COASTING_S = 0.2  # a reported track without a detection for longer is coasting [s]
 _CONFIRMED, _COASTING, _STOPPED = (
     STATUS_NAMES.index(s) for s in ("confirmed", "coasting", "stopped")
@@ -99,9 +98,8 @@ class ExtendedTrackerConfig:
     initial_turn_std_radps: float = 0.3
     prior_length_m: float = 4.5  # a new track's box (a car) ...
     prior_width_m: float = 1.8
-    prior_length_std_m: float = 2.5  # ... and how little that is known
+    prior_length_std_m: float = 2.5  # ... and how little that is known (its class)
     prior_width_std_m: float = 0.5
-    extent_psd: float = 1e-4  # random walk of length and width [m^2/s]
     min_extent_m: float = 0.3
     max_extent_m: float = 20.0
     extent_learning_rate: float = 0.05
@@ -151,7 +149,7 @@ class ExtendedLog:
 
 
 _TRACK_FIELDS = (
-    "track_id", "x", "p", "time_s", "existence", "heading_rad",
+    "track_id", "x", "p", "time_s", "existence", "heading_rad", "extent", "extent_var",
     "born_s", "last_hit_s", "hits", "moved", "reported", "rate", "top_speed_mps",
 )  # fmt: skip
 
@@ -215,31 +213,28 @@ class ExtendedTracker:
         z = z[in_field]
         g, g_cov, a, v_var = _ground_points(radar, z)
         n_t = t["x"].shape[0]
-        seen = self._in_view(radar)
         owner = np.full(z.shape[0], -1)
         cost = np.zeros((n_t, z.shape[0]))
+        offset, spread = self._faces(radar)
+        share = self._view_share(radar, offset, spread)
+        seen = share > 0
         if n_t and z.shape[0]:
-            offset, spread, h_pos = self._faces(radar)
-            cost = self._point_costs(radar, g, g_cov, a, v_var, z[:, 2], offset, spread, h_pos)
+            cost = self._point_costs(radar, g, g_cov, a, v_var, z[:, 2], offset, spread)
             cost[~seen] = np.inf
             best = np.argmin(cost, axis=0)
             ok = np.isfinite(cost[best, np.arange(z.shape[0])])
             owner[ok] = best[ok]
         if self.background is not None and z.shape[0]:
             owner[self._background_explains(radar_name, g, z[:, 2], owner, cost)] = BACKGROUND
-
-        else:
-            offset = spread = h_pos = None
         hit = np.zeros(n_t, bool)
-        pd = self._detection_probability(radar, seen) if n_t else np.zeros(0)
+        pd = self._detection_probability(radar, seen) * share
         clutter = self._clutter[radar_name]
         r_index = self._radar_index[radar_name]
         counts = self._counts[radar_name]
         for i in np.unique(owner[owner >= 0]):
             mine = owner == i
-            assert offset is not None and spread is not None and h_pos is not None
             ratio = self._update(i, radar, g[mine], g_cov[mine], a[mine], v_var[mine],
-                                 z[mine, 2], offset[i], spread[i], h_pos[i], clutter)  # fmt: skip
+                                 z[mine, 2], offset[i], spread[i], clutter)  # fmt: skip
             n_mine = int(mine.sum())
             rate = t["rate"][i, r_index]
             ground = float(np.hypot(*(t["x"][i, :2] - radar.position_m)))
@@ -285,8 +280,8 @@ class ExtendedTracker:
         )
         rows = np.flatnonzero(present)
         self.clearance.update(t_scan, t["track_id"][rows], t["x"][rows, :2],
-                              t["heading_rad"][rows], t["x"][rows, LENGTH],
-                              t["x"][rows, WIDTH])  # fmt: skip
+                              t["heading_rad"][rows], t["extent"][rows, 0],
+                              t["extent"][rows, 1])  # fmt: skip
 
     def _predict(self, t_scan: float) -> None:
         """Predict every track to the scan time (motion and survival)."""
@@ -294,14 +289,8 @@ class ExtendedTracker:
         if not t["x"].shape[0]:
             return
         dt = np.maximum(t_scan - t["time_s"], 0.0)
-        x = t["x"].copy()
-        x[:, :5], f5 = self.motion.propagate(t["x"][:, :5], dt)
-        f = np.broadcast_to(np.eye(N_STATE), (dt.size, N_STATE, N_STATE)).copy()
-        f[:, :5, :5] = f5
-        q = np.zeros_like(f)
-        q[:, :5, :5] = self.motion.process_cov(dt)
-        q[:, LENGTH, LENGTH] = q[:, WIDTH, WIDTH] = self.config.extent_psd * dt
-        p = f @ t["p"] @ np.swapaxes(f, -1, -2) + q
+        x, f = self.motion.propagate(t["x"], dt)
+        p = f @ t["p"] @ np.swapaxes(f, -1, -2) + self.motion.process_cov(dt)
         t["x"], t["p"] = x, 0.5 * (p + np.swapaxes(p, -1, -2))
         t["time_s"] = np.full(dt.shape, t_scan)
         t["existence"] = survive(t["existence"], dt, self.config.lifetime_s)
@@ -310,11 +299,21 @@ class ExtendedTracker:
         known = speed > 2.0 * np.sqrt(speed_var) + 0.3
         t["heading_rad"] = np.where(known, np.arctan2(x[:, 3], x[:, 2]), t["heading_rad"])
 
-    def _in_view(self, radar: RadarSpec) -> np.ndarray:
-        """Tracks whose centre the radar covers (bool per track)."""
-        if not self._t["x"].shape[0]:
-            return np.zeros(0, bool)
-        return np.asarray(radar.covers(self._t["x"][:, :2]), bool)
+    def _view_share(self, radar: RadarSpec, offset: FloatArray, spread: FloatArray) -> FloatArray:
+        """Each track's probability of lying in the radar's view (0 to 1).
+
+        The share of five points in view: the predicted reflection point and two sigmas
+        either way along the axes of its covariance (the track's and the faces' spread).
+        """
+        x, p = self._t["x"], self._t["p"]
+        if not x.shape[0]:
+            return np.zeros(0)
+        centre = x[:, :2] + offset
+        cov = p[:, :2, :2] + spread
+        values, vectors = np.linalg.eigh(cov)
+        reach = 2.0 * np.sqrt(np.maximum(values, 0.0))[:, None, :] * vectors  # (T, 2, 2)
+        points = [centre] + [centre + sign * reach[:, :, k] for k in (0, 1) for sign in (1, -1)]
+        return np.mean([np.asarray(radar.covers(q), float) for q in points], axis=0)
 
     def _detection_probability(self, radar: RadarSpec, seen: np.ndarray) -> FloatArray:
         """Each track's P_D in this scan: the radar's at its range, less its hidden share."""
@@ -325,7 +324,7 @@ class ExtendedTracker:
         antenna = _antenna_height(radar, cfg)
         rel = xy - np.asarray(radar.position_m)
         ground = np.linalg.norm(rel, axis=1)
-        half = np.arctan2(0.5 * np.hypot(t["x"][:, LENGTH], t["x"][:, WIDTH]),
+        half = np.arctan2(0.5 * np.hypot(t["extent"][:, 0], t["extent"][:, 1]),
                           np.maximum(ground, 1e-6))  # fmt: skip
         hidden = np.zeros(xy.shape[0])
         idx = np.flatnonzero(seen)
@@ -344,30 +343,18 @@ class ExtendedTracker:
                 hidden[i] = max(hidden[i], share * depth)
         return pd * (1.0 - hidden)
 
-    def _faces(self, radar: RadarSpec) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """Each track's face offset (T, 2), spread (T, 2, 2) and the offset point's Jacobian.
+    def _faces(self, radar: RadarSpec) -> tuple[FloatArray, FloatArray]:
+        """Each track's face offset (T, 2) and spread (T, 2, 2) seen from the radar."""
+        t = self._t
+        return face_moments(t["x"][:, :2], t["heading_rad"], t["extent"][:, 0],
+                            t["extent"][:, 1], np.asarray(radar.position_m))  # fmt: skip
 
-        The Jacobian (T, 2, N_STATE) of centre plus offset: the identity on the position and
-        the offset's change with length and width (finite steps of ``STEP_M``).
-        """
-        x, heading = self._t["x"], self._t["heading_rad"]
-        where = np.asarray(radar.position_m)
-        offset, spread = face_moments(x[:, :2], heading, x[:, LENGTH], x[:, WIDTH], where)
-        longer, _ = face_moments(x[:, :2], heading, x[:, LENGTH] + STEP_M, x[:, WIDTH], where)
-        wider, _ = face_moments(x[:, :2], heading, x[:, LENGTH], x[:, WIDTH] + STEP_M, where)
-        h_pos = np.zeros((x.shape[0], 2, N_STATE))
-        h_pos[:, 0, 0] = h_pos[:, 1, 1] = 1.0
-        h_pos[:, :, LENGTH] = (longer - offset) / STEP_M
-        h_pos[:, :, WIDTH] = (wider - offset) / STEP_M
-        return offset, spread, h_pos
-
-    def _point_costs(self, radar, g, g_cov, a, v_var, vr, offset, spread, h_pos):  # type: ignore[no-untyped-def]
+    def _point_costs(self, radar, g, g_cov, a, v_var, vr, offset, spread):  # type: ignore[no-untyped-def]
         """Chi-square plus log-determinant of each detection for each track (T, n); inf out of gate."""
         t, cfg = self._t, self.config
         x, p = t["x"], t["p"]
         e = g[None, :, :] - (x[:, None, :2] + offset[:, None, :])
-        point_cov = h_pos @ p @ np.swapaxes(h_pos, -1, -2)
-        s = point_cov[:, None] + spread[:, None] + g_cov[None] + cfg.shape_model_std_m**2 * np.eye(2)
+        s = p[:, None, :2, :2] + spread[:, None] + g_cov[None] + cfg.shape_model_std_m**2 * np.eye(2)
         det = s[..., 0, 0] * s[..., 1, 1] - s[..., 0, 1] ** 2
         d2 = (s[..., 1, 1] * e[..., 0] ** 2 - 2 * s[..., 0, 1] * e[..., 0] * e[..., 1]
               + s[..., 0, 0] * e[..., 1] ** 2) / det  # fmt: skip
@@ -379,7 +366,7 @@ class ExtendedTracker:
         chi = d2 + dv**2 / sv
         return np.where(chi <= self._gate, chi + np.log(det * sv), np.inf)
 
-    def _update(self, i, radar, g, g_cov, a, v_var, vr, offset, spread, h_pos, clutter):  # type: ignore[no-untyped-def]
+    def _update(self, i, radar, g, g_cov, a, v_var, vr, offset, spread, clutter):  # type: ignore[no-untyped-def]
         """Update track ``i`` with its detections of a scan; return their likelihood ratio."""
         t, cfg = self._t, self.config
         x, p = t["x"][i], t["p"][i]
@@ -387,7 +374,7 @@ class ExtendedTracker:
         lever = g - x[:2]
         arm = np.stack([-lever[:, 1], lever[:, 0]], -1)
         h = np.zeros((3, N_STATE))
-        h[:2] = h_pos
+        h[0, 0] = h[1, 1] = 1.0
         h[2, 2:4] = a.mean(axis=0)
         h[2, 4] = np.einsum("nj,nj->n", a, arm).mean()
         predicted = np.array([x[0] + offset[0], x[1] + offset[1], h[2] @ x])
@@ -404,8 +391,6 @@ class ExtendedTracker:
         ikh = np.eye(N_STATE) - k @ h
         post = ikh @ p @ ikh.T + k @ r @ k.T  # Joseph form
         t["p"][i] = 0.5 * (post + post.T)
-        for axis in (LENGTH, WIDTH):
-            t["x"][i, axis] = min(max(t["x"][i, axis], cfg.min_extent_m), cfg.max_extent_m)
         if n >= 3:
             self._learn_extent(i, g, g_cov, np.asarray(radar.position_m))
         speed = math.hypot(t["x"][i, 2], t["x"][i, 3])
@@ -427,18 +412,21 @@ class ExtendedTracker:
         noise = np.einsum("ai,nij,aj->a", axes, g_cov, axes) / g.shape[0]
         observed = np.maximum(local.var(axis=0, ddof=1) - noise, 0.0)
         _, model_cov = face_moments(t["x"][i : i + 1, :2], np.array([h]),
-                                    t["x"][i : i + 1, LENGTH], t["x"][i : i + 1, WIDTH],
+                                    t["extent"][i : i + 1, 0], t["extent"][i : i + 1, 1],
                                     radar_xy)  # fmt: skip
         expected = np.einsum("ai,ij,aj->a", axes, model_cov[0], axes)
         rate = cfg.extent_learning_rate
-        for axis, k in ((LENGTH, 0), (WIDTH, 1)):
+        for k in (0, 1):
             # an axis is learnt where a face along it is in view: its reflections' variance
             # is then that of a uniform spread over the face, proportional to its square
-            size = t["x"][i, axis]
+            size = t["extent"][i, k]
             if expected[k] >= 0.25 * size**2 / 12.0:
                 square = size**2 * (1.0 + rate * (observed[k] / expected[k] - 1.0))
-                t["x"][i, axis] = min(max(math.sqrt(max(square, 0.0)), cfg.min_extent_m),
-                                      cfg.max_extent_m)  # fmt: skip
+                t["extent"][i, k] = min(max(math.sqrt(max(square, 0.0)), cfg.min_extent_m),
+                                        cfg.max_extent_m)  # fmt: skip
+                # the prior's weight in the moving average decays by 1 - rate a step
+                t["extent_var"][i, k] = (1.0 - rate) * t["extent_var"][i, k] + rate * (
+                    EXTENT_FLOOR_M**2)  # fmt: skip
 
     def _open(self, radar, t_scan, g, g_cov, a, v_var, vr, existence):  # type: ignore[no-untyped-def]
         """Open a track on a group of unexplained detections (lane prior on its motion)."""
@@ -458,9 +446,7 @@ class ExtendedTracker:
                                       np.asarray(radar.position_m))  # fmt: skip
         x = np.zeros(N_STATE)
         x[:2] = centre - offset[0]
-        x[LENGTH], x[WIDTH] = length, width
         p = np.zeros((N_STATE, N_STATE))
-        p[LENGTH, LENGTH], p[WIDTH, WIDTH] = length_sd**2, width_sd**2
         n = g.shape[0]
         p[:2, :2] = g_cov.sum(axis=0) / n**2 + spread[0] + cfg.shape_model_std_m**2 * np.eye(2)
         if direction is not None:
@@ -484,6 +470,8 @@ class ExtendedTracker:
             "track_id": np.array([self._next_id]), "x": x[None], "p": 0.5 * (p + p.T)[None],
             "time_s": np.array([t_scan]), "existence": np.array([existence]),
             "heading_rad": np.array([heading]), "born_s": np.array([t_scan]),
+            "extent": np.array([[length, width]]),
+            "extent_var": np.array([[length_sd**2, width_sd**2]]),
             "last_hit_s": np.array([t_scan]), "hits": np.array([1]),
             "moved": np.array([False]), "reported": np.array([False]),
             "rate": np.full((1, len(self._radars)), np.nan), "top_speed_mps": np.zeros(1),
@@ -520,7 +508,7 @@ class ExtendedTracker:
         out = np.zeros(n, bool)
         if n < 2:
             return out
-        length, width = t["x"][:, LENGTH], t["x"][:, WIDTH]
+        length, width = t["extent"][:, 0], t["extent"][:, 1]
         reach = float(length.max())
         for i, j in cKDTree(x[:, :2]).query_pairs(reach, output_type="ndarray").tolist():
             older, younger = (i, j) if t["born_s"][i] <= t["born_s"][j] else (j, i)
@@ -572,7 +560,8 @@ class ExtendedTracker:
             np.where(time_s - t["last_hit_s"][rows] > COASTING_S, _COASTING, _CONFIRMED),
         )  # fmt: skip
         names, chance = class_names(class_probabilities(
-            x[:, LENGTH], p[:, LENGTH, LENGTH], x[:, WIDTH], p[:, WIDTH, WIDTH],
+            t["extent"][rows, 0], t["extent_var"][rows, 0], t["extent"][rows, 1],
+            t["extent_var"][rows, 1],
             t["top_speed_mps"][rows],
         ))  # fmt: skip
         return {
@@ -583,7 +572,8 @@ class ExtendedTracker:
             "moved": t["moved"][rows],
             "position_std_m": np.sqrt(p[:, 0, 0] + p[:, 1, 1]),
             "speed_std_mps": np.sqrt(np.einsum("ni,nij,nj->n", u, p[:, 2:4, 2:4], u)),
-            "existence": t["existence"][rows], "length_m": x[:, LENGTH], "width_m": x[:, WIDTH],
+            "existence": t["existence"][rows], "length_m": t["extent"][rows, 0],
+            "width_m": t["extent"][rows, 1],
             "heading_rad": t["heading_rad"][rows], "class": names,
             "class_probability": chance,
         }  # fmt: skip
@@ -624,6 +614,7 @@ def _empty_tracks(n_radars: int) -> dict[str, np.ndarray]:
     kinds = {"track_id": np.int64, "hits": np.int64, "moved": bool, "reported": bool}
     out = {name: np.zeros(0, kinds.get(name, float)) for name in _TRACK_FIELDS}
     out["rate"] = np.zeros((0, n_radars))
+    out["extent"], out["extent_var"] = np.zeros((0, 2)), np.zeros((0, 2))
     out["x"], out["p"] = np.zeros((0, N_STATE)), np.zeros((0, N_STATE, N_STATE))
     return out
 
