@@ -199,14 +199,16 @@ def site_background(
     try:
         st = load_site(site)
         det = read_scene_detections(detections, st)
-        background = learn_background(st, det, cell_m=cell, static_speed_mps=static_speed,
-                                      min_rate=min_rate)
+        background = learn_background(
+            st, det, cell_m=cell, static_speed_mps=static_speed, min_rate=min_rate
+        )
     except (ValueError, OSError) as exc:
         fail(str(exc))
     out.parent.mkdir(parents=True, exist_ok=True)
     background.save(out)
     busy = int((background.rates > 0).sum())
     Console().print(
-        f"wrote {out}: {busy} cells of {cell:g} m with a standing reflector (>= {min_rate:g} detections "
+        f"wrote {out}: {busy} cells of {cell:g} m with a standing reflector (>= {min_rate:g} "
+        "detections "
         f"per scan) over {int(background.scans.sum())} scans of {len(background.radars)} radars"
     )

@@ -26,17 +26,18 @@ tracks (axis 0).
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.special import gammaln
 
 from .._typing import FloatArray
 
 
-def survive(existence: FloatArray, dt_s: FloatArray, lifetime_s: float) -> FloatArray:
-    """Existence after ``dt_s`` [s] for objects of mean lifetime ``lifetime_s`` [s] (exponential)."""
+def survive(existence: ArrayLike, dt_s: ArrayLike, lifetime_s: float) -> FloatArray:
+    """Return the existence after ``dt_s`` [s] for a mean lifetime ``lifetime_s`` [s]."""
     return np.asarray(existence, float) * np.exp(-np.asarray(dt_s, float) / lifetime_s)
 
 
-def after_miss(existence: FloatArray, detection_probability: FloatArray) -> FloatArray:
+def after_miss(existence: ArrayLike, detection_probability: ArrayLike) -> FloatArray:
     """Existence after a scan that could have detected the track (``pd``) but did not."""
     r = np.asarray(existence, float)
     pd = np.asarray(detection_probability, float)
@@ -44,7 +45,7 @@ def after_miss(existence: FloatArray, detection_probability: FloatArray) -> Floa
 
 
 def after_hit(
-    existence: FloatArray, detection_probability: FloatArray, likelihood_ratio: FloatArray
+    existence: ArrayLike, detection_probability: ArrayLike, likelihood_ratio: FloatArray
 ) -> FloatArray:
     """Existence after a measurement of likelihood ratio ``g / lambda`` (module docstring)."""
     r = np.asarray(existence, float)
@@ -54,14 +55,14 @@ def after_hit(
         return r / (r + (1.0 - r) / gain)  # an infinite ratio gives 1
 
 
-def at_birth(birth_density: FloatArray, clutter_density: FloatArray) -> FloatArray:
+def at_birth(birth_density: ArrayLike, clutter_density: ArrayLike) -> FloatArray:
     """Existence of a track opened where new objects and clutter have these densities."""
     b = np.asarray(birth_density, float)
     return b / (b + np.asarray(clutter_density, float))
 
 
 def count_ratio(
-    count: FloatArray, rate: FloatArray, shape: float, clutter_mean: FloatArray
+    count: ArrayLike, rate: ArrayLike, shape: float, clutter_mean: ArrayLike
 ) -> FloatArray:
     """Likelihood ratio object / clutter of ``count`` >= 1 detections in one group.
 

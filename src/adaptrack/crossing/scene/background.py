@@ -5,23 +5,26 @@ user in the zone): the stationary detections (radial speed within ``static_speed
 each radar are counted per ground cell of ``cell_m`` and divided by that radar's scans, so
 each cell holds the mean number of detections a scan gives there (a barrier post, a sign, the
 rails); a cell seen in fewer than ``min_rate`` of the scans, with no such cell beside it,
-holds no reflector (a false alarm falls in a given cell in about one scan in 10^5). The extended tracker takes a stationary
-detection for the background's where the background there is likelier than every track
-(:meth:`BackgroundMap.density`), so no track grows on a post, while the detections of a
-stalled car or a fallen load beside it, off the reflector's cells, make a track of their own.
-An object standing exactly on a reflector's cell, seen as one point, is not told from it
-(a test of the cell's detection count against its rate would). Saved as a NumPy ``.npz``
-beside the site file.
+holds no reflector (a false alarm falls in a given cell in about one scan in 10^5). Each
+connected group of kept cells is one reflector, with the mean, covariance and rate of its
+detections.
+
+The extended tracker takes a stationary detection on a reflector's cells for the
+reflector's where the reflector's density there (:meth:`BackgroundMap.density`) exceeds every
+track's, so no track grows on a post, while the detections of a stalled car or a fallen load
+beside it make a track of their own; an object standing on the reflector itself is found by
+a CUSUM of its detections against the reflector's scatter and rate (the tracker's
+``background_alarm_nats``). Saved as a NumPy ``.npz`` beside the site file.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from scipy.ndimage import maximum_filter
+from scipy.ndimage import label, maximum_filter
 
 from ..._typing import FloatArray
 from ..site.model import Site
@@ -37,16 +40,38 @@ class BackgroundMap:
     rates: FloatArray  # (radars, east cells, north cells) [detections per scan]
     scans: np.ndarray  # (radars,) scans learnt from
     static_speed_mps: float = 0.5  # a detection this slow (|radial speed|) can be background
+    regions: np.ndarray = field(default_factory=lambda: np.zeros((0, 0, 0), np.int64))
+    reflector_mean: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))  # (K, 2) [m]
+    reflector_cov: FloatArray = field(default_factory=lambda: np.zeros((0, 2, 2)))  # [m^2]
+    reflector_rate: FloatArray = field(default_factory=lambda: np.zeros(0))  # per scan
 
-    def density(self, radar: str, xy: FloatArray) -> FloatArray:
-        """The background's stationary detections per m^2 and scan at ground points (N, 2)."""
+    def reflector_of(self, radar: str, xy: FloatArray) -> np.ndarray:
+        """Return the reflector (index into ``reflector_*``) holding each point; -1: none."""
         pts = np.asarray(xy, float).reshape(-1, 2)
+        out = np.full(pts.shape[0], -1)
         if radar not in self.radars:
-            return np.zeros(pts.shape[0])
+            return out
         ij = np.floor((pts - self.origin_m) / self.cell_m).astype(int)
-        ok = (ij >= 0).all(axis=1) & (ij < self.rates.shape[1:]).all(axis=1)
+        ok = (ij >= 0).all(axis=1) & (ij < self.regions.shape[1:]).all(axis=1)
+        out[ok] = self.regions[self.radars.index(radar), ij[ok, 0], ij[ok, 1]] - 1
+        return out
+
+    def density(self, reflector: np.ndarray, xy: FloatArray) -> FloatArray:
+        """Return the reflectors' detections per m^2 and scan at points (N, 2) (0 at ``-1``).
+
+        Each reflector's detections scatter as a Gaussian about their mean.
+        """
+        pts = np.asarray(xy, float).reshape(-1, 2)
         out = np.zeros(pts.shape[0])
-        out[ok] = self.rates[self.radars.index(radar), ij[ok, 0], ij[ok, 1]] / self.cell_m**2
+        k = np.asarray(reflector)
+        on = k >= 0
+        if on.any():
+            e = pts[on] - self.reflector_mean[k[on]]
+            cov = self.reflector_cov[k[on]]
+            inv = np.linalg.inv(cov)
+            d2 = np.einsum("ni,nij,nj->n", e, inv, e)
+            out[on] = self.reflector_rate[k[on]] * np.exp(-0.5 * d2) / (
+                2 * np.pi * np.sqrt(np.linalg.det(cov)))  # fmt: skip
         return out
 
     def save(self, path: str | Path) -> None:
@@ -54,7 +79,9 @@ class BackgroundMap:
         np.savez_compressed(
             Path(path), radars=np.array(self.radars), origin_m=np.array(self.origin_m),
             cell_m=np.array(self.cell_m), rates=self.rates, scans=self.scans,
-            static_speed_mps=np.array(self.static_speed_mps),
+            static_speed_mps=np.array(self.static_speed_mps), regions=self.regions,
+            reflector_mean=self.reflector_mean, reflector_cov=self.reflector_cov,
+            reflector_rate=self.reflector_rate,
         )  # fmt: skip
 
     @classmethod
@@ -67,9 +94,16 @@ class BackgroundMap:
                     (float(data["origin_m"][0]), float(data["origin_m"][1])),
                     float(data["cell_m"]), np.asarray(data["rates"], float),
                     np.asarray(data["scans"], np.int64), float(data["static_speed_mps"]),
+                    np.asarray(data["regions"], np.int64),
+                    np.asarray(data["reflector_mean"], float),
+                    np.asarray(data["reflector_cov"], float),
+                    np.asarray(data["reflector_rate"], float),
                 )  # fmt: skip
         except (KeyError, ValueError, OSError) as exc:
             raise ValueError(f"{path}: not a background map ({exc})") from None
+
+
+REFLECTOR_FLOOR_M = 0.05  # a reflector's scatter is known no better than this [m]
 
 
 def learn_background(
@@ -98,7 +132,11 @@ def learn_background(
     origin = centre - reach
     n = int(np.ceil(2 * reach / cell_m))
     rates = np.zeros((len(radars), n, n))
+    regions = np.zeros((len(radars), n, n), np.int64)
     scans = np.zeros(len(radars), np.int64)
+    means: list[FloatArray] = []
+    covs: list[FloatArray] = []
+    per_scan: list[float] = []
     for k, (name, radar) in enumerate(radars.items()):
         mine = detections[detections["radar"].astype(str) == name]
         t = mine["time_s"].to_numpy(float)
@@ -118,8 +156,29 @@ def learn_background(
             rates[k] /= scans[k]
         # a reflector's cells and their neighbours (its scatter's tails) are kept
         rates[k][~maximum_filter(rates[k] >= min_rate, size=3)] = 0.0
-    return BackgroundMap(tuple(radars), (float(origin[0]), float(origin[1])), float(cell_m),
-                         rates, scans, float(static_speed_mps))  # fmt: skip
+        labels, count = label(rates[k] > 0)
+        mine_cells = labels[i[ok], j[ok]]
+        pts = np.stack([east[ok], north[ok]], -1)
+        for r in range(1, count + 1):
+            sel = pts[mine_cells == r]
+            regions[k][labels == r] = len(means) + 1
+            means.append(sel.mean(axis=0))
+            # the scatter, with a floor: the learnt spread of a few dozen detections
+            covs.append(np.cov(sel.T) + REFLECTOR_FLOOR_M**2 * np.eye(2) if len(sel) > 2
+                        else REFLECTOR_FLOOR_M**2 * np.eye(2) * 4)  # fmt: skip
+            per_scan.append(len(sel) / max(scans[k], 1))
+    return BackgroundMap(
+        tuple(radars),
+        (float(origin[0]), float(origin[1])),
+        float(cell_m),
+        rates,
+        scans,
+        float(static_speed_mps),
+        regions,
+        np.array(means).reshape(-1, 2),
+        np.array(covs).reshape(-1, 2, 2),
+        np.array(per_scan),
+    )
 
 
 __all__ = ["BackgroundMap", "learn_background"]

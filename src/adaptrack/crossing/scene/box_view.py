@@ -58,9 +58,9 @@ def face_moments(
     safe = np.where(seen, total, 1.0)
     mean = mean / safe[:, None]
     cov = second / safe[:, None, None] - mean[:, :, None] * mean[:, None, :]
-    inside = (half_l**2 / 3.0)[:, None, None] * ax[:, :, None] * ax[:, None, :] + (
-        half_w**2 / 3.0
-    )[:, None, None] * ay[:, :, None] * ay[:, None, :]
+    inside = (half_l**2 / 3.0)[:, None, None] * ax[:, :, None] * ax[:, None, :] + (half_w**2 / 3.0)[
+        :, None, None
+    ] * ay[:, :, None] * ay[:, None, :]
     return np.where(seen[:, None], mean, 0.0), np.where(seen[:, None, None], cov, inside)
 
 

@@ -64,6 +64,7 @@ from .tracker import EVENT_COLUMNS, ROW_COLUMNS, STATUS_NAMES, scan_arrays
 N_STATE = 5  # x, y, vx, vy, omega
 BACKGROUND = -2  # owner of a detection the background explains
 EXTENT_FLOOR_M = 0.3  # what a box's learnt length and width stay uncertain by, at best [m]
+OBJECT_REACH_M = 1.0  # an object beside a reflector spreads its detections over this radius
 COASTING_S = 0.2  # a reported track without a detection for longer is coasting [s]
 _CONFIRMED, _COASTING, _STOPPED = (
     STATUS_NAMES.index(s) for s in ("confirmed", "coasting", "stopped")
@@ -108,6 +109,7 @@ class ExtendedTrackerConfig:
     body_height_m: float = 1.5  # an occluder's height [m] (the antenna sees over it)
     antenna_height_m: float | None = None  # above the road (None: the radar's height_m + 0.5)
     same_body_sigmas: float = 3.0
+    background_alarm_nats: float = 16.0  # an object stands on a reflector (CUSUM threshold)
     stopped_speed_mps: float = 0.5
     moved_speed_mps: float = 1.0
 
@@ -117,8 +119,12 @@ class ExtendedTrackerConfig:
             value = getattr(self, f.name)
             if value is None:
                 continue
-            if f.name in ("gate_probability", "report_existence", "keep_existence",
-                          "drop_existence"):
+            if f.name in (
+                "gate_probability",
+                "report_existence",
+                "keep_existence",
+                "drop_existence",
+            ):
                 ok, want = 0 < value < 1, "in (0, 1)"
             elif f.name in ("extent_learning_rate", "count_learning_rate"):
                 ok, want = 0 < value <= 1, "in (0, 1]"
@@ -127,8 +133,10 @@ class ExtendedTrackerConfig:
             if not ok:
                 raise ValueError(f"ExtendedTrackerConfig.{f.name} must be {want}; got {value}")
         if not self.drop_existence < self.keep_existence <= self.report_existence:
-            raise ValueError("ExtendedTrackerConfig: drop_existence < keep_existence <= "
-                             "report_existence is required")
+            raise ValueError(
+                "ExtendedTrackerConfig: drop_existence < keep_existence <= "
+                "report_existence is required"
+            )
 
 
 @dataclass
@@ -167,6 +175,14 @@ class ExtendedTracker:
         self.site = site
         self.background = background
         self.clearance = ClearanceMonitor(site, train_intervals)
+        n_reflectors = 0 if background is None else background.reflector_rate.size
+        self._reflector_cusum = np.zeros(n_reflectors)  # object-on-reflector test [nats]
+        self._reflectors_of = {
+            r.name: (np.setdiff1d(np.unique(background.regions[background.radars.index(r.name)]),
+                                  [0]) - 1 if background is not None and r.name in background.radars
+                     else np.zeros(0, np.int64))
+            for r in site.radars
+        }  # fmt: skip
         self.config = cfg = config or ExtendedTrackerConfig()
         self.motion = CoordinatedTurn(accel_psd=cfg.accel_psd, turn_psd=cfg.turn_psd)
         self.log = ExtendedLog()
@@ -225,7 +241,9 @@ class ExtendedTracker:
             ok = np.isfinite(cost[best, np.arange(z.shape[0])])
             owner[ok] = best[ok]
         if self.background is not None and z.shape[0]:
-            owner[self._background_explains(radar_name, g, z[:, 2], owner, cost)] = BACKGROUND
+            explained = self._background_explains(radar, g, z[:, 2], owner, cost,
+                                                  self._counts[radar_name])  # fmt: skip
+            owner[explained] = BACKGROUND
         hit = np.zeros(n_t, bool)
         pd = self._detection_probability(radar, seen) * share
         clutter = self._clutter[radar_name]
@@ -262,8 +280,15 @@ class ExtendedTracker:
                 r0 = float(at_birth(cfg.birth_density / cfg.clutter_doppler_span_mps,
                                     centre_density))  # fmt: skip
                 ground = float(np.hypot(*(centres[k] - radar.position_m)))
-                odds = r0 / (1.0 - r0) * float(count_ratio(
-                    rows.size, counts.rate_at(ground), cfg.count_shape, counts.clutter_mean))
+                odds = (
+                    r0
+                    / (1.0 - r0)
+                    * float(
+                        count_ratio(
+                            rows.size, counts.rate_at(ground), cfg.count_shape, counts.clutter_mean
+                        )
+                    )
+                )
                 self._open(radar, t_scan, g[rows], g_cov[rows], a[rows], v_var[rows], z[rows, 2],
                            odds / (1.0 + odds))  # fmt: skip
                 counts.learn_clutter(rows.size, cfg.count_learning_rate)
@@ -350,19 +375,31 @@ class ExtendedTracker:
                             t["extent"][:, 1], np.asarray(radar.position_m))  # fmt: skip
 
     def _point_costs(self, radar, g, g_cov, a, v_var, vr, offset, spread):  # type: ignore[no-untyped-def]
-        """Chi-square plus log-determinant of each detection for each track (T, n); inf out of gate."""
+        """Return chi-square plus log-determinant per track and detection (T, n); inf: no gate."""
         t, cfg = self._t, self.config
         x, p = t["x"], t["p"]
         e = g[None, :, :] - (x[:, None, :2] + offset[:, None, :])
-        s = p[:, None, :2, :2] + spread[:, None] + g_cov[None] + cfg.shape_model_std_m**2 * np.eye(2)
+        s = (
+            p[:, None, :2, :2]
+            + spread[:, None]
+            + g_cov[None]
+            + cfg.shape_model_std_m**2 * np.eye(2)
+        )
         det = s[..., 0, 0] * s[..., 1, 1] - s[..., 0, 1] ** 2
         d2 = (s[..., 1, 1] * e[..., 0] ** 2 - 2 * s[..., 0, 1] * e[..., 0] * e[..., 1]
               + s[..., 0, 0] * e[..., 1] ** 2) / det  # fmt: skip
         lever = g[None, :, :] - x[:, None, :2]
-        predicted = (np.einsum("nj,tnj->tn", a, x[:, None, 2:4]
-                               + x[:, None, 4:5] * np.stack([-lever[..., 1], lever[..., 0]], -1)))
+        predicted = np.einsum(
+            "nj,tnj->tn",
+            a,
+            x[:, None, 2:4] + x[:, None, 4:5] * np.stack([-lever[..., 1], lever[..., 0]], -1),
+        )
         dv = _unfold(vr[None, :] - predicted, radar)
-        sv = np.einsum("nj,tjk,nk->tn", a, p[:, 2:4, 2:4], a) + v_var[None] + cfg.body_doppler_std_mps**2
+        sv = (
+            np.einsum("nj,tjk,nk->tn", a, p[:, 2:4, 2:4], a)
+            + v_var[None]
+            + cfg.body_doppler_std_mps**2
+        )
         chi = d2 + dv**2 / sv
         return np.where(chi <= self._gate, chi + np.log(det * sv), np.inf)
 
@@ -452,7 +489,8 @@ class ExtendedTracker:
         if direction is not None:
             along = np.outer(direction, direction)
             p[2:4, 2:4] = cfg.lane_speed_std_mps**2 * along + cfg.lane_across_std_mps**2 * (
-                np.eye(2) - along)
+                np.eye(2) - along
+            )
         else:
             p[2:4, 2:4] = cfg.initial_speed_std_mps**2 * np.eye(2)
         p[4, 4] = cfg.initial_turn_std_radps**2
@@ -530,26 +568,43 @@ class ExtendedTracker:
             out[younger] = True
         return out
 
-    def _background_explains(self, radar_name, g, vr, owner, cost):  # type: ignore[no-untyped-def]
-        """Stationary detections on a background reflector likelier its than their track's.
+    def _background_explains(self, radar, g, vr, owner, cost, counts):  # type: ignore[no-untyped-def]
+        """Stationary detections that a reflector of the background explains (bool each).
 
-        The background's density (stationary detections per m^2 and scan, spread evenly over
-        +- its static speed) against the best track's density of the detection.
+        A detection on a reflector's cells is the reflector's where the reflector's density
+        (its detections' Gaussian scatter times its rate, spread evenly over +- the static
+        speed) exceeds its best track's, unless an object stands on the reflector. That is
+        tested per reflector by a CUSUM of the log-likelihood ratio of each scan's detections
+        there, object beside the reflector (rate ``m``, the radar's object rate, its points
+        spread over ``OBJECT_REACH_M``) against the reflector alone; at
+        ``background_alarm_nats`` the reflector's detections go to the tracks again, until
+        the sum falls back (it is capped at twice the threshold).
         """
-        bg = self.background
+        bg, cfg = self.background, self.config
         assert bg is not None
         span = bg.static_speed_mps
-        own = bg.density(radar_name, g) / (2.0 * span)
+        reflector = bg.reflector_of(radar.name, g)
+        still = (np.abs(vr) <= span) & (reflector >= 0)
+        own = bg.density(reflector, g)
+        for k in self._reflectors_of[radar.name]:
+            here = still & (reflector == k)
+            ground = float(np.hypot(*(bg.reflector_mean[k] - radar.position_m)))
+            m = max(counts.rate_at(ground), 0.5)
+            beside = m / (math.pi * OBJECT_REACH_M**2)
+            llr = float(np.log1p(beside / np.maximum(own[here], 1e-300)).sum()) - m
+            self._reflector_cusum[k] = min(max(self._reflector_cusum[k] + llr, 0.0),
+                                           2.0 * cfg.background_alarm_nats)  # fmt: skip
+        free = self._reflector_cusum[np.maximum(reflector, 0)] < cfg.background_alarm_nats
         track = np.zeros(g.shape[0])
         mine = owner >= 0
         if mine.any():
             track[mine] = np.exp(-0.5 * cost[owner[mine], np.flatnonzero(mine)]) / (
                 2 * math.pi) ** 1.5  # fmt: skip
-        return (np.abs(vr) <= span) & (own > 0) & (own > track)
+        return still & free & (own / (2.0 * span) > track)
 
     # -- output ---------------------------------------------------------------------------
     def columns(self, time_s: float) -> dict[str, np.ndarray]:
-        """The reported tracks at ``time_s`` (after the scan): the columns of the track table."""
+        """Return the reported tracks at ``time_s`` (after the scan): the track table's columns."""
         t, cfg = self._t, self.config
         rows = np.flatnonzero(t["reported"] & (t["existence"] >= cfg.keep_existence))
         x, p = t["x"][rows], t["p"][rows]
@@ -629,13 +684,13 @@ def _speed_variance(x: FloatArray, p: FloatArray) -> FloatArray:
 
 
 def _unit(v: FloatArray) -> FloatArray:
-    """Unit vectors of rows of ``v`` (a zero row gives east)."""
+    """Return the unit vectors of the rows of ``v`` (a zero row gives east)."""
     norm = np.linalg.norm(v, axis=-1, keepdims=True)
     return np.where(norm > 1e-9, v / np.maximum(norm, 1e-9), np.array([1.0, 0.0]))
 
 
 def _antenna_height(radar: RadarSpec, cfg: ExtendedTrackerConfig) -> float:
-    """The antenna's height above the road [m]."""
+    """Return the antenna's height above the road [m]."""
     return cfg.antenna_height_m if cfg.antenna_height_m is not None else radar.height_m + 0.5
 
 
@@ -693,7 +748,9 @@ def track_scene_extended(
     keys = [*ROW_COLUMNS, *EXTRA_COLUMNS]
     table = {k: np.concatenate([o[k] for o in out]) if out else np.zeros(0) for k in keys}
     frame = pd.DataFrame(table)
-    frame["status"] = pd.Categorical.from_codes(frame["status"].astype(int), categories=STATUS_NAMES)
+    frame["status"] = pd.Categorical.from_codes(
+        frame["status"].astype(int), categories=STATUS_NAMES
+    )
     return frame, pd.DataFrame(tracker.clearance.events, columns=EVENT_COLUMNS), tracker.log
 
 

@@ -32,7 +32,7 @@ class CrossingArea:
         reach = site.barrier_m + 2.0 * max(
             (r.lanes_in + r.lanes_out) * r.lane_width_m for r in site.roads.values()
         )
-        n = int(math.ceil(2 * reach / AREA_CELL_M))
+        n = math.ceil(2 * reach / AREA_CELL_M)
         self.origin = np.array([-reach, -reach])
         centres = -reach + (np.arange(n) + 0.5) * AREA_CELL_M
         ee, nn = np.meshgrid(centres, centres, indexing="ij")
@@ -52,8 +52,8 @@ class CrossingArea:
         """Whether a box's centre or a corner lies in the area."""
         c, s = math.cos(heading_rad), math.sin(heading_rad)
         ax, ay = np.array([c, s]) * 0.5 * length_m, np.array([-s, c]) * 0.5 * width_m
-        pts = np.asarray(centre) + np.array([[0, 0], [1, 1], [1, -1], [-1, 1], [-1, -1]]) @ np.stack(
-            [ax, ay])  # fmt: skip
+        signs = np.array([[0, 0], [1, 1], [1, -1], [-1, 1], [-1, -1]])
+        pts = np.asarray(centre) + signs @ np.stack([ax, ay])
         ij = np.floor((pts - self.origin) / AREA_CELL_M).astype(int)
         n = self.inside.shape[0]
         ok = (ij >= 0).all(axis=1) & (ij < n).all(axis=1)
@@ -74,9 +74,9 @@ class ClearanceMonitor:
 
     def __init__(self, site: Site, train_intervals: FloatArray | None = None) -> None:
         self.area = CrossingArea(site)
-        self.trains = np.asarray(
-            [] if train_intervals is None else train_intervals, float
-        ).reshape(-1, 2)
+        self.trains = np.asarray([] if train_intervals is None else train_intervals, float).reshape(
+            -1, 2
+        )
         self.occupant: int | None = None  # track id of the object that made it not clear
         self.events: list[dict[str, object]] = []
 

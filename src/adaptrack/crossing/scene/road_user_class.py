@@ -52,7 +52,7 @@ def class_probabilities(
 
 
 def class_names(probabilities: FloatArray) -> tuple[np.ndarray, FloatArray]:
-    """The named class of each track (``unknown`` below :data:`NAMED_AT`) and its probability."""
+    """Return each track's named class (``unknown`` below :data:`NAMED_AT`), its probability."""
     best = np.argmax(probabilities, axis=1) if len(probabilities) else np.zeros(0, int)
     p = probabilities[np.arange(best.size), best] if best.size else np.zeros(0)
     names = np.array(CLASSES, dtype=object)[best] if best.size else np.zeros(0, dtype=object)

@@ -9,8 +9,9 @@ Seeded trials on a site, each replayed through the face radar (the simulator's o
 
 the delay runs from when the object first stands in the area (placed: its appearance; stalled:
 its box first touching the area, an event up to ``EARLY_S`` before counting as its own) to the
-first ``crossing_not_clear`` event (negative: raised as the car's estimated box arrived). The background
-map is learnt first from ``background_s`` of the empty site (a different seed). ``clear_run``
+first ``crossing_not_clear`` event (negative: raised as the car's estimated box arrived). The
+background map is learnt first from ``background_s`` of the empty site (a different seed).
+``clear_run``
 counts the false ``crossing_not_clear`` events over a span with no object in the area.
 """
 
@@ -49,7 +50,7 @@ class ClearanceTrial:
 
 
 def _replay(site: Site, motion: pd.DataFrame, seed: int, radar: FaceRadar):  # type: ignore[no-untyped-def]
-    """Detections of motion written as a generic trajectory table."""
+    """Return the detections of motion given as a generic trajectory table."""
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "motion.csv"
         motion.to_csv(path, index=False)
@@ -57,7 +58,7 @@ def _replay(site: Site, motion: pd.DataFrame, seed: int, radar: FaceRadar):  # t
 
 
 def _far_away(duration_s: float) -> pd.DataFrame:
-    """A pedestrian out of every radar's view: the replay's stand-in for "nobody"."""
+    """Return a pedestrian out of every radar's view: the replay's stand-in for "nobody"."""
     t = np.arange(0.0, duration_s + 1e-9, 0.1)
     return pd.DataFrame({"time_s": t, "object_id": 999, "class": "pedestrian",
                          "x_m": FAR_AWAY_M, "y_m": FAR_AWAY_M, "length_m": 0.5,
@@ -66,7 +67,7 @@ def _far_away(duration_s: float) -> pd.DataFrame:
 
 
 def empty_background(site: Site, radar: FaceRadar, seconds: float, seed: int) -> BackgroundMap:
-    """The background learnt from ``seconds`` of the empty site."""
+    """Learn the background from ``seconds`` of the empty site."""
     return learn_background(site, _replay(site, _far_away(seconds), seed, radar).detections)
 
 
@@ -87,7 +88,7 @@ def _placed(point: tuple[float, float], start_s: float, duration_s: float) -> pd
 
 def _stalled(site: Site, point: tuple[float, float], approach_kmh: float, decel_mps2: float,
              duration_s: float) -> pd.DataFrame:  # fmt: skip
-    """A car driving along the nearest corridor to ``point`` and stopping there."""
+    """Return a car driving along the corridor nearest to ``point`` and stopping there."""
     corridor = min(site.corridors, key=lambda c: float(np.abs(c.path.project(np.array(point))[1])))
     u_stop, d = (float(v) for v in corridor.path.project(np.array(point)))
     v0 = approach_kmh / 3.6
@@ -102,7 +103,8 @@ def _stalled(site: Site, point: tuple[float, float], approach_kmh: float, decel_
     heading = np.interp(u, corridor.path.s, corridor.path.heading)
     return pd.DataFrame({"time_s": t, "object_id": 1, "class": "car", "x_m": xy[:, 0],
                          "y_m": xy[:, 1], "length_m": 4.5, "width_m": 1.8, "height_m": 1.5,
-                         "speed_mps": speed, "heading_deg": np.degrees(heading) % 360.0})  # fmt: skip
+                         "speed_mps": speed,
+                         "heading_deg": np.degrees(heading) % 360.0})  # fmt: skip
 
 
 def clearance_trials(
@@ -147,8 +149,10 @@ def clearance_trials(
 
 
 def clear_run(site: Site, seconds: float, seed: int, radar: FaceRadar | None = None) -> int:
-    """False ``crossing_not_clear`` events over ``seconds`` of the empty site (background learnt
-    from another seed)."""
+    """Count false ``crossing_not_clear`` events over ``seconds`` of the empty site.
+
+    The background is learnt from another seed.
+    """
     radar = radar or FaceRadar.of_kind("cluster")
     background = empty_background(site, radar, 60.0, seed=10_000)
     rec = _replay(site, _far_away(seconds), seed, radar)

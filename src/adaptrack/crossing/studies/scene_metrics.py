@@ -191,9 +191,11 @@ def _per_user(pairs: pd.DataFrame, zone_rows: pd.DataFrame) -> pd.DataFrame:
     epochs = zone_rows.groupby("object_id").agg(
         vehicle_class=("vehicle_class", "first"), zone_epochs=("time_s", "size")
     )
-    got = pairs.assign(p2=pairs["pos_err"] ** 2, s2=(3.6 * pairs["speed_err"]) ** 2).groupby(
-        "object_id"
-    ).agg(p2=("p2", "mean"), s2=("s2", "mean"), epochs=("p2", "size"))
+    got = (
+        pairs.assign(p2=pairs["pos_err"] ** 2, s2=(3.6 * pairs["speed_err"]) ** 2)
+        .groupby("object_id")
+        .agg(p2=("p2", "mean"), s2=("s2", "mean"), epochs=("p2", "size"))
+    )
     table = epochs.join(got, how="left")
     return pd.DataFrame({
         "object_id": table.index.to_numpy(),
