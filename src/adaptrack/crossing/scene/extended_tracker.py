@@ -594,7 +594,9 @@ class ExtendedTracker:
             llr = float(np.log1p(beside / np.maximum(own[here], 1e-300)).sum()) - m
             self._reflector_cusum[k] = min(max(self._reflector_cusum[k] + llr, 0.0),
                                            2.0 * cfg.background_alarm_nats)  # fmt: skip
-        free = self._reflector_cusum[np.maximum(reflector, 0)] < cfg.background_alarm_nats
+        free = np.ones(g.shape[0], bool)
+        on = reflector >= 0
+        free[on] = self._reflector_cusum[reflector[on]] < cfg.background_alarm_nats
         track = np.zeros(g.shape[0])
         mine = owner >= 0
         if mine.any():
