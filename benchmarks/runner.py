@@ -22,6 +22,11 @@ Workloads (full sizes; ``--quick`` shrinks them to a smoke test):
 * ``radar_imm``: the same radar, an IMM-EKF of two CV modes (the compiled kernel and its NumPy
   reference) against FilterPy's ``IMMEstimator`` of two ``ExtendedKalmanFilter``;
 * ``lx_mc``: the ``lx_default`` level-crossing compliance Monte Carlo;
+* ``scene``: ``lx_default`` mixed traffic (reflections about each body's centre), the scene
+  tracker against Stone Soup's trackers;
+* ``scene_faces``: the same traffic seen by the face radar (reflections on the faces each
+  antenna sees), the extended-object tracker against the corridor tracker and Stone Soup's
+  GNN and JPDA;
 * ``memory``: peak traced memory of the batch filter over its input + output arrays.
 
 The ratio column is the row's time per track-step over adaptrack's (first row) in the same
@@ -82,6 +87,7 @@ def run(quick: bool, only: list[str] | None = None, workers: int = 2) -> list[Re
         "radar_imm": lambda: workloads.radar_imm(quick, repeats),
         "lx_mc": lambda: workloads.crossing(quick, workers),
         "scene": lambda: workloads.scene(quick),
+        "scene_faces": lambda: workloads.scene_faces(quick),
         "memory": lambda: workloads.memory(quick),
     }
     results: list[Result] = []

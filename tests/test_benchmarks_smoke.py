@@ -23,6 +23,7 @@ def test_benchmarks_quick_run_writes_json(tmp_path, capsys):
         "lx_mc",
         "memory",
         "scene",
+        "scene_faces",
         "radar_ekf",
         "radar_imm",
     ):

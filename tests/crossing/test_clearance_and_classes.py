@@ -34,10 +34,11 @@ def test_the_empty_site_stays_clear(site):
 
 def test_the_area_is_the_carriageway_between_the_barriers(site):
     area = CrossingArea(site)
-    assert area.touches(np.zeros(2), 0.0, 0.5, 0.5)
-    assert area.touches(np.array([1.75, site.barrier_m - 0.5]), math.pi / 2, 0.5, 0.5)
-    assert not area.touches(np.array([1.75, site.barrier_m + 3.0]), math.pi / 2, 0.5, 0.5)
-    assert not area.touches(np.array([15.0, 0.0]), 0.0, 0.5, 0.5)  # beside the road
+    boxes = np.array([[0.0, 0.0], [1.75, site.barrier_m - 0.5], [1.75, site.barrier_m + 3.0],
+                      [15.0, 0.0]])  # fmt: skip
+    heading = np.array([0.0, math.pi / 2, math.pi / 2, 0.0])
+    # in the middle, just inside the barrier, beyond it, beside the road
+    assert list(area.touches(boxes, heading, 0.5, 0.5)) == [True, True, False, False]
 
 
 def test_a_train_due_is_the_known_occupant_of_the_rails():

@@ -29,8 +29,10 @@ class CrossingArea:
 
     def __init__(self, site: Site) -> None:
         corridors = site.corridors
-        reach = site.barrier_m + 2.0 * max(
-            (r.lanes_in + r.lanes_out) * r.lane_width_m for r in site.roads.values()
+        reach = (
+            site.barrier_m
+            + max(0.5 * (r.lanes_in + r.lanes_out) * r.lane_width_m for r in site.roads.values())
+            + 1.0
         )
         n = math.ceil(2 * reach / AREA_CELL_M)
         self.origin = np.array([-reach, -reach])
@@ -47,17 +49,23 @@ class CrossingArea:
         self.inside = inside.reshape(n, n)
         self.rails = site.rails
 
-    def touches(self, centre: FloatArray, heading_rad: float, length_m: float,
-                width_m: float) -> bool:  # fmt: skip
-        """Whether a box's centre or a corner lies in the area."""
-        c, s = math.cos(heading_rad), math.sin(heading_rad)
-        ax, ay = np.array([c, s]) * 0.5 * length_m, np.array([-s, c]) * 0.5 * width_m
-        signs = np.array([[0, 0], [1, 1], [1, -1], [-1, 1], [-1, -1]])
-        pts = np.asarray(centre) + signs @ np.stack([ax, ay])
+    def touches(self, centre: FloatArray, heading_rad: FloatArray, length_m: FloatArray,
+                width_m: FloatArray) -> np.ndarray:  # fmt: skip
+        """Whether each box's centre or a corner lies in the area (boxes (N, 2) ... (N,))."""
+        centre = np.asarray(centre, float).reshape(-1, 2)
+        h = np.asarray(heading_rad, float).reshape(-1)
+        half_l = 0.5 * np.asarray(length_m, float).reshape(-1, 1)
+        half_w = 0.5 * np.asarray(width_m, float).reshape(-1, 1)
+        ax = np.stack([np.cos(h), np.sin(h)], -1) * half_l
+        ay = np.stack([-np.sin(h), np.cos(h)], -1) * half_w
+        signs = np.array([[0, 0], [1, 1], [1, -1], [-1, 1], [-1, -1]], float)
+        pts = centre[:, None] + signs[None, :, :1] * ax[:, None] + signs[None, :, 1:] * ay[:, None]
         ij = np.floor((pts - self.origin) / AREA_CELL_M).astype(int)
         n = self.inside.shape[0]
-        ok = (ij >= 0).all(axis=1) & (ij < n).all(axis=1)
-        return bool(self.inside[ij[ok, 0], ij[ok, 1]].any())
+        ok = (ij >= 0).all(axis=-1) & (ij < n).all(axis=-1)
+        hit = np.zeros(ok.shape, bool)
+        hit[ok] = self.inside[ij[ok][:, 0], ij[ok][:, 1]]
+        return hit.any(axis=1)
 
     def on_rails(self, centre: FloatArray) -> bool:
         """Whether a point lies within ``RAIL_CORRIDOR_M`` of the rails' axis (no rails: False)."""
@@ -88,10 +96,10 @@ class ClearanceMonitor:
                length: FloatArray, width: FloatArray) -> None:  # fmt: skip
         """Take the reported objects after a scan; raise an event when the state changes."""
         train = self.train_due(time_s)
+        touching = self.area.touches(centres, heading, length, width) if ids.size else []
         inside = [
-            k for k in range(ids.size)
-            if self.area.touches(centres[k], heading[k], length[k], width[k])
-            and not (train and self.area.on_rails(centres[k]))
+            k for k in np.flatnonzero(touching)
+            if not (train and self.area.on_rails(centres[k]))
         ]  # fmt: skip
         if inside and self.occupant is None:
             k = inside[0]

@@ -17,7 +17,6 @@ counts the false ``crossing_not_clear`` events over a span with no object in the
 
 from __future__ import annotations
 
-import math
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -133,9 +132,13 @@ def clearance_trials(
             motion, since = _placed(point, placed_at_s, duration_s), placed_at_s
         else:
             motion = _stalled(site, point, approach_kmh, decel_mps2, duration_s)
-            inside = [area.touches(np.array([r.x_m, r.y_m]), math.radians(90 - r.heading_deg),
-                                   4.5, 1.8) for r in motion.itertuples()]  # fmt: skip
-            since = float(motion["time_s"].iloc[int(np.argmax(inside))]) if any(inside) else np.nan
+            inside = area.touches(
+                motion[["x_m", "y_m"]].to_numpy(),
+                np.radians(90.0 - motion["heading_deg"].to_numpy()),
+                4.5,
+                1.8,
+            )
+            since = float(motion["time_s"].iloc[int(np.argmax(inside))]) if inside.any() else np.nan
         rec = _replay(site, pd.concat([motion, _far_away(duration_s)]), seed, radar)
         _, events, _ = track_scene_extended(site, rec.detections, background=background)
         raised = events.loc[events["event"] == EVENT_NOT_CLEAR, "time_s"].to_numpy()
