@@ -734,7 +734,11 @@ def track_scene_extended(
 ) -> tuple[pd.DataFrame, pd.DataFrame, ExtendedLog]:
     """Track a detection table scan by scan; return the reported tracks of every scan and the log.
 
-    Columns as :func:`.tracker.track_scene`'s (``status`` named) and :data:`EXTRA_COLUMNS`.
+    Columns as :func:`.tracker.track_scene`'s (``status`` named; ``from_crossing_m`` is the
+    straight distance from the crossing centre, the track not being tied to a road) and
+    :data:`EXTRA_COLUMNS`; the events are :mod:`.occupancy`'s. ``background``: the empty
+    site's reflectors (:mod:`.background`); ``train_intervals`` (K, 2): when the controller
+    has a train due [s].
     """
     tracker = ExtendedTracker(site, config, background, train_intervals)
     names, radar, stamps, starts, z, _ = scan_arrays(
