@@ -245,7 +245,10 @@ class ExtendedTracker:
                                                   self._counts[radar_name])  # fmt: skip
             owner[explained] = BACKGROUND
         hit = np.zeros(n_t, bool)
-        pd = self._detection_probability(radar, seen) * share
+        pd, clear = self._detection_probability(radar, seen)
+        pd = pd * share
+        # P_D is learnt from the tracks surely there, wholly in view and hidden by none
+        learns = (t["existence"] >= cfg.report_existence) & t["reported"] & (share >= 1.0) & clear
         clutter = self._clutter[radar_name]
         r_index = self._radar_index[radar_name]
         counts = self._counts[radar_name]
@@ -269,6 +272,9 @@ class ExtendedTracker:
         self.log.updated += int((owner >= 0).sum())
         self.log.background += int((owner == BACKGROUND).sum())
         missed = seen & ~hit
+        for i in np.flatnonzero(learns):
+            counts.learn_detection(float(np.hypot(*(t["x"][i, :2] - radar.position_m))),
+                                   bool(hit[i]))  # fmt: skip
         t["existence"][missed] = after_miss(t["existence"][missed], pd[missed])
         left = np.flatnonzero(owner == -1)
         groups = cluster_points(g[left], cfg.cluster_gap_m) if left.size else np.zeros(0, int)
@@ -340,12 +346,22 @@ class ExtendedTracker:
         points = [centre] + [centre + sign * reach[:, :, k] for k in (0, 1) for sign in (1, -1)]
         return np.mean([np.asarray(radar.covers(q), float) for q in points], axis=0)
 
-    def _detection_probability(self, radar: RadarSpec, seen: np.ndarray) -> FloatArray:
-        """Each track's P_D in this scan: the radar's at its range, less its hidden share."""
+    def _detection_probability(
+        self, radar: RadarSpec, seen: np.ndarray
+    ) -> tuple[FloatArray, np.ndarray]:
+        """Each track's P_D in this scan, and whether nothing hides it (bool each).
+
+        The P_D at its range learnt from this radar's tracks (:class:`_Counts`; the radar's
+        declared curve as the prior), less the share of it hidden behind nearer tracks.
+        """
         t, cfg = self._t, self.config
         xy = t["x"][:, :2]
         rng, az = radar.polar(xy)
-        pd = np.where(seen, radar.detection_curve("default")(rng), 0.0)
+        declared = radar.detection_curve("default")(rng)
+        counts = self._counts[radar.name]
+        ground_m = np.hypot(*(xy - np.asarray(radar.position_m)).T) if len(xy) else np.zeros(0)
+        learnt = np.array([counts.pd_at(g, p) for g, p in zip(ground_m, declared, strict=True)])
+        pd = np.where(seen, learnt, 0.0)
         antenna = _antenna_height(radar, cfg)
         rel = xy - np.asarray(radar.position_m)
         ground = np.linalg.norm(rel, axis=1)
@@ -366,7 +382,7 @@ class ExtendedTracker:
                 line = antenna - (antenna - cfg.body_height_m) * ground[i] / max(ground[j], 1e-6)
                 depth = float(np.clip(line / cfg.body_height_m, 0.0, 1.0))
                 hidden[i] = max(hidden[i], share * depth)
-        return pd * (1.0 - hidden)
+        return pd * (1.0 - hidden), hidden == 0.0
 
     def _faces(self, radar: RadarSpec) -> tuple[FloatArray, FloatArray]:
         """Each track's face offset (T, 2) and spread (T, 2, 2) seen from the radar."""
@@ -645,11 +661,27 @@ class _Counts:
     """A radar's detections per group: of a reported object by range (mean), of clutter (mean).
 
     A body's count falls with range (its echo power) and varies with its aspect; the mean per
-    ``RANGE_BIN_M`` of ground range is learnt from the reported tracks' hits.
+    ``RANGE_BIN_M`` of ground range is learnt from the reported tracks' hits, and so is the
+    detection probability (the share of scans that detect a track surely there, in view and
+    hidden by none).
     """
 
     object_rate: FloatArray = field(default_factory=lambda: np.ones(RANGE_BINS))
     clutter_mean: float = 1.1
+    pd_hits: FloatArray = field(default_factory=lambda: np.zeros(RANGE_BINS))
+    pd_chances: FloatArray = field(default_factory=lambda: np.zeros(RANGE_BINS))
+
+    def pd_at(self, ground_m: float, declared: float) -> float:
+        """P_D at this ground range: hits over chances, the declared P_D worth ``PD_PRIOR``."""
+        k = min(int(ground_m / RANGE_BIN_M), RANGE_BINS - 1)
+        return float((self.pd_hits[k] + PD_PRIOR * declared) / (self.pd_chances[k] + PD_PRIOR))
+
+    def learn_detection(self, ground_m: float, hit: bool) -> None:
+        """Count a chance of detecting an object at this range, forgetting over ``PD_MEMORY``."""
+        k = min(int(ground_m / RANGE_BIN_M), RANGE_BINS - 1)
+        keep = 1.0 - 1.0 / PD_MEMORY
+        self.pd_hits[k] = keep * self.pd_hits[k] + float(hit)
+        self.pd_chances[k] = keep * self.pd_chances[k] + 1.0
 
     def rate_at(self, ground_m: float) -> float:
         """Mean detections of an object at this ground range [m]."""
@@ -665,6 +697,8 @@ class _Counts:
 
 RANGE_BIN_M = 10.0
 RANGE_BINS = 40
+PD_PRIOR = 20.0  # scans the declared P_D is worth against the learnt one
+PD_MEMORY = 2000.0  # scans the learnt P_D remembers
 
 
 def _empty_tracks(n_radars: int) -> dict[str, np.ndarray]:

@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..._typing import FloatArray
 from ..site.corridor import nearest_corridor
@@ -49,8 +50,8 @@ class CrossingArea:
         self.inside = inside.reshape(n, n)
         self.rails = site.rails
 
-    def touches(self, centre: FloatArray, heading_rad: FloatArray, length_m: FloatArray,
-                width_m: FloatArray) -> np.ndarray:  # fmt: skip
+    def touches(self, centre: ArrayLike, heading_rad: ArrayLike, length_m: ArrayLike,
+                width_m: ArrayLike) -> np.ndarray:  # fmt: skip
         """Whether each box's centre or a corner lies in the area (boxes (N, 2) ... (N,))."""
         centre = np.asarray(centre, float).reshape(-1, 2)
         h = np.asarray(heading_rad, float).reshape(-1)
@@ -65,7 +66,7 @@ class CrossingArea:
         ok = (ij >= 0).all(axis=-1) & (ij < n).all(axis=-1)
         hit = np.zeros(ok.shape, bool)
         hit[ok] = self.inside[ij[ok][:, 0], ij[ok][:, 1]]
-        return hit.any(axis=1)
+        return np.asarray(hit.any(axis=1), bool)
 
     def on_rails(self, centre: FloatArray) -> bool:
         """Whether a point lies within ``RAIL_CORRIDOR_M`` of the rails' axis (no rails: False)."""
@@ -96,7 +97,9 @@ class ClearanceMonitor:
                length: FloatArray, width: FloatArray) -> None:  # fmt: skip
         """Take the reported objects after a scan; raise an event when the state changes."""
         train = self.train_due(time_s)
-        touching = self.area.touches(centres, heading, length, width) if ids.size else []
+        touching = (
+            self.area.touches(centres, heading, length, width) if ids.size else np.zeros(0, bool)
+        )
         inside = [
             k for k in np.flatnonzero(touching)
             if not (train and self.area.on_rails(centres[k]))
