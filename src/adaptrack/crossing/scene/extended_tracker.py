@@ -18,23 +18,30 @@ this one takes its behaviour from three models:
   points' lever arms. Length and width follow the detections' spread along and across
   (moment matching, rate ``extent_learning_rate``) where a scan gives three or more.
 - **Existence**: every track carries the probability that an object stands behind it
-  (:mod:`adaptrack.tracking.existence`): a scan that should have seen it (the radar's P_D at
-  its range, less the share hidden behind nearer tracks in 3-D from the antenna's height)
-  and did not lowers it, a detection raises it by its likelihood against the clutter density
-  that each radar's :class:`~adaptrack.tracking.ClutterMap` learns online from the detections
-  no track explains. A group of unexplained detections (single link within
-  ``cluster_gap_m``) opens a track at the birth / (birth + clutter) share. A track is
-  reported once its existence reaches ``report_existence`` and its speed is known to
-``report_speed_std_mps`` (along its velocity; the worst axis when slower than 1 m/s),
-and while it stays above
-``keep_existence``, kept through standstills and
-  occlusions of any length while it is not contradicted, and dropped below
-  ``drop_existence`` or once its position is known worse than ``lost_position_std_m``.
+  (:mod:`adaptrack.tracking.existence`): a scan that should have seen it and did not lowers
+  it, a detection raises it by its likelihood against the clutter density that each radar's
+  :class:`~adaptrack.tracking.clutter_map.ClutterMap` learns online from the detections no
+  track explains, and by its detection count (negative binomial, rate learnt per track,
+  radar and range, against a clutter group's). The P_D of a scan is learnt per radar and
+  range (the declared curve as the prior), times the share of the track's reflection point
+  in view, less its share hidden behind nearer tracks in 3-D from the antenna's height. A
+  group of unexplained detections (single link within ``cluster_gap_m``) opens a track at
+  the birth / (birth + clutter) share. A track is reported once its existence reaches
+  ``report_existence`` and its speed is known to ``report_speed_std_mps`` (along its
+  velocity; the worst axis when slower than 1 m/s), and while it stays above
+  ``keep_existence``, kept through standstills and occlusions of any length while it is not
+  contradicted, and dropped below ``drop_existence`` or once its position is known worse
+  than ``lost_position_std_m``.
 
-Two tracks on one body (one's centre within the other's box, velocities alike within
-``same_body_sigmas``) are one object: the younger is dropped. Every detection is accounted for
-(:class:`ExtendedLog`). Status: confirmed (detected within ``COASTING_S``), coasting, or
-stopped (slower than ``stopped_speed_mps``); ``moved`` once faster than ``moved_speed_mps``.
+Two tracks whose boxes overlap and whose velocities agree within ``same_body_sigmas`` (and a
+rigid body's turn) follow one body: the younger is dropped. With the empty site's background
+(:mod:`.background`) a stationary detection on a known reflector is the reflector's unless a
+track explains it better or an object is found standing on it. After every scan the
+crossing's clear / not-clear state is updated from every track as likely as a reported one
+(:mod:`.occupancy`), and each reported track gets a class with its probability
+(:mod:`.road_user_class`). Every detection is accounted for (:class:`ExtendedLog`). Status:
+confirmed (detected within ``COASTING_S``), coasting, or stopped (slower than
+``stopped_speed_mps``); ``moved`` once faster than ``moved_speed_mps``.
 This tracker is NumPy, one scan per call.
 """
 
