@@ -10,10 +10,14 @@ import time
 import tracemalloc
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from . import peers
+
+if TYPE_CHECKING:
+    from adaptrack.crossing.studies.scene_metrics import SceneScore
 
 Impl = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
@@ -428,7 +432,6 @@ def scene(quick: bool) -> list[Result]:
     from adaptrack.crossing.scene.tracker import track_scene
     from adaptrack.crossing.simulation.scene import scene_spec, simulate_scene
     from adaptrack.crossing.site.model import load_site
-    from adaptrack.crossing.studies.scene_metrics import score_scene
 
     from .scene_peer import stonesoup_scene
 
@@ -457,10 +460,8 @@ def scene(quick: bool) -> list[Result]:
             1,
         ),
     }
-    rows = []
-    for name, (run, repeats) in impls.items():
-        secs, tracks = best_time(run, repeats)
-        sc = score_scene(rec.truth, tracks, site.zone_m)
+
+    def describe(name: str, sc: SceneScore) -> str:
         by_class = sc.classes.set_index("class") if len(sc.classes) else None
         cars = by_class["coverage"].get("car", np.nan) if by_class is not None else np.nan
         if name == "adaptrack" and cars < 0.9:  # (NaN: no car reached the zone)
@@ -471,18 +472,35 @@ def scene(quick: bool) -> list[Result]:
             if by_class is not None
             else "no road user in the zone"
         )
+        return f"id switches {sc.id_switches}, car coverage {cars:.2f}, {worst}"
+
+    return _scene_results("scene", impls, rec, site.zone_m, n_scans, duration, describe)
+
+
+def _scene_results(
+    workload: str,
+    impls: dict[str, tuple[Callable[[], Any], int]],
+    rec: Any,
+    zone_m: float,
+    n_scans: int,
+    duration: float,
+    describe: Callable[[str, SceneScore], str],
+) -> list[Result]:
+    """Time each tracker of a scene, score its tracks on the truth (GOSPA and ``describe``)."""
+    from adaptrack.crossing.studies.scene_metrics import score_scene
+
+    rows = []
+    for name, (run, repeats) in impls.items():
+        secs, tracks = best_time(run, repeats)
+        sc = score_scene(rec.truth, tracks, zone_m)
         rows.append(
             Result(
-                "scene",
-                name,
-                secs / n_scans * 1e6,
-                n_scans / secs,
+                workload, name, secs / n_scans * 1e6, n_scans / secs,
                 f"{duration:.0f} s, {n_scans} scans ({duration / secs:.0f}x real time); GOSPA "
                 f"{sc.gospa_mean:.2f} (GOSPA^2 parts: loc {sc.gospa_localisation:.2f}, missed "
-                f"{sc.gospa_missed:.2f}, false {sc.gospa_false:.2f}), id switches "
-                f"{sc.id_switches}, car coverage {cars:.2f}, {worst}",
+                f"{sc.gospa_missed:.2f}, false {sc.gospa_false:.2f}), {describe(name, sc)}",
             )
-        )
+        )  # fmt: skip
     return rows
 
 
@@ -500,7 +518,6 @@ def scene_faces(quick: bool) -> list[Result]:
     from adaptrack.crossing.simulation.scene import scene_spec, simulate_scene
     from adaptrack.crossing.site.model import load_site
     from adaptrack.crossing.studies.clearance import empty_background
-    from adaptrack.crossing.studies.scene_metrics import score_scene
 
     from .scene_peer import stonesoup_scene
 
@@ -531,21 +548,12 @@ def scene_faces(quick: bool) -> list[Result]:
             1,
         ),
     }
-    rows = []
-    for name, (run, repeats) in impls.items():
-        secs, tracks = best_time(run, repeats)
-        sc = score_scene(rec.truth, tracks, site.zone_m)
-        rows.append(
-            Result(
-                "scene_faces", name, secs / n_scans * 1e6, n_scans / secs,
-                f"{duration:.0f} s, {n_scans} scans ({duration / secs:.0f}x real time); GOSPA "
-                f"{sc.gospa_mean:.2f} (loc {sc.gospa_localisation:.2f}, missed "
-                f"{sc.gospa_missed:.2f}, false {sc.gospa_false:.2f}), {sc.users_meeting()} of "
-                f"{len(sc.users)} road users within 0.7 m / 2 km/h, {sc.false_tracks} false "
-                f"tracks",
-            )
-        )  # fmt: skip
-    return rows
+
+    def describe(name: str, sc: SceneScore) -> str:
+        return (f"{sc.users_meeting()} of {len(sc.users)} road users within 0.7 m / 2 km/h, "
+                f"{sc.false_tracks} false tracks")  # fmt: skip
+
+    return _scene_results("scene_faces", impls, rec, site.zone_m, n_scans, duration, describe)
 
 
 def memory(quick: bool) -> list[Result]:

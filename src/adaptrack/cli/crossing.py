@@ -576,7 +576,7 @@ def track(
         None,
         "--background",
         help="The empty site's background map of 'adaptrack site background' (extended "
-        "tracker): standing tracks no busier than it are reported static.",
+        "tracker): stationary detections on its reflectors are the background's.",
     ),
     trains: Path | None = typer.Option(
         None,

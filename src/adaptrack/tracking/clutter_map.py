@@ -41,7 +41,12 @@ class ClutterMap:
         return 1.0 - 1.0 / self.memory_scans
 
     def _cells(self, xy: FloatArray) -> np.ndarray:
-        return np.floor(np.asarray(xy, float).reshape(-1, 2) / self.cell_m).astype(np.int64)
+        """Return the cells (N, 2) of ground points (N, 2); a non-finite point is an error."""
+        pts = np.asarray(xy, float).reshape(-1, 2)
+        if not np.isfinite(pts).all():
+            row = int(np.argwhere(~np.isfinite(pts))[0, 0])
+            raise ValueError(f"ClutterMap: point {row} is not finite: {pts[row].tolist()}")
+        return np.floor(pts / self.cell_m).astype(np.int64)
 
     def density(self, xy: FloatArray) -> FloatArray:
         """Clutter density at ground points (N, 2) [per m^2 per scan]."""

@@ -28,6 +28,7 @@ from scipy.ndimage import label, maximum_filter
 
 from ..._typing import FloatArray
 from ..site.model import Site
+from .detection_table import check_detection_table
 
 
 @dataclass(frozen=True, eq=False)
@@ -44,6 +45,13 @@ class BackgroundMap:
     reflector_mean: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))  # (K, 2) [m]
     reflector_cov: FloatArray = field(default_factory=lambda: np.zeros((0, 2, 2)))  # [m^2]
     reflector_rate: FloatArray = field(default_factory=lambda: np.zeros(0))  # per scan
+
+    def reflectors_seen_by(self, radar: str) -> np.ndarray:
+        """Return the indices (into ``reflector_*``) of the reflectors learnt for a radar."""
+        if radar not in self.radars:
+            return np.zeros(0, np.int64)
+        found = np.unique(self.regions[self.radars.index(radar)])
+        return found[found > 0] - 1
 
     def reflector_of(self, radar: str, xy: FloatArray) -> np.ndarray:
         """Return the reflector (index into ``reflector_*``) holding each point; -1: none."""
@@ -122,6 +130,7 @@ def learn_background(
     """
     if not (np.isfinite(cell_m) and cell_m > 0):
         raise ValueError(f"cell_m must be finite and > 0; got {cell_m}")
+    check_detection_table(detections)
     radars = {r.name: r for r in site.radars}
     unknown = sorted(set(detections["radar"].astype(str)) - set(radars))
     if unknown:

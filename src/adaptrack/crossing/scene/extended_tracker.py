@@ -64,6 +64,7 @@ from ..site.model import Site
 from ..site.sensor import RadarSpec
 from .background import BackgroundMap
 from .box_view import face_moments
+from .detection_table import check_detection_table
 from .occupancy import ClearanceMonitor
 from .road_user_class import class_names, class_probabilities
 from .tracker import EVENT_COLUMNS, ROW_COLUMNS, STATUS_NAMES, scan_arrays
@@ -170,7 +171,12 @@ _TRACK_FIELDS = (
 
 
 class ExtendedTracker:
-    """Incremental tracker of one site (module docstring): ``step`` a scan, ``rows`` after."""
+    """Incremental tracker of one site (module docstring).
+
+    ``step`` processes a scan; ``last_columns`` (or ``columns(time_s)``) holds the reported
+    tracks after it, ``clearance.events`` the crossing's events and ``log`` the detections'
+    outcomes.
+    """
 
     def __init__(
         self,
@@ -185,9 +191,8 @@ class ExtendedTracker:
         n_reflectors = 0 if background is None else background.reflector_rate.size
         self._reflector_cusum = np.zeros(n_reflectors)  # object-on-reflector test [nats]
         self._reflectors_of = {
-            r.name: (np.setdiff1d(np.unique(background.regions[background.radars.index(r.name)]),
-                                  [0]) - 1 if background is not None and r.name in background.radars
-                     else np.zeros(0, np.int64))
+            r.name: background.reflectors_seen_by(r.name) if background is not None
+            else np.zeros(0, np.int64)
             for r in site.radars
         }  # fmt: skip
         self.config = cfg = config or ExtendedTrackerConfig()
@@ -224,7 +229,14 @@ class ExtendedTracker:
                 f"radar {radar_name!r}: scan at {time_s} s is not after its previous scan at "
                 f"{self._last_stamp[radar_name]} s"
             )
-        z = np.asarray(z, float).reshape(-1, 3)
+        z = np.asarray(z, float)
+        if z.size == 0:
+            z = z.reshape(0, 3)
+        if z.ndim != 2 or z.shape[1] != 3:
+            raise ValueError(
+                f"radar {radar_name!r} at {time_s} s: detections must be (n, 3) (range_m, "
+                f"azimuth_rad, radial_speed_mps); got shape {z.shape}"
+            )
         if not np.isfinite(z).all():
             raise ValueError(f"radar {radar_name!r} at {time_s} s: a detection is not finite")
         self._last_stamp[radar_name] = time_s
@@ -265,7 +277,7 @@ class ExtendedTracker:
                                  z[mine, 2], offset[i], spread[i], clutter)  # fmt: skip
             n_mine = int(mine.sum())
             rate = t["rate"][i, r_index]
-            ground = float(np.hypot(*(t["x"][i, :2] - radar.position_m)))
+            ground = _ground_range(t["x"][i, :2], radar)
             ratio *= count_ratio(n_mine, counts.rate_at(ground) if np.isnan(rate) else rate,
                                  cfg.count_shape, counts.clutter_mean)  # fmt: skip
             t["rate"][i, r_index] = n_mine if np.isnan(rate) else rate + cfg.count_learning_rate * (
@@ -280,34 +292,9 @@ class ExtendedTracker:
         self.log.background += int((owner == BACKGROUND).sum())
         missed = seen & ~hit
         for i in np.flatnonzero(learns):
-            counts.learn_detection(float(np.hypot(*(t["x"][i, :2] - radar.position_m))),
-                                   bool(hit[i]))  # fmt: skip
+            counts.learn_detection(_ground_range(t["x"][i, :2], radar), bool(hit[i]))
         t["existence"][missed] = after_miss(t["existence"][missed], pd[missed])
-        left = np.flatnonzero(owner == -1)
-        groups = cluster_points(g[left], cfg.cluster_gap_m) if left.size else np.zeros(0, int)
-        centres = np.array([g[left[groups == k]].mean(axis=0) for k in np.unique(groups)])
-        if left.size:
-            density = clutter.density(centres) / cfg.clutter_doppler_span_mps
-            for k, centre_density in zip(np.unique(groups), density, strict=True):
-                rows = left[groups == k]
-                r0 = float(at_birth(cfg.birth_density / cfg.clutter_doppler_span_mps,
-                                    centre_density))  # fmt: skip
-                ground = float(np.hypot(*(centres[k] - radar.position_m)))
-                odds = (
-                    r0
-                    / (1.0 - r0)
-                    * float(
-                        count_ratio(
-                            rows.size, counts.rate_at(ground), cfg.count_shape, counts.clutter_mean
-                        )
-                    )
-                )
-                self._open(radar, t_scan, g[rows], g_cov[rows], a[rows], v_var[rows], z[rows, 2],
-                           odds / (1.0 + odds))  # fmt: skip
-                counts.learn_clutter(rows.size, cfg.count_learning_rate)
-                self.log.opened += 1
-                self.log.joined_new += rows.size - 1
-        clutter.end_scan(centres if left.size else np.zeros((0, 2)))
+        self._births(radar, t_scan, np.flatnonzero(owner == -1), g, g_cov, a, v_var, z[:, 2])
         self._prune()
         self.last_columns = self.columns(t_scan)
         # occupancy needs an object's presence and place, not its speed: every track as
@@ -320,6 +307,35 @@ class ExtendedTracker:
         self.clearance.update(t_scan, t["track_id"][rows], t["x"][rows, :2],
                               t["heading_rad"][rows], t["extent"][rows, 0],
                               t["extent"][rows, 1])  # fmt: skip
+
+    def _births(self, radar, t_scan, left, g, g_cov, a, v_var, vr):  # type: ignore[no-untyped-def]
+        """Open a track on each group of the scan's unexplained detections ``left``.
+
+        Its existence: the birth / (birth + clutter) share at the group's centre, times the
+        odds of its detection count; the groups are counted in the radar's clutter map.
+        """
+        cfg = self.config
+        clutter, counts = self._clutter[radar.name], self._counts[radar.name]
+        groups = cluster_points(g[left], cfg.cluster_gap_m) if left.size else np.zeros(0, int)
+        labels = np.unique(groups)
+        centres = np.array([g[left[groups == k]].mean(axis=0) for k in labels]).reshape(-1, 2)
+        density = clutter.density(centres) / cfg.clutter_doppler_span_mps
+        birth = cfg.birth_density / cfg.clutter_doppler_span_mps
+        for k, centre, centre_density in zip(labels, centres, density, strict=True):
+            rows = left[groups == k]
+            r0 = float(at_birth(birth, centre_density))
+            rate = counts.rate_at(_ground_range(centre, radar))
+            odds = (
+                r0
+                / (1.0 - r0)
+                * float(count_ratio(rows.size, rate, cfg.count_shape, counts.clutter_mean))
+            )
+            self._open(radar, t_scan, g[rows], g_cov[rows], a[rows], v_var[rows], vr[rows],
+                       odds / (1.0 + odds))  # fmt: skip
+            counts.learn_clutter(rows.size, cfg.count_learning_rate)
+            self.log.opened += 1
+            self.log.joined_new += rows.size - 1
+        clutter.end_scan(centres)
 
     def _predict(self, t_scan: float) -> None:
         """Predict every track to the scan time (motion and survival)."""
@@ -611,8 +627,7 @@ class ExtendedTracker:
         own = bg.density(reflector, g)
         for k in self._reflectors_of[radar.name]:
             here = still & (reflector == k)
-            ground = float(np.hypot(*(bg.reflector_mean[k] - radar.position_m)))
-            m = max(counts.rate_at(ground), 0.5)
+            m = max(counts.rate_at(_ground_range(bg.reflector_mean[k], radar)), 0.5)
             beside = m / (math.pi * OBJECT_REACH_M**2)
             llr = float(np.log1p(beside / np.maximum(own[here], 1e-300)).sum()) - m
             self._reflector_cusum[k] = min(max(self._reflector_cusum[k] + llr, 0.0),
@@ -695,15 +710,19 @@ class _Counts:
         return float(self.object_rate[min(int(ground_m / RANGE_BIN_M), RANGE_BINS - 1)])
 
     def learn_object(self, n: int, ground_m: float, rate: float) -> None:
+        """Move the mean count at this range towards ``n`` (a track's ``rate``, shared)."""
         k = min(int(ground_m / RANGE_BIN_M), RANGE_BINS - 1)
-        self.object_rate[k] += rate * 0.1 * (n - self.object_rate[k])
+        self.object_rate[k] += rate * RADAR_SHARE * (n - self.object_rate[k])
 
     def learn_clutter(self, n: int, rate: float) -> None:
-        self.clutter_mean = max(self.clutter_mean + rate * 0.1 * (n - self.clutter_mean), 1.01)
+        """Move a clutter group's mean count towards ``n`` (at least 1.01: mostly singles)."""
+        step = rate * RADAR_SHARE * (n - self.clutter_mean)
+        self.clutter_mean = max(self.clutter_mean + step, 1.01)
 
 
 RANGE_BIN_M = 10.0
 RANGE_BINS = 40
+RADAR_SHARE = 0.1  # a radar's mean counts learn at this share of a track's learning rate
 PD_PRIOR = 20.0  # scans the declared P_D is worth against the learnt one
 PD_MEMORY = 2000.0  # scans the learnt P_D remembers
 
@@ -735,6 +754,11 @@ def _unit(v: FloatArray) -> FloatArray:
 def _antenna_height(radar: RadarSpec, cfg: ExtendedTrackerConfig) -> float:
     """Return the antenna's height above the road [m]."""
     return cfg.antenna_height_m if cfg.antenna_height_m is not None else radar.height_m + 0.5
+
+
+def _ground_range(xy: FloatArray, radar: RadarSpec) -> float:
+    """Return the ground distance [m] from the radar to a point (2,)."""
+    return float(np.hypot(*(np.asarray(xy) - radar.position_m)))
 
 
 def _unfold(dv: FloatArray, radar: RadarSpec) -> FloatArray:
@@ -781,6 +805,7 @@ def track_scene_extended(
     site's reflectors (:mod:`.background`); ``train_intervals`` (K, 2): when the controller
     has a train due [s].
     """
+    check_detection_table(detections)
     tracker = ExtendedTracker(site, config, background, train_intervals)
     names, radar, stamps, starts, z, _ = scan_arrays(
         detections, {r.name: r.latency_s for r in site.radars}

@@ -83,9 +83,17 @@ class ClearanceMonitor:
 
     def __init__(self, site: Site, train_intervals: FloatArray | None = None) -> None:
         self.area = CrossingArea(site)
-        self.trains = np.asarray([] if train_intervals is None else train_intervals, float).reshape(
-            -1, 2
-        )
+        trains = np.asarray([] if train_intervals is None else train_intervals, float)
+        if trains.size and (trains.ndim != 2 or trains.shape[1] != 2):
+            raise ValueError(f"train intervals must be (K, 2) (start_s, end_s); got {trains.shape}")
+        self.trains = trains.reshape(-1, 2)
+        bad = ~(np.isfinite(self.trains).all(axis=1) & (self.trains[:, 0] < self.trains[:, 1]))
+        if bad.any():
+            k = int(np.argmax(bad))
+            raise ValueError(
+                f"train interval {k}: expected finite start_s < end_s; "
+                f"got {self.trains[k].tolist()}"
+            )
         self.occupant: int | None = None  # track id of the object that made it not clear
         self.events: list[dict[str, object]] = []
 
