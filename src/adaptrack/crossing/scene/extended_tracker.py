@@ -42,7 +42,8 @@ crossing's clear / not-clear state is updated from every track as likely as a re
 (:mod:`.road_user_class`). Every detection is accounted for (:class:`ExtendedLog`). Status:
 confirmed (detected within ``COASTING_S``), coasting, or stopped (slower than
 ``stopped_speed_mps``); ``moved`` once faster than ``moved_speed_mps``.
-This tracker is NumPy, one scan per call.
+This class is the NumPy reference, one scan per call; :func:`track_scene_extended` runs the
+same computation compiled, many scans per call (:mod:`.extended_loop`).
 """
 
 from __future__ import annotations
@@ -61,11 +62,12 @@ from ...tracking import cluster_points, gate_threshold
 from ...tracking.clutter_map import ClutterMap
 from ...tracking.existence import after_hit, after_miss, at_birth, count_ratio, survive
 from ..site.model import Site
-from ..site.sensor import RadarSpec
+from ..site.sensor import RadarSpec, curve_tables
 from .background import BackgroundMap
 from .box_view import face_moments
 from .detection_table import check_detection_table
-from .occupancy import ClearanceMonitor
+from .extended_loop import CFG_FIELDS, N_ROW_F, ROW_F_FIELDS, TRACK_ARRAYS, run_scans
+from .occupancy import AREA_CELL_M, EVENT_CLEAR, EVENT_NOT_CLEAR, RAIL_CORRIDOR_M, ClearanceMonitor
 from .road_user_class import class_names, class_probabilities
 from .tracker import EVENT_COLUMNS, ROW_COLUMNS, STATUS_NAMES, scan_arrays
 
@@ -278,8 +280,9 @@ class ExtendedTracker:
             n_mine = int(mine.sum())
             rate = t["rate"][i, r_index]
             ground = _ground_range(t["x"][i, :2], radar)
-            ratio *= count_ratio(n_mine, counts.rate_at(ground) if np.isnan(rate) else rate,
-                                 cfg.count_shape, counts.clutter_mean)  # fmt: skip
+            with np.errstate(over="ignore"):  # an infinite ratio: surely an object (after_hit)
+                ratio *= count_ratio(n_mine, counts.rate_at(ground) if np.isnan(rate) else rate,
+                                     cfg.count_shape, counts.clutter_mean)  # fmt: skip
             t["rate"][i, r_index] = n_mine if np.isnan(rate) else rate + cfg.count_learning_rate * (
                 n_mine - rate)  # fmt: skip
             if t["reported"][i]:
@@ -587,7 +590,9 @@ class ExtendedTracker:
             return out
         length, width = t["extent"][:, 0], t["extent"][:, 1]
         reach = float(length.max())
-        for i, j in cKDTree(x[:, :2]).query_pairs(reach, output_type="ndarray").tolist():
+        pairs = cKDTree(x[:, :2]).query_pairs(reach, output_type="ndarray")
+        pairs = pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]  # in order: i, then j
+        for i, j in pairs.tolist():
             older, younger = (i, j) if t["born_s"][i] <= t["born_s"][j] else (j, i)
             if out[older] or out[younger]:
                 continue
@@ -796,6 +801,7 @@ def track_scene_extended(
     on_scan: Callable[[int, int], None] | None = None,
     background: BackgroundMap | None = None,
     train_intervals: FloatArray | None = None,
+    reference: bool = False,
 ) -> tuple[pd.DataFrame, pd.DataFrame, ExtendedLog]:
     """Track a detection table scan by scan; return the reported tracks of every scan and the log.
 
@@ -803,13 +809,20 @@ def track_scene_extended(
     straight distance from the crossing centre, the track not being tied to a road) and
     :data:`EXTRA_COLUMNS`; the events are :mod:`.occupancy`'s. ``background``: the empty
     site's reflectors (:mod:`.background`); ``train_intervals`` (K, 2): when the controller
-    has a train due [s].
+    has a train due [s]. The scans run in the compiled loop (:mod:`.extended_loop`, many
+    scans per call); ``reference=True`` runs :class:`ExtendedTracker` one scan per call
+    instead (the NumPy reference it equals).
     """
     check_detection_table(detections)
     tracker = ExtendedTracker(site, config, background, train_intervals)
     names, radar, stamps, starts, z, _ = scan_arrays(
         detections, {r.name: r.latency_s for r in site.radars}
     )
+    unknown = sorted(set(names) - set(tracker._radars))
+    if unknown:
+        raise ValueError(f"unknown radar {unknown[0]!r}; the site has {sorted(tracker._radars)}")
+    if not reference:
+        return _track_compiled(tracker, names, radar, stamps, starts, z, on_scan)
     out: list[dict[str, np.ndarray]] = []
     n_scans = stamps.size
     for k in range(n_scans):
@@ -819,11 +832,204 @@ def track_scene_extended(
             on_scan(k + 1, n_scans)
     keys = [*ROW_COLUMNS, *EXTRA_COLUMNS]
     table = {k: np.concatenate([o[k] for o in out]) if out else np.zeros(0) for k in keys}
-    frame = pd.DataFrame(table)
+    return (_track_frame(table), pd.DataFrame(tracker.clearance.events, columns=EVENT_COLUMNS),
+            tracker.log)  # fmt: skip
+
+
+def _track_frame(table: dict[str, np.ndarray]) -> pd.DataFrame:
+    """Return the track table of the columns ``table`` (``status`` as named categories)."""
+    frame = pd.DataFrame({k: table[k] for k in [*ROW_COLUMNS, *EXTRA_COLUMNS]})
     frame["status"] = pd.Categorical.from_codes(
         frame["status"].astype(int), categories=STATUS_NAMES
     )
-    return frame, pd.DataFrame(tracker.clearance.events, columns=EVENT_COLUMNS), tracker.log
+    return frame
+
+
+SCANS_PER_CALL = 2000  # scans per compiled call (progress between calls)
+
+
+def _track_compiled(  # type: ignore[no-untyped-def]
+    tracker: ExtendedTracker, names, radar, stamps, starts, z, on_scan
+) -> tuple[pd.DataFrame, pd.DataFrame, ExtendedLog]:
+    """Run the scans through :func:`.extended_loop.run_scans` from ``tracker``'s initial state."""
+    site_index = [tracker._radar_index[name] for name in names]
+    scan_radar = np.asarray(site_index, np.int64)[radar] if radar.size else np.zeros(0, np.int64)
+    specs = list(tracker._radars.values())
+    latency = np.array([r.latency_s for r in specs])
+    scan_time = stamps - latency[scan_radar] if stamps.size else np.zeros(0)
+    arrays = _CompiledState(tracker)
+    n_scans, k = stamps.size, 0
+    rows = arrays.rows(n_scans)
+    while k < n_scans:
+        stop = min(k + SCANS_PER_CALL, n_scans)
+        reached = run_scans(k, stop, scan_radar, scan_time, starts, z, arrays.tracks,
+                            arrays.state, arrays.log, arrays.radars, arrays.learnt,
+                            arrays.clutter, arrays.background, arrays.has_background,
+                            arrays.scene, arrays.cfg, *rows)  # fmt: skip
+        if reached < stop:
+            need = int(starts[reached + 1] - starts[reached])
+            arrays.grow(need)
+            rows = arrays.grow_rows(rows, need)
+        elif on_scan is not None:
+            on_scan(stop, n_scans)
+        k = reached
+    return arrays.result(rows)
+
+
+class _CompiledState:
+    """The arrays of :mod:`.extended_loop` built from a new tracker, and the result from them."""
+
+    def __init__(self, tracker: ExtendedTracker) -> None:
+        cfg = tracker.config
+        specs = list(tracker._radars.values())
+        values = {f.name: getattr(cfg, f.name) for f in fields(cfg)}
+        values.update(
+            gate=tracker._gate, extent_floor_m=EXTENT_FLOOR_M, object_reach_m=OBJECT_REACH_M,
+            coasting_s=COASTING_S, range_bin_m=RANGE_BIN_M, radar_share=RADAR_SHARE,
+            pd_prior=PD_PRIOR, pd_memory=PD_MEMORY,
+            clutter_prior_scans=next(iter(tracker._clutter.values())).prior_scans,
+            area_cell_m=AREA_CELL_M,
+        )  # fmt: skip
+        self.cfg = np.array([float(values[name]) for name in CFG_FIELDS])
+        n_r = len(specs)
+        n_f = max(len(r.fields) for r in specs)
+        fields_table = np.zeros((n_r, n_f, 2))
+        for i, r in enumerate(specs):
+            fields_table[i, : len(r.fields)] = r.field_table()
+        noise = [r.noise_table() for r in specs]
+        pd_curves = [curve_tables((r.detection_curve("default"),)) for r in specs]
+        k_noise = max(t.shape[-1] for t, _ in noise)
+        k_pd = max(t.shape[-1] for t, _ in pd_curves)
+        noise_table = np.zeros((n_r, 3, 2, k_noise))
+        pd_table = np.zeros((n_r, 1, 2, k_pd))
+        for i in range(n_r):
+            noise_table[i, :, :, : noise[i][0].shape[-1]] = noise[i][0]
+            pd_table[i, :, :, : pd_curves[i][0].shape[-1]] = pd_curves[i][0]
+        self.radars = (
+            np.array([r.kernel_row() for r in specs]),
+            fields_table,
+            np.array([len(r.fields) for r in specs], np.int64),
+            noise_table,
+            np.array([n for _, n in noise], np.int64),
+            pd_table,
+            np.array([n for _, n in pd_curves], np.int64),
+            np.array([_antenna_height(r, cfg) for r in specs]),
+        )
+        counts = [tracker._counts[r.name] for r in specs]
+        self.learnt = (
+            np.array([c.object_rate for c in counts]),
+            np.array([c.clutter_mean for c in counts]),
+            np.array([c.pd_hits for c in counts]),
+            np.array([c.pd_chances for c in counts]),
+        )
+        cell = cfg.clutter_cell_m
+        first = np.array([np.floor((np.asarray(r.position_m) - r.max_range_m) / cell) - 1
+                          for r in specs]).astype(np.int64)  # fmt: skip
+        span = max(math.ceil(2 * r.max_range_m / cell) + 3 for r in specs)
+        self.clutter = (np.zeros((n_r, span, span)), np.zeros((n_r, span, span), np.int64),
+                        first, np.zeros(n_r, np.int64))  # fmt: skip
+        self.has_background = tracker.background is not None
+        self.background = _background_arrays(tracker, specs)
+        area = tracker.clearance.area
+        rails = area.rails
+        rails_row = (
+            np.array([0.0, 0.0, 0.0, 0.0, -1.0]) if rails is None else np.array([
+                *rails.centre_m, *rails.direction,
+                RAIL_CORRIDOR_M + 0.5 * (rails.tracks - 1) * rails.track_spacing_m,
+            ])
+        )  # fmt: skip
+        self.scene = (
+            np.ascontiguousarray(tracker._lane_xy, dtype=float),
+            np.ascontiguousarray(tracker._lane_dir, dtype=float),
+            np.ascontiguousarray(area.inside), np.asarray(area.origin, float),
+            np.ascontiguousarray(tracker.clearance.trains, dtype=float), rails_row,
+        )  # fmt: skip
+        self.state = np.array([0, tracker._next_id, -1, 0, 0, 0], np.int64)
+        self.log = np.zeros(5, np.int64)
+        self.tracks = tuple(tracker._t[name] for name in TRACK_ARRAYS)
+        self.grow(64)
+
+    def grow(self, need: int) -> None:
+        """Make room for ``need`` more tracks than held (doubling)."""
+        held = int(self.state[0])
+        size = self.tracks[0].shape[0]
+        if held + need <= size and size:
+            return
+        new = max(2 * size, held + need, 64)
+        grown = []
+        for arr in self.tracks:
+            out = np.zeros((new, *arr.shape[1:]), arr.dtype)
+            out[:held] = arr[:held]
+            grown.append(out)
+        self.tracks = tuple(grown)
+
+    def rows(self, n_scans: int) -> tuple[FloatArray, np.ndarray, FloatArray]:
+        """Output arrays for a first guess of the rows (8 a scan) and events."""
+        size = max(8 * n_scans, 1024)
+        return np.zeros((size, N_ROW_F)), np.zeros((size, 3), np.int64), np.zeros((1024, 5))
+
+    def grow_rows(self, rows, need: int):  # type: ignore[no-untyped-def]
+        """Double the output arrays that could run out in the next scan."""
+        rows_f, rows_i, events = rows
+        held, written, n_events = (int(v) for v in self.state[[0, 3, 4]])
+        if written + held + need > rows_f.shape[0]:
+            size = 2 * rows_f.shape[0] + held + need
+            rows_f = np.concatenate([rows_f, np.zeros((size - rows_f.shape[0], N_ROW_F))])
+            rows_i = np.concatenate([rows_i, np.zeros((size - rows_i.shape[0], 3), np.int64)])
+        if n_events + 1 > events.shape[0]:
+            events = np.concatenate([events, np.zeros(events.shape)])
+        return rows_f, rows_i, events
+
+    def result(self, rows) -> tuple[pd.DataFrame, pd.DataFrame, ExtendedLog]:  # type: ignore[no-untyped-def]
+        """Return the track table, the events and the log of the run."""
+        rows_f, rows_i, events = rows
+        n_rows, n_events = int(self.state[3]), int(self.state[4])
+        f = dict(zip(ROW_F_FIELDS, rows_f[:n_rows].T, strict=True))
+        status_codes = np.array([_CONFIRMED, _COASTING, _STOPPED], np.int64)
+        names, chance = class_names(class_probabilities(
+            f["length_m"], f["length_var"], f["width_m"], f["width_var"], f["top_speed_mps"]
+        ))  # fmt: skip
+        table = {
+            "track_id": rows_i[:n_rows, 0], "time_s": f["time_s"], "east_m": f["east_m"],
+            "north_m": f["north_m"], "speed_mps": f["speed_mps"],
+            "east_speed_mps": f["east_speed_mps"], "north_speed_mps": f["north_speed_mps"],
+            "from_crossing_m": np.hypot(f["east_m"], f["north_m"]),
+            "status": status_codes[rows_i[:n_rows, 1]], "moved": rows_i[:n_rows, 2] > 0,
+            "position_std_m": f["position_std_m"], "speed_std_mps": f["speed_std_mps"],
+            "existence": f["existence"], "length_m": f["length_m"], "width_m": f["width_m"],
+            "heading_rad": f["heading_rad"], "class": names, "class_probability": chance,
+        }  # fmt: skip
+        ev = events[:n_events]
+        kinds = np.array([EVENT_NOT_CLEAR, EVENT_CLEAR], dtype=object)
+        event_frame = pd.DataFrame({
+            "time_s": ev[:, 0], "event": kinds[ev[:, 1].astype(int)],
+            "track_id": ev[:, 2].astype(np.int64), "east_m": ev[:, 3], "north_m": ev[:, 4],
+            "lead_s": np.full(n_events, np.nan),
+        }, columns=EVENT_COLUMNS)  # fmt: skip
+        log = ExtendedLog(*(int(v) for v in self.log))
+        return _track_frame(table), event_frame, log
+
+
+def _background_arrays(tracker: ExtendedTracker, specs: list[RadarSpec]) -> tuple[object, ...]:
+    """Return the background map's arrays for :mod:`.extended_loop` (empty without a map)."""
+    bg = tracker.background
+    n_r = len(specs)
+    if bg is None:
+        return (np.zeros((n_r, 1, 1), np.int64), np.zeros(2), 1.0, 0.5, np.zeros((0, 2)),
+                np.zeros((0, 2, 2)), np.zeros(0), np.zeros((n_r, 1), np.int64),
+                np.zeros(n_r, np.int64), tracker._reflector_cusum)  # fmt: skip
+    regions = np.zeros((n_r, *bg.regions.shape[1:]), np.int64)
+    seen = [tracker._reflectors_of[r.name] for r in specs]
+    seen_by = np.zeros((n_r, max(1, max(s.size for s in seen))), np.int64)
+    for i, r in enumerate(specs):
+        if r.name in bg.radars:
+            regions[i] = bg.regions[bg.radars.index(r.name)]
+        seen_by[i, : seen[i].size] = seen[i]
+    return (regions, np.asarray(bg.origin_m, float), float(bg.cell_m),
+            float(bg.static_speed_mps), np.ascontiguousarray(bg.reflector_mean, dtype=float),
+            np.ascontiguousarray(bg.reflector_cov, dtype=float),
+            np.ascontiguousarray(bg.reflector_rate, dtype=float), seen_by,
+            np.array([s.size for s in seen], np.int64), tracker._reflector_cusum)  # fmt: skip
 
 
 __all__ = ["EXTRA_COLUMNS", "ExtendedLog", "ExtendedTracker", "ExtendedTrackerConfig",
