@@ -91,6 +91,7 @@ DEMO_COMPILE_TIME = "3 min"  # measured: a fresh clone's demo (4.8 min) less a c
 
 
 TRACK_COMPILE_TIME = "1.5 min"  # the scene tracker's compiled loop and kernels (93 s, then 0.3 s)
+EXTENDED_COMPILE_TIME = "1 min"  # the extended tracker's compiled loop (69 s, then 0.6 s)
 
 
 def demo(
@@ -570,7 +571,7 @@ def track(
         "corridor",
         "--tracker",
         help="Scene tracker: 'corridor' (along the site's corridors, compiled) or 'extended' "
-        "(free 2-D motion, box extents, existence probabilities; NumPy).",
+        "(free 2-D motion, box extents, existence probabilities; compiled).",
     ),
     background: Path | None = typer.Option(
         None,
@@ -651,6 +652,7 @@ def _track_extended_file(
         intervals = read_warnings(trains) if trains is not None else None
     except (ValueError, OSError) as exc:
         _fail(str(exc))
+    announce_compilation(EXTENDED_COMPILE_TIME, "extended_loop.run_scans")
     with progress(Console(), "tracking (scans)") as bar:
         try:
             tracks, events_frame, log = track_scene_extended(

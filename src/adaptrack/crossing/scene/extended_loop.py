@@ -21,7 +21,7 @@ Layout of the arguments (built by :func:`.extended_tracker.track_scene_extended`
   each radar's reflectors (R, K) with counts (R,), and the CUSUM (K,); ``has_background``;
 - ``scene``: lane points (L, 2) and directions (L, 2), the crossing area raster (n, n), its
   origin (2,), the train intervals (T, 2), the rails row (centre x, y, direction x, y,
-  half width; half width < 0: no rails);
+  half width; half width < 0: no rails), the lane points' grid (:func:`lane_grid`);
 - ``state`` (int64): tracks held, next id, the crossing's occupant (-1: clear), rows and
   events written, scans done; ``log`` (5,): updated, opened, joined new, outside view,
   background;
@@ -231,16 +231,17 @@ def _predict(tracks, n, t_scan, cfg):  # type: ignore[no-untyped-def]
         x[i, 1] += b * vx + a * vy
         x[i, 2] = c * vx - s * vy
         x[i, 3] = s * vx + c * vy
+        # F P F^T over F's non-zeros: row r of F holds r and 2, 3, 4 (row 4: only 4)
         for r in range(5):
             for k in range(5):
-                acc = 0.0
-                for m in range(5):
+                acc = 0.0 if r >= 2 else p[i, r, k]
+                for m in range(2, 5):
                     acc += f[r, m] * p[i, m, k]
                 fp[r, k] = acc
         for r in range(5):
             for k in range(5):
-                acc = 0.0
-                for m in range(5):
+                acc = 0.0 if k >= 2 else fp[r, k]
+                for m in range(2, 5):
                     acc += fp[r, m] * f[k, m]
                 p[i, r, k] = acc
         q = cfg[ACCEL]
@@ -374,6 +375,24 @@ def _learn_extent(tracks, i, g, g_cov, rows, radar, cfg):  # type: ignore[no-unt
             extent_var[i, k] = (1.0 - rate) * extent_var[i, k] + rate * cfg[EXTENT_FLOOR] ** 2
 
 
+@_inline
+def _inverse3(s):  # type: ignore[no-untyped-def]
+    """Return the inverse of a 3 x 3 matrix (cofactors) and its determinant."""
+    c00 = s[1, 1] * s[2, 2] - s[1, 2] * s[2, 1]
+    c01 = s[1, 2] * s[2, 0] - s[1, 0] * s[2, 2]
+    c02 = s[1, 0] * s[2, 1] - s[1, 1] * s[2, 0]
+    det = s[0, 0] * c00 + s[0, 1] * c01 + s[0, 2] * c02
+    out = np.empty((3, 3))
+    out[0, 0], out[1, 0], out[2, 0] = c00 / det, c01 / det, c02 / det
+    out[0, 1] = (s[0, 2] * s[2, 1] - s[0, 1] * s[2, 2]) / det
+    out[1, 1] = (s[0, 0] * s[2, 2] - s[0, 2] * s[2, 0]) / det
+    out[2, 1] = (s[0, 1] * s[2, 0] - s[0, 0] * s[2, 1]) / det
+    out[0, 2] = (s[0, 1] * s[1, 2] - s[0, 2] * s[1, 1]) / det
+    out[1, 2] = (s[0, 2] * s[1, 0] - s[0, 0] * s[1, 2]) / det
+    out[2, 2] = (s[0, 0] * s[1, 1] - s[0, 1] * s[1, 0]) / det
+    return out, det
+
+
 @_njit
 def _update(tracks, i, rows, g, g_cov, a, v_var, vr, offset, spread, radar, r, cfg, clutter):  # type: ignore[no-untyped-def]
     """Update track ``i`` with its detections ``rows``; return their likelihood ratio."""
@@ -413,12 +432,20 @@ def _update(tracks, i, rows, g, g_cov, a, v_var, vr, offset, spread, radar, r, c
     innov = zb - predicted
     innov[2] = _unfold(innov[2], radar)
     pi = p[i]
-    ph = pi @ h.T
-    s = h @ ph + rm
-    s_inv = np.linalg.inv(s)
+    ph = np.empty((5, 3))  # P H^T (H: x, y and the radial-speed row)
+    for a_ in range(5):
+        ph[a_, 0], ph[a_, 1] = pi[a_, 0], pi[a_, 1]
+        ph[a_, 2] = pi[a_, 2] * h[2, 2] + pi[a_, 3] * h[2, 3] + pi[a_, 4] * h[2, 4]
+    s = np.empty((3, 3))
+    for b_ in range(3):
+        s[0, b_], s[1, b_] = ph[0, b_] + rm[0, b_], ph[1, b_] + rm[1, b_]
+        s[2, b_] = ph[2, b_] * h[2, 2] + ph[3, b_] * h[2, 3] + ph[4, b_] * h[2, 4] + rm[2, b_]
+    s_inv, det_s = _inverse3(s)
     k = ph @ s_inv
     x[i] += k @ innov
-    ikh = np.eye(5) - k @ h
+    ikh = -(k @ h)
+    for a_ in range(5):
+        ikh[a_, a_] += 1.0
     post = ikh @ pi @ ikh.T + k @ rm @ k.T
     p[i] = 0.5 * (post + post.T)
     if n >= 3:
@@ -430,14 +457,53 @@ def _update(tracks, i, rows, g, g_cov, a, v_var, vr, offset, spread, radar, r, c
         top_speed[i] = max(top_speed[i], speed)
     density = _clutter_density(zb[0], zb[1], r, cfg, clutter) / cfg[SPAN]
     d2 = innov @ s_inv @ innov
-    g_z = math.exp(-0.5 * d2) / math.sqrt((2 * math.pi) ** 3 * np.linalg.det(s))
+    g_z = math.exp(-0.5 * d2) / math.sqrt((2 * math.pi) ** 3 * det_s)
     return g_z / density
+
+
+@_njit
+def _nearest_lane(cx, cy, lanes, lane_index):  # type: ignore[no-untyped-def]
+    """Return the nearest lane point within one grid cell's reach (-1: none) and its distance.
+
+    ``lane_index``: the lane points bucketed in square cells (``lane_grid``); the cell of
+    the point and its eight neighbours hold every lane point within a cell's size of it. Of
+    equally near points the first is taken.
+    """
+    order, start, grid = lane_index
+    x0, y0, cell, nx, ny = grid[0], grid[1], grid[2], int(grid[3]), int(grid[4])
+    ci, cj = math.floor((cx - x0) / cell), math.floor((cy - y0) / cell)
+    best, best_d2 = -1, np.inf
+    for i in range(max(ci - 1, 0), min(ci + 2, nx)):
+        for j in range(max(cj - 1, 0), min(cj + 2, ny)):
+            for q in range(start[i * ny + j], start[i * ny + j + 1]):
+                k = order[q]
+                d2 = (lanes[k, 0] - cx) ** 2 + (lanes[k, 1] - cy) ** 2
+                if d2 < best_d2 or (d2 == best_d2 and k < best):
+                    best, best_d2 = k, d2
+    return best, math.sqrt(best_d2)
+
+
+def lane_grid(lanes: np.ndarray, cell_m: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Bucket lane points (L, 2) in square cells of ``cell_m`` for :func:`_nearest_lane`.
+
+    Returns the points' order by cell, each cell's first position in it (cells + 1,) and the
+    grid (x0, y0, cell, nx, ny).
+    """
+    if not len(lanes):
+        return np.zeros(0, np.int64), np.zeros(2, np.int64), np.array([0.0, 0.0, cell_m, 1, 1])
+    lo = lanes.min(axis=0)
+    ij = np.floor((lanes - lo) / cell_m).astype(np.int64)
+    nx, ny = int(ij[:, 0].max()) + 1, int(ij[:, 1].max()) + 1
+    key = ij[:, 0] * ny + ij[:, 1]
+    order = np.argsort(key, kind="stable").astype(np.int64)
+    start = np.searchsorted(key[order], np.arange(nx * ny + 1)).astype(np.int64)
+    return order, start, np.array([lo[0], lo[1], cell_m, nx, ny], float)
 
 
 @_njit
 def _open(  # type: ignore[no-untyped-def]
     tracks, n, next_id, rows, g, g_cov, a, v_var, vr, t_scan, existence0, radar, cfg, lanes,
-    lane_dir,
+    lane_dir, lane_index,
 ):  # fmt: skip
     """Open a track on a group of unexplained detections (``ExtendedTracker._open``)."""
     m = rows.size
@@ -456,11 +522,7 @@ def _open(  # type: ignore[no-untyped-def]
     am /= m
     vrm /= m
     vv /= m
-    best, best_d = -1, np.inf
-    for k in range(lanes.shape[0]):
-        d = math.hypot(lanes[k, 0] - cx, lanes[k, 1] - cy)
-        if d < best_d:
-            best, best_d = k, d
+    best, best_d = _nearest_lane(cx, cy, lanes, lane_index)
     along = best >= 0 and best_d <= cfg[LANE_PRIOR]
     if along:
         dx, dy = lane_dir[best, 0], lane_dir[best, 1]
@@ -898,7 +960,7 @@ def _births(  # type: ignore[no-untyped-def]
         odds = r0 / (1.0 - r0) * _count_ratio(float(rows.size), mean_rate, cfg[COUNT_SHAPE],
                                               clutter_mean[r])  # fmt: skip
         _open(tracks, state[N_TRACKS], state[NEXT_ID], rows, g, g_cov, a, v_var, vr, t_scan,
-              odds / (1.0 + odds), radar, cfg, scene[0], scene[1])  # fmt: skip
+              odds / (1.0 + odds), radar, cfg, scene[0], scene[1], scene[6])  # fmt: skip
         state[N_TRACKS] += 1
         state[NEXT_ID] += 1
         step = cfg[COUNT_RATE] * cfg[RADAR_SHARE] * (rows.size - clutter_mean[r])
@@ -938,4 +1000,4 @@ def run_scans(  # type: ignore[no-untyped-def]
     return k1
 
 
-__all__ = ["CFG_FIELDS", "N_ROW_F", "ROW_F_FIELDS", "TRACK_ARRAYS", "run_scans"]
+__all__ = ["CFG_FIELDS", "N_ROW_F", "ROW_F_FIELDS", "TRACK_ARRAYS", "lane_grid", "run_scans"]

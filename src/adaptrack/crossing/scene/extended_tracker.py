@@ -66,7 +66,14 @@ from ..site.sensor import RadarSpec, curve_tables
 from .background import BackgroundMap
 from .box_view import face_moments
 from .detection_table import check_detection_table
-from .extended_loop import CFG_FIELDS, N_ROW_F, ROW_F_FIELDS, TRACK_ARRAYS, run_scans
+from .extended_loop import (
+    CFG_FIELDS,
+    N_ROW_F,
+    ROW_F_FIELDS,
+    TRACK_ARRAYS,
+    lane_grid,
+    run_scans,
+)
 from .occupancy import AREA_CELL_M, EVENT_CLEAR, EVENT_NOT_CLEAR, RAIL_CORRIDOR_M, ClearanceMonitor
 from .road_user_class import class_names, class_probabilities
 from .tracker import EVENT_COLUMNS, ROW_COLUMNS, STATUS_NAMES, scan_arrays
@@ -943,6 +950,7 @@ class _CompiledState:
             np.ascontiguousarray(tracker._lane_dir, dtype=float),
             np.ascontiguousarray(area.inside), np.asarray(area.origin, float),
             np.ascontiguousarray(tracker.clearance.trains, dtype=float), rails_row,
+            lane_grid(tracker._lane_xy, cfg.lane_prior_m),
         )  # fmt: skip
         self.state = np.array([0, tracker._next_id, -1, 0, 0, 0], np.int64)
         self.log = np.zeros(5, np.int64)
