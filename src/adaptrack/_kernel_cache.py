@@ -10,8 +10,9 @@ install) a test or a benchmark after such an edit runs stale kernels and cannot 
 :func:`register` puts cache locators for a package's files in front of numba's own. Each is
 one of numba's, with the source stamp widened to the module's file and every module of the
 package it imports, directly or through others (``from .x import y``, ``from ..x import y``,
-``import pkg.x``; a name that is a submodule counts as imported). A kernel's cache is then
-reused only while none of those sources changed.
+``import pkg.x``; a name that is a submodule counts as imported, found by a scan of the
+source lines, so an import inside a function counts too). A kernel's cache is then reused
+only while none of those sources changed.
 
 A kernel's index names the types of its signatures; after a type is renamed or removed
 (a ``NamedTuple`` a kernel takes) numba cannot unpickle the index and fails. In the
@@ -21,10 +22,10 @@ index is rewritten.
 
 from __future__ import annotations
 
-import ast
 import hashlib
 import os
 import pickle
+import re
 from pathlib import Path
 from typing import Any
 
@@ -72,21 +73,18 @@ class _Package:
             return known[1]
         name = self.module_name(path)
         package = name if path.name == "__init__.py" else name.rpartition(".")[0]
-        found: set[Path] = set()
-        for node in ast.walk(ast.parse(path.read_bytes(), str(path))):
-            if isinstance(node, ast.ImportFrom):
-                if node.level:
-                    parts = package.split(".")
-                    parts = parts[: len(parts) - node.level + 1]
-                    target = ".".join([*parts, node.module] if node.module else parts)
-                else:
-                    target = node.module or ""
-                targets = [target, *(f"{target}.{alias.name}" for alias in node.names)]
-            elif isinstance(node, ast.Import):
-                targets = [alias.name for alias in node.names]
-            else:
-                continue
-            found.update(f for f in map(self.module_file, targets) if f is not None)
+        source = path.read_text(encoding="utf-8")
+        targets: list[str] = []
+        for dots, module, names in _FROM_IMPORT.findall(source):
+            if dots:
+                parts = package.split(".")
+                parts = parts[: len(parts) - len(dots) + 1]
+                module = ".".join([*parts, module] if module else parts)
+            targets.append(module)
+            targets.extend(f"{module}.{alias}" for alias in _aliases(names))
+        for names in _IMPORT.findall(source):
+            targets.extend(_aliases(names))
+        found = {f for f in map(self.module_file, targets) if f is not None}
         result = frozenset(found)
         self._imports[path] = (stamp, result)
         return result
@@ -116,6 +114,18 @@ class _Package:
             known = (stamp, hashlib.sha256(path.read_bytes()).digest())
             self._digests[path] = known
         return known[1]
+
+
+_FROM_IMPORT = re.compile(
+    r"^[ \t]*from[ \t]+(\.*)([\w.]*)[ \t]+import[ \t]+(\([^)]*\)|[^\n;]*)", re.MULTILINE
+)
+_IMPORT = re.compile(r"^[ \t]*import[ \t]+([^\n;]*)", re.MULTILINE)
+
+
+def _aliases(names: str) -> list[str]:
+    """Return the imported names of an import list (``a as b, c``, in parentheses or not)."""
+    names = re.sub(r"#[^\n]*", "", names).strip("() \t\n")
+    return [part.split()[0] for part in names.split(",") if part.strip()]
 
 
 def _stat(path: Path) -> tuple[int, int]:

@@ -19,7 +19,7 @@ crossing Monte Carlos.
 from __future__ import annotations
 
 import numpy as np
-from scipy.stats import t as student_t
+from scipy.special import stdtrit
 
 from .._typing import ArrayLike, FloatArray
 from .._validation import as_float_array
@@ -67,9 +67,7 @@ def rms_with_bounds(
         else:
             resid = y - ratio * x
             se = np.sqrt(np.sum(resid**2, axis=0) / (n * (n - 1))) / (total / n)
-            log_half = float(student_t.ppf(confidence, n - 1)) * np.where(
-                ratio > 0, se / ratio, 0.0
-            )
+            log_half = float(stdtrit(n - 1, confidence)) * np.where(ratio > 0, se / ratio, 0.0)
         empty = total == 0
         rms = np.where(empty, np.nan, np.sqrt(ratio))
         lower = np.where(empty, np.nan, np.sqrt(ratio * np.exp(-log_half)))

@@ -12,7 +12,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.stats import binom, chi2, norm
 
 from ..types import FilterResult
 
@@ -59,6 +58,8 @@ def innovation_consistency(result: FilterResult, level: float = 0.95) -> Consist
     Updates without an observed component are left out. Raises ValueError for a batch of
     tracks (pass one track: ``result`` of a 1-D time axis) or fewer than 3 updates.
     """
+    from scipy.stats import binom, chi2, norm  # here: scipy.stats takes 0.3 s to import
+
     info = result.info
     if info.nis.ndim != 1:
         raise ValueError(f"one track expected (nis of shape (T,)); got {info.nis.shape}")

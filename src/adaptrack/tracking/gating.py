@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
-from scipy.stats import chi2
+from scipy.special import chdtri
 
 from .._typing import FloatArray
 
@@ -15,7 +15,7 @@ def gate_threshold(dim: int, probability: float = 0.999) -> float:
     """
     if not 0.0 < probability < 1.0:
         raise ValueError(f"probability must lie in (0, 1); got {probability}")
-    return float(chi2.ppf(probability, dim))
+    return float(chdtri(dim, 1.0 - probability))  # the chi-square quantile, as chi2.ppf
 
 
 def mahalanobis_squared(residuals: FloatArray, covariance: FloatArray) -> FloatArray:

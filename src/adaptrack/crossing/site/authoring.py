@@ -12,7 +12,6 @@ from __future__ import annotations
 
 from importlib import resources
 
-import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
@@ -24,6 +23,7 @@ from .drawing import (
     draw_network,
     draw_site,
     network_layers,
+    pyplot,
     site_layers,
     site_marks,
     svg_of,
@@ -70,6 +70,7 @@ def site_map_svg(site: Site, centre_m: float = 40.0) -> str:
     barriers, the ends of the controlled zone, the radars with their fields of view, blind
     zones and the scene's static clutter.
     """
+    plt = pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(14, 7))
     roads, radars = site_layers(site)
     reach = site.zone_m + site.run_in_m
@@ -103,6 +104,7 @@ def site_map_svg(site: Site, centre_m: float = 40.0) -> str:
 
 def coverage_svg(site: Site) -> str:
     """Which radar sees each road's lane centre, against the distance from the centre."""
+    plt = pyplot()
     s = _stations(site)
     fig, axes = plt.subplots(len(site.roads), 1, figsize=(8, 1.2 + 0.8 * len(site.radars) *
                              len(site.roads)), squeeze=False)  # fmt: skip

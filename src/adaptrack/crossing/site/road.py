@@ -16,7 +16,6 @@ from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
-from scipy.interpolate import splev, splprep
 from scipy.spatial import cKDTree
 
 from ..._typing import ArrayLike, FloatArray
@@ -215,6 +214,8 @@ def polyline_road(
     length; heading and curvature come from its derivatives. ``extend_m`` continues it
     straight beyond the last point.
     """
+    from scipy.interpolate import splev, splprep  # here: scipy.interpolate takes 0.4 s
+
     p = as_float_array(points_m, "points_m")
     if p.ndim != 2 or p.shape[1] != 2 or len(p) < 2:
         raise ValueError(f"road {name!r}: points_m needs two or more [east, north] points")

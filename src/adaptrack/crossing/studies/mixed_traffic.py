@@ -18,7 +18,6 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass, fields
 from typing import Any
 
-import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
@@ -26,7 +25,7 @@ from ..._typing import FloatArray
 from ..scene.tracker import SceneTrackerConfig, track_scene
 from ..simulation.object_list import object_list_ids
 from ..simulation.scene import Stall, scene_spec, simulate_scene
-from ..site.drawing import draw_site, svg_of
+from ..site.drawing import draw_site, pyplot, svg_of
 from ..site.geometry import radial_geometry
 from ..site.model import Site
 from .compliance import CONFIDENCE, POSITION_LIMIT_M, SPEED_LIMIT_KMH
@@ -200,6 +199,7 @@ def _map_figure(
     radars: list[dict[str, Any]],
     zone_m: float,
 ) -> str:
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(6, 6))
     draw_site(ax, roads, radars, zone_m)
     for j, p in enumerate(m.truth_paths):
@@ -236,6 +236,7 @@ def _shade_closures(ax: Any, m: MixedTraffic) -> None:
 
 
 def _gospa_figure(m: MixedTraffic) -> str:
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(10, 3))
     s = {k: np.asarray(v) for k, v in m.gospa_series.items()}
     _shade_closures(ax, m)
@@ -257,6 +258,7 @@ def _gospa_figure(m: MixedTraffic) -> str:
 
 
 def _events_figure(m: MixedTraffic) -> str:
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(10, 2.6))
     _shade_closures(ax, m)
     lanes = [

@@ -23,13 +23,12 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
-import matplotlib.pyplot as plt
 import numpy as np
 
 from ... import __version__
 from ..estimators.road_filters import track_free_2d
 from ..simulation.radar import simulate_site_case
-from ..site.drawing import blind_polylines, site_layers, site_marks, svg_of
+from ..site.drawing import blind_polylines, pyplot, site_layers, site_marks, svg_of
 from ..site.interactive import error_plot_div, plotly_script, site_map_div
 from ..site.model import Site
 from .compliance import (
@@ -247,6 +246,7 @@ def _map_div(data: ReportData) -> str:
 
 
 def _rms_figure(data: ReportData, name: str) -> str:
+    plt = pyplot()
     rows = [r for r in data.rows if r["filter"] == name]
     labels = [f"{r['vehicle_class']} / {r['case']}" for r in rows]
     fig, axes = plt.subplots(1, 2, figsize=(10, max(3, 0.2 * len(rows))))
@@ -274,6 +274,7 @@ def _rms_figure(data: ReportData, name: str) -> str:
 
 
 def _profile_figure(data: ReportData) -> str:
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(6, 3.5))
     lam = np.asarray(data.profile["lambda_per_s2"])
     j = np.asarray(data.profile["criterion"])
