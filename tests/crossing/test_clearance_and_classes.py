@@ -11,7 +11,12 @@ from adaptrack.crossing.scene.occupancy import ClearanceMonitor, CrossingArea
 from adaptrack.crossing.scene.road_user_class import CLASSES, class_names, class_probabilities
 from adaptrack.crossing.simulation.faces import FaceRadar
 from adaptrack.crossing.site.model import load_site
-from adaptrack.crossing.studies.clearance import clear_run, clearance_trials, empty_background
+from adaptrack.crossing.studies.clearance import (
+    clear_run,
+    clearance_trials,
+    empty_background,
+    traffic_run,
+)
 
 
 @pytest.fixture(scope="module")
@@ -32,6 +37,21 @@ def test_the_empty_site_stays_clear(site):
     assert clear_run(site, 60.0, seed=4) == 0
 
 
+def test_traffic_raises_are_sorted_by_the_truth_near_them():
+    """200 s of the junction site's traffic with its first train: every raise is sorted."""
+    junction = load_site(
+        Path(__file__).parents[2] / "examples" / "sites" / "junction_crossing.toml"
+    )
+    run = traffic_run(junction, 200.0, seed=2)
+    assert run.trains == 1
+    assert (
+        run.raised
+        == run.in_area + run.near + run.false
+        == len(run.false_times_s) + (run.in_area + run.near)
+    )
+    assert run.in_area > 5  # road users drive over the crossing while it is open
+
+
 def test_the_area_is_the_carriageway_between_the_barriers(site):
     area = CrossingArea(site)
     boxes = np.array([[0.0, 0.0], [1.75, site.barrier_m - 0.5], [1.75, site.barrier_m + 3.0],
@@ -41,20 +61,27 @@ def test_the_area_is_the_carriageway_between_the_barriers(site):
     assert list(area.touches(boxes, heading, 0.5, 0.5)) == [True, True, False, False]
 
 
-def test_a_train_due_is_the_known_occupant_of_the_rails():
+def test_a_train_due_is_the_known_occupant_of_the_rails_and_nothing_else_there():
     junction = load_site(
         Path(__file__).parents[2] / "examples" / "sites" / "junction_crossing.toml"
     )
     assert junction.rails is not None
+    along = 25.0 * np.asarray(junction.rails.direction)[None, :]
     monitor = ClearanceMonitor(junction, train_intervals=np.array([[10.0, 20.0]]))
     on_rails = np.zeros((1, 2))
     box = (np.array([0.0]), np.array([4.0]), np.array([3.0]))
-    monitor.update(12.0, np.array([7]), on_rails, *box)
-    assert monitor.events == []  # the train
-    monitor.update(25.0, np.array([7]), on_rails, *box)  # no train due: an obstacle
+    monitor.update(12.0, np.array([7]), on_rails, along, *box)
+    assert monitor.events == []  # the train, moving along the rails while one is due
+    monitor.update(25.0, np.array([7]), on_rails, along, *box)  # no train due: an obstacle
     assert [e["event"] for e in monitor.events] == ["crossing_not_clear"]
-    monitor.update(26.0, np.zeros(0, int), np.zeros((0, 2)), *(np.zeros(0),) * 3)
+    none = (np.zeros(0, int), np.zeros((0, 2)), np.zeros((0, 2)), *(np.zeros(0),) * 3)
+    monitor.update(26.0, *none)
     assert [e["event"] for e in monitor.events] == ["crossing_not_clear", "crossing_clear"]
+    across = np.array([[-along[0, 1], along[0, 0]]])  # a car driving over the rails
+    for k, velocity in enumerate((np.zeros((1, 2)), across)):  # a car stalled on the rails
+        monitor = ClearanceMonitor(junction, train_intervals=np.array([[10.0, 20.0]]))
+        monitor.update(12.0, np.array([8 + k]), on_rails, velocity, *box)
+        assert [e["event"] for e in monitor.events] == ["crossing_not_clear"]
 
 
 def test_the_background_map_round_trips_and_rejects_other_files(site, tmp_path):

@@ -9,6 +9,8 @@ first room. The two share no arithmetic (the kernel writes every operation out),
 tables to rounding check each against the other.
 """
 
+from pathlib import Path
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -56,6 +58,17 @@ def test_free_motion_with_a_background_and_an_object_standing(tmp_path, kind):
                                   train_intervals=trains)  # fmt: skip
     assert log.background > 0  # the reflectors of the empty site explained detections
     assert (events["event"] == "crossing_not_clear").any()
+
+
+def test_a_train_passing_the_junction_site():
+    """The rails' branch of the crossing's state: a train due on a site with rails."""
+    site = load_site(Path(__file__).parents[2] / "examples" / "sites" / "junction_crossing.toml")
+    spec = scene_spec(site, duration_s=24.0, first_closure_s=4.0, closure_s=16.0)
+    rec = simulate_scene(site, spec, 5, face_returns_of(FaceRadar.of_kind("cluster")))
+    assert (rec.truth.table["vehicle_class"] == "train").any()
+    _, events, _ = _assert_same(site, rec.detections, train_intervals=spec.warnings())
+    _, unannounced, _ = track_scene_extended(site, rec.detections)
+    assert len(events) < len(unannounced)  # the train's tracks were its known occupant
 
 
 def test_mixed_traffic_outgrowing_the_first_room(monkeypatch):

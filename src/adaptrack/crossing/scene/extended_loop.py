@@ -21,7 +21,8 @@ Layout of the arguments (built by :func:`.extended_tracker.track_scene_extended`
   each radar's reflectors (R, K) with counts (R,), and the CUSUM (K,); ``has_background``;
 - ``scene``: lane points (L, 2) and directions (L, 2), the crossing area raster (n, n), its
   origin (2,), the train intervals (T, 2), the rails row (centre x, y, direction x, y,
-  half width; half width < 0: no rails), the lane points' grid (:func:`lane_grid`);
+  half width, a train's least speed along them, the tangent of its largest angle to them;
+  half width < 0: no rails), the lane points' grid (:func:`lane_grid`);
 - ``state`` (int64): tracks held, next id, the crossing's occupant (-1: clear), rows and
   events written, scans done; ``log`` (5,): updated, opened, joined new, outside view,
   background;
@@ -694,9 +695,12 @@ def _clearance(tracks, n, t_scan, cfg, scene, state, events):  # type: ignore[no
         if not _touches(x[i, 0], x[i, 1], heading[i], extent[i, 0], extent[i, 1], inside,
                         origin, cfg[AREA_CELL]):  # fmt: skip
             continue
-        if train and rails[4] >= 0:
+        if train and rails[4] >= 0:  # the train: on the rails, moving along them
             rx, ry = x[i, 0] - rails[0], x[i, 1] - rails[1]
-            if abs(-rx * rails[3] + ry * rails[2]) <= rails[4]:
+            along = abs(x[i, 2] * rails[2] + x[i, 3] * rails[3])
+            across = abs(-x[i, 2] * rails[3] + x[i, 3] * rails[2])
+            if (abs(-rx * rails[3] + ry * rails[2]) <= rails[4] and along >= rails[5]
+                    and across <= along * rails[6]):  # fmt: skip
                 continue
         first = i
         break

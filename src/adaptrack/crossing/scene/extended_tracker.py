@@ -74,7 +74,15 @@ from .extended_loop import (
     lane_grid,
     run_scans,
 )
-from .occupancy import AREA_CELL_M, EVENT_CLEAR, EVENT_NOT_CLEAR, RAIL_CORRIDOR_M, ClearanceMonitor
+from .occupancy import (
+    AREA_CELL_M,
+    EVENT_CLEAR,
+    EVENT_NOT_CLEAR,
+    RAIL_CORRIDOR_M,
+    TRAIN_ALIGN_DEG,
+    TRAIN_SPEED_MPS,
+    ClearanceMonitor,
+)
 from .road_user_class import class_names, class_probabilities
 from .tracker import EVENT_COLUMNS, ROW_COLUMNS, STATUS_NAMES, scan_arrays
 
@@ -314,7 +322,7 @@ class ExtendedTracker:
             t["reported"] & (t["existence"] >= cfg.keep_existence)
         )
         rows = np.flatnonzero(present)
-        self.clearance.update(t_scan, t["track_id"][rows], t["x"][rows, :2],
+        self.clearance.update(t_scan, t["track_id"][rows], t["x"][rows, :2], t["x"][rows, 2:4],
                               t["heading_rad"][rows], t["extent"][rows, 0],
                               t["extent"][rows, 1])  # fmt: skip
 
@@ -940,9 +948,10 @@ class _CompiledState:
         area = tracker.clearance.area
         rails = area.rails
         rails_row = (
-            np.array([0.0, 0.0, 0.0, 0.0, -1.0]) if rails is None else np.array([
+            np.array([0.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0]) if rails is None else np.array([
                 *rails.centre_m, *rails.direction,
                 RAIL_CORRIDOR_M + 0.5 * (rails.tracks - 1) * rails.track_spacing_m,
+                TRAIN_SPEED_MPS, math.tan(math.radians(TRAIN_ALIGN_DEG)),
             ])
         )  # fmt: skip
         self.scene = (

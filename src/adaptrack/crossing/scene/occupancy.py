@@ -6,7 +6,10 @@ cells of ``AREA_CELL_M``. After each scan the reported objects (not the backgrou
 (centre and corners) touches the area occupy it; the crossing is "not clear" from the first
 scan with an occupant until the first scan without one, raising ``crossing_not_clear`` and then
 ``crossing_clear``. While the controller says a train is due (``train_intervals``) an object
-on the rails (within ``RAIL_CORRIDOR_M`` of the rails' axis) is the train, a known occupant.
+on the rails (within ``RAIL_CORRIDOR_M`` of the rails' axis) that moves along them (at least
+``TRAIN_SPEED_MPS`` along their axis, within ``TRAIN_ALIGN_DEG`` of it) is the train, a known
+occupant; anything else there (a car stalled on the rails, a fallen load, a track that
+crosses them) makes the crossing not clear whether a train is due or not.
 """
 
 from __future__ import annotations
@@ -22,6 +25,8 @@ from ..site.model import Site
 
 AREA_CELL_M = 0.25
 RAIL_CORRIDOR_M = 2.5  # half width of what a train occupies beside the rails' axis [m]
+TRAIN_SPEED_MPS = 2.0  # a train due moves along the rails at least this fast [m/s] ...
+TRAIN_ALIGN_DEG = 30.0  # ... within this of their axis
 EVENT_NOT_CLEAR, EVENT_CLEAR = "crossing_not_clear", "crossing_clear"
 
 
@@ -77,6 +82,16 @@ class CrossingArea:
         half = RAIL_CORRIDOR_M + 0.5 * (self.rails.tracks - 1) * self.rails.track_spacing_m
         return abs(-rel[0] * d[1] + rel[1] * d[0]) <= half
 
+    def is_train(self, centre: FloatArray, velocity: FloatArray) -> bool:
+        """Whether an object at ``centre`` [m] moving at ``velocity`` [m/s] is a train."""
+        if not self.on_rails(centre):
+            return False
+        d = self.rails.direction  # type: ignore[union-attr]
+        along = abs(velocity[0] * d[0] + velocity[1] * d[1])
+        across = abs(-velocity[0] * d[1] + velocity[1] * d[0])
+        aligned = across <= along * math.tan(math.radians(TRAIN_ALIGN_DEG))
+        return along >= TRAIN_SPEED_MPS and aligned
+
 
 class ClearanceMonitor:
     """The crossing's clear / not-clear state and its events (module docstring)."""
@@ -101,16 +116,16 @@ class ClearanceMonitor:
         """Whether the controller has a train due at ``time_s``."""
         return bool(np.any((self.trains[:, 0] <= time_s) & (time_s < self.trains[:, 1])))
 
-    def update(self, time_s: float, ids: np.ndarray, centres: FloatArray, heading: FloatArray,
-               length: FloatArray, width: FloatArray) -> None:  # fmt: skip
-        """Take the reported objects after a scan; raise an event when the state changes."""
+    def update(self, time_s: float, ids: np.ndarray, centres: FloatArray, velocity: FloatArray,
+               heading: FloatArray, length: FloatArray, width: FloatArray) -> None:  # fmt: skip
+        """Take the objects after a scan (centres m, velocities m/s, boxes); raise the changes."""
         train = self.train_due(time_s)
         touching = (
             self.area.touches(centres, heading, length, width) if ids.size else np.zeros(0, bool)
         )
         inside = [
             k for k in np.flatnonzero(touching)
-            if not (train and self.area.on_rails(centres[k]))
+            if not (train and self.area.is_train(centres[k], velocity[k]))
         ]  # fmt: skip
         if inside and self.occupant is None:
             k = inside[0]
