@@ -504,7 +504,7 @@ def lane_grid(lanes: np.ndarray, cell_m: float) -> tuple[np.ndarray, np.ndarray,
 @_njit
 def _open(  # type: ignore[no-untyped-def]
     tracks, n, next_id, rows, g, g_cov, a, v_var, vr, t_scan, existence0, radar, cfg, lanes,
-    lane_dir, lane_index,
+    lane_dir, lane_index, train, rails,
 ):  # fmt: skip
     """Open a track on a group of unexplained detections (``ExtendedTracker._open``)."""
     m = rows.size
@@ -525,11 +525,21 @@ def _open(  # type: ignore[no-untyped-def]
     vv /= m
     best, best_d = _nearest_lane(cx, cy, lanes, lane_index)
     along = best >= 0 and best_d <= cfg[LANE_PRIOR]
+    dx = dy = 0.0
     if along:
         dx, dy = lane_dir[best, 0], lane_dir[best, 1]
+    if train and rails[4] >= 0:  # a train is due: the rails are a lane too, on their corridor
+        rx, ry = cx - rails[0], cy - rails[1]
+        noise = vv / m + cfg[BODY_DOPPLER] ** 2
+        if abs(-rx * rails[3] + ry * rails[2]) <= rails[4] and (
+            not along
+            or _lane_fit(rails[2], rails[3], am, vrm, noise, cfg)
+            > _lane_fit(dx, dy, am, vrm, noise, cfg)
+        ):
+            dx, dy, along = rails[2], rails[3], True
+    if along:
         heading = math.atan2(dy, dx)
     else:
-        dx = dy = 0.0
         heading = math.atan2(radar[1] - cy, radar[0] - cx)
     length, width = cfg[PRIOR_L], cfg[PRIOR_W]
     ox, oy, s00, s01, s11 = _faces(cx, cy, heading, length, width, radar[0], radar[1])
@@ -574,6 +584,24 @@ def _open(  # type: ignore[no-untyped-def]
     rate[n, :] = np.nan
     top_speed[n] = 0.0
     track_id[n] = next_id
+
+
+@_njit
+def _train_due(trains, t_scan):  # type: ignore[no-untyped-def]
+    """Whether a train interval (T, 2) holds ``t_scan``."""
+    for k in range(trains.shape[0]):
+        if trains[k, 0] <= t_scan < trains[k, 1]:
+            return True
+    return False
+
+
+@_njit
+def _lane_fit(dx, dy, am, vrm, noise, cfg):  # type: ignore[no-untyped-def]
+    """Log-likelihood of a new group's mean radial speed under the lane prior along (dx, dy)."""
+    sa, sc = cfg[LANE_SPEED] ** 2, cfg[LANE_ACROSS] ** 2
+    on = am[0] * dx + am[1] * dy  # the line of sight along the lane
+    var = sa * on * on + sc * (am[0] * am[0] + am[1] * am[1] - on * on) + noise
+    return -0.5 * (vrm * vrm / var + math.log(var))
 
 
 @_njit
@@ -964,7 +992,8 @@ def _births(  # type: ignore[no-untyped-def]
         odds = r0 / (1.0 - r0) * _count_ratio(float(rows.size), mean_rate, cfg[COUNT_SHAPE],
                                               clutter_mean[r])  # fmt: skip
         _open(tracks, state[N_TRACKS], state[NEXT_ID], rows, g, g_cov, a, v_var, vr, t_scan,
-              odds / (1.0 + odds), radar, cfg, scene[0], scene[1], scene[6])  # fmt: skip
+              odds / (1.0 + odds), radar, cfg, scene[0], scene[1], scene[6],
+              _train_due(scene[4], t_scan), scene[5])  # fmt: skip
         state[N_TRACKS] += 1
         state[NEXT_ID] += 1
         step = cfg[COUNT_RATE] * cfg[RADAR_SHARE] * (rows.size - clutter_mean[r])

@@ -7,7 +7,8 @@ this one takes its behaviour from three models:
   CoordinatedTurn`, state ``x, y, vx, vy, omega``), so turns, lane changes, U-turns and
   pedestrians crossing anywhere are followed; the site's lanes enter only as a prior on a
   new track's direction of motion (along the nearest lane, either way, within
-  ``lane_prior_m``), never as a path a track must keep.
+  ``lane_prior_m``; while a train is due, on the rails, their axis instead where it explains
+  the new group's mean radial speed better), never as a path a track must keep.
 - **Extent**: each track is a box (length, width, heading: the velocity's direction once the
   speed is known, else the last one or the lane's). A radar's reflections of it lie on the
   faces it sees (:func:`.box_view.face_moments`): a detection is predicted at the visible
@@ -531,6 +532,16 @@ class ExtendedTracker:
             dist, k = self._lane_tree.query(centre)
             if dist <= cfg.lane_prior_m:
                 direction = self._lane_dir[k]
+        n = g.shape[0]
+        if self.clearance.train_due(t_scan) and self.clearance.area.on_rails(centre):
+            # a train is due: the rails are a lane too, taken where they explain the radial
+            # speeds better than the road's lane
+            rails = np.asarray(self.site.rails.direction, float)  # type: ignore[union-attr]
+            noise = v_var.mean() / n + cfg.body_doppler_std_mps**2
+            fit = [self._lane_fit(d, a.mean(axis=0), vr.mean(), noise)
+                   for d in (rails, direction) if d is not None]  # fmt: skip
+            if direction is None or fit[0] > fit[1]:
+                direction = rails
         heading = math.atan2(direction[1], direction[0]) if direction is not None else math.atan2(
             *(np.asarray(radar.position_m) - centre)[::-1])  # fmt: skip
         length, width = cfg.prior_length_m, cfg.prior_width_m
@@ -541,7 +552,6 @@ class ExtendedTracker:
         x = np.zeros(N_STATE)
         x[:2] = centre - offset[0]
         p = np.zeros((N_STATE, N_STATE))
-        n = g.shape[0]
         p[:2, :2] = g_cov.sum(axis=0) / n**2 + spread[0] + cfg.shape_model_std_m**2 * np.eye(2)
         if direction is not None:
             along = np.outer(direction, direction)
@@ -574,6 +584,17 @@ class ExtendedTracker:
         self._next_id += 1
         for name in _TRACK_FIELDS:
             self._t[name] = np.concatenate([self._t[name], new[name]])
+
+    def _lane_fit(self, direction: FloatArray, los: FloatArray, vr: float, noise: float) -> float:
+        """Log-likelihood of a group's mean radial speed under a lane prior along ``direction``.
+
+        ``vr`` [m/s] along the mean line of sight ``los``; the prior velocity has mean zero.
+        """
+        cfg = self.config
+        along = np.outer(direction, direction)
+        p = cfg.lane_speed_std_mps**2 * along + cfg.lane_across_std_mps**2 * (np.eye(2) - along)
+        var = float(los @ p @ los) + noise
+        return -0.5 * (vr**2 / var + math.log(var))
 
     def _prune(self) -> None:
         """Drop tracks gone (existence), lost (position sigma) or duplicating another's body."""
