@@ -536,7 +536,7 @@ class ExtendedTracker:
         if self.clearance.train_due(t_scan) and self.clearance.area.on_rails(centre):
             # a train is due: the rails are a lane too, taken where they explain the radial
             # speeds better than the road's lane
-            rails = np.asarray(self.site.rails.direction, float)  # type: ignore[union-attr]
+            rails = np.asarray(self.site.rails.direction, float)
             noise = v_var.mean() / n + cfg.body_doppler_std_mps**2
             fit = [self._lane_fit(d, a.mean(axis=0), vr.mean(), noise)
                    for d in (rails, direction) if d is not None]  # fmt: skip
