@@ -711,10 +711,7 @@ def _clearance(tracks, n, t_scan, cfg, scene, state, events):  # type: ignore[no
     x, existence, heading, extent = tracks[0], tracks[3], tracks[4], tracks[5]
     reported, track_id = tracks[11], tracks[14]
     inside, origin, trains, rails = scene[2], scene[3], scene[4], scene[5]
-    train = False
-    for k in range(trains.shape[0]):
-        if trains[k, 0] <= t_scan < trains[k, 1]:
-            train = True
+    train = _train_due(trains, t_scan)
     first = -1
     for i in range(n):
         present = existence[i] >= cfg[REPORT] or (reported[i] and existence[i] >= cfg[KEEP])
