@@ -528,13 +528,10 @@ def _open(  # type: ignore[no-untyped-def]
     dx = dy = 0.0
     if along:
         dx, dy = lane_dir[best, 0], lane_dir[best, 1]
-    if train and rails[4] >= 0:  # a train is due: the rails are a lane too, on their corridor
-        rx, ry = cx - rails[0], cy - rails[1]
+    if train and _on_rails(cx, cy, rails):  # a train is due: the rails are a lane too
         noise = vv / m + cfg[BODY_DOPPLER] ** 2
-        if abs(-rx * rails[3] + ry * rails[2]) <= rails[4] and (
-            not along
-            or _lane_fit(rails[2], rails[3], am, vrm, noise, cfg)
-            > _lane_fit(dx, dy, am, vrm, noise, cfg)
+        if not along or _lane_fit(rails[2], rails[3], am, vrm, noise, cfg) > _lane_fit(
+            dx, dy, am, vrm, noise, cfg
         ):
             dx, dy, along = rails[2], rails[3], True
     if along:
@@ -593,6 +590,15 @@ def _train_due(trains, t_scan):  # type: ignore[no-untyped-def]
         if trains[k, 0] <= t_scan < trains[k, 1]:
             return True
     return False
+
+
+@_njit
+def _on_rails(cx, cy, rails):  # type: ignore[no-untyped-def]
+    """Whether a point lies in the train's corridor (``CrossingArea.on_rails``; the rails row)."""
+    if rails[4] < 0:
+        return False
+    rx, ry = cx - rails[0], cy - rails[1]
+    return abs(-rx * rails[3] + ry * rails[2]) <= rails[4]
 
 
 @_njit
@@ -720,12 +726,10 @@ def _clearance(tracks, n, t_scan, cfg, scene, state, events):  # type: ignore[no
         if not _touches(x[i, 0], x[i, 1], heading[i], extent[i, 0], extent[i, 1], inside,
                         origin, cfg[AREA_CELL]):  # fmt: skip
             continue
-        if train and rails[4] >= 0:  # the train: on the rails, moving along them
-            rx, ry = x[i, 0] - rails[0], x[i, 1] - rails[1]
+        if train and _on_rails(x[i, 0], x[i, 1], rails):  # the train: moving along them
             along = abs(x[i, 2] * rails[2] + x[i, 3] * rails[3])
             across = abs(-x[i, 2] * rails[3] + x[i, 3] * rails[2])
-            if (abs(-rx * rails[3] + ry * rails[2]) <= rails[4] and along >= rails[5]
-                    and across <= along * rails[6]):  # fmt: skip
+            if along >= rails[5] and across <= along * rails[6]:
                 continue
         first = i
         break
@@ -981,6 +985,7 @@ def _births(  # type: ignore[no-untyped-def]
         centres[k] /= sizes[k]
         density[k] = _clutter_density(centres[k, 0], centres[k, 1], r, cfg, clutter) / cfg[SPAN]
     birth = cfg[BIRTH] / cfg[SPAN]
+    train = _train_due(scene[4], t_scan)
     for k in range(n_groups):
         rows = left[labels == k]
         r0 = birth / (birth + density[k])
@@ -989,8 +994,8 @@ def _births(  # type: ignore[no-untyped-def]
         odds = r0 / (1.0 - r0) * _count_ratio(float(rows.size), mean_rate, cfg[COUNT_SHAPE],
                                               clutter_mean[r])  # fmt: skip
         _open(tracks, state[N_TRACKS], state[NEXT_ID], rows, g, g_cov, a, v_var, vr, t_scan,
-              odds / (1.0 + odds), radar, cfg, scene[0], scene[1], scene[6],
-              _train_due(scene[4], t_scan), scene[5])  # fmt: skip
+              odds / (1.0 + odds), radar, cfg, scene[0], scene[1], scene[6], train,
+              scene[5])  # fmt: skip
         state[N_TRACKS] += 1
         state[NEXT_ID] += 1
         step = cfg[COUNT_RATE] * cfg[RADAR_SHARE] * (rows.size - clutter_mean[r])

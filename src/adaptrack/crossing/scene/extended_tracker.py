@@ -79,7 +79,6 @@ from .occupancy import (
     AREA_CELL_M,
     EVENT_CLEAR,
     EVENT_NOT_CLEAR,
-    RAIL_CORRIDOR_M,
     TRAIN_ALIGN_DEG,
     TRAIN_SPEED_MPS,
     ClearanceMonitor,
@@ -554,10 +553,7 @@ class ExtendedTracker:
         p = np.zeros((N_STATE, N_STATE))
         p[:2, :2] = g_cov.sum(axis=0) / n**2 + spread[0] + cfg.shape_model_std_m**2 * np.eye(2)
         if direction is not None:
-            along = np.outer(direction, direction)
-            p[2:4, 2:4] = cfg.lane_speed_std_mps**2 * along + cfg.lane_across_std_mps**2 * (
-                np.eye(2) - along
-            )
+            p[2:4, 2:4] = self._lane_velocity_cov(direction)
         else:
             p[2:4, 2:4] = cfg.initial_speed_std_mps**2 * np.eye(2)
         p[4, 4] = cfg.initial_turn_std_radps**2
@@ -585,15 +581,18 @@ class ExtendedTracker:
         for name in _TRACK_FIELDS:
             self._t[name] = np.concatenate([self._t[name], new[name]])
 
+    def _lane_velocity_cov(self, direction: FloatArray) -> FloatArray:
+        """Return a new track's velocity covariance (2, 2) [m^2/s^2] along a lane (unit vector)."""
+        cfg = self.config
+        along = np.outer(direction, direction)
+        return cfg.lane_speed_std_mps**2 * along + cfg.lane_across_std_mps**2 * (np.eye(2) - along)
+
     def _lane_fit(self, direction: FloatArray, los: FloatArray, vr: float, noise: float) -> float:
         """Log-likelihood of a group's mean radial speed under a lane prior along ``direction``.
 
         ``vr`` [m/s] along the mean line of sight ``los``; the prior velocity has mean zero.
         """
-        cfg = self.config
-        along = np.outer(direction, direction)
-        p = cfg.lane_speed_std_mps**2 * along + cfg.lane_across_std_mps**2 * (np.eye(2) - along)
-        var = float(los @ p @ los) + noise
+        var = float(los @ self._lane_velocity_cov(direction) @ los) + noise
         return -0.5 * (vr**2 / var + math.log(var))
 
     def _prune(self) -> None:
@@ -971,7 +970,7 @@ class _CompiledState:
         rails_row = (
             np.array([0.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0]) if rails is None else np.array([
                 *rails.centre_m, *rails.direction,
-                RAIL_CORRIDOR_M + 0.5 * (rails.tracks - 1) * rails.track_spacing_m,
+                area.rails_half_width_m,
                 TRAIN_SPEED_MPS, math.tan(math.radians(TRAIN_ALIGN_DEG)),
             ])
         )  # fmt: skip

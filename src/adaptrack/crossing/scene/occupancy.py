@@ -79,8 +79,14 @@ class CrossingArea:
             return False
         d = self.rails.direction
         rel = np.asarray(centre) - np.asarray(self.rails.centre_m)
-        half = RAIL_CORRIDOR_M + 0.5 * (self.rails.tracks - 1) * self.rails.track_spacing_m
-        return abs(-rel[0] * d[1] + rel[1] * d[0]) <= half
+        return abs(-rel[0] * d[1] + rel[1] * d[0]) <= self.rails_half_width_m
+
+    @property
+    def rails_half_width_m(self) -> float:
+        """Half width of the train's corridor about the rails' axis, every track in it [m]."""
+        if self.rails is None:
+            return -1.0
+        return RAIL_CORRIDOR_M + 0.5 * (self.rails.tracks - 1) * self.rails.track_spacing_m
 
     def is_train(self, centre: FloatArray, velocity: FloatArray) -> bool:
         """Whether an object at ``centre`` [m] moving at ``velocity`` [m/s] is a train."""

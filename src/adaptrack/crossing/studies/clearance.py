@@ -205,15 +205,16 @@ def traffic_run(
                                         train_intervals=spec.warnings())  # fmt: skip
     raised = np.sort(events.loc[events["event"] == EVENT_NOT_CLEAR, "time_s"].to_numpy())
     truth, users = rec.truth.table, rec.truth.users
+    truth = truth[truth["vehicle_class"] != "train"].sort_values("time_s", kind="stable")
     length = truth["object_id"].map(users.set_index("object_id")["length_m"]).to_numpy()
-    road = truth["vehicle_class"].to_numpy() != "train"
     barrier = max([site.barrier_m, *site.barriers.values()])
     beyond = np.abs(truth["to_crossing_m"].to_numpy()) - barrier - 0.5 * length  # [m]
+    beyond = np.where(np.isfinite(beyond), beyond, np.inf)
     t = truth["time_s"].to_numpy()
+    lo, hi = np.searchsorted(t, raised - EARLY_S), np.searchsorted(t, raised + EARLY_S, "right")
     kinds = []
-    for at in raised:
-        close = road & (np.abs(t - at) <= EARLY_S) & np.isfinite(beyond)
-        gap = float(beyond[close].min()) if close.any() else np.inf
+    for a, b in zip(lo, hi, strict=True):
+        gap = float(beyond[a:b].min()) if b > a else np.inf
         kinds.append("in" if gap <= 0 else "near" if gap <= NEAR_M else "false")
     kinds_a = np.array(kinds, dtype=object)
     return TrafficRun(seconds, len(raised), int((kinds_a == "in").sum()),
