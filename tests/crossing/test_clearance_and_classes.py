@@ -50,6 +50,9 @@ def test_traffic_raises_are_sorted_by_the_truth_near_them():
         == len(run.false_times_s) + (run.in_area + run.near)
     )
     assert run.in_area > 5  # road users drive over the crossing while it is open
+    for bad in (0.0, -5.0, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="traffic_run: seconds must be finite and > 0"):
+            traffic_run(junction, bad, seed=2)
 
 
 def test_the_area_is_the_carriageway_between_the_barriers(site):

@@ -195,6 +195,8 @@ def traffic_run(
     The background is learnt from 60 s of the empty site (another seed); the tracker is told
     the warning intervals as the times a train is due.
     """
+    if not (np.isfinite(seconds) and seconds > 0):
+        raise ValueError(f"traffic_run: seconds must be finite and > 0; got {seconds}")
     radar = radar or FaceRadar.of_kind("cluster")
     spec = scene_spec(site, duration_s=seconds)
     if spec.trains is None and site.rails is not None:
